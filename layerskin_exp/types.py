@@ -1,0 +1,134 @@
+"""Typed records that flow device -> acquisition -> session log -> reader -> analysis.
+
+Every record keeps the device's own timestamp and the host's receive time (monotonic ns),
+never a synthetic one: clock alignment happens later, from both.
+Units are in the names; array shapes are in the docstrings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SKIN_SHAPE = (16, 16)
+ADC_MAX = 4095  # 12-bit readout
+
+
+@dataclass(frozen=True, slots=True)
+class TwoLayerFrame:
+    """One scan of both layers.
+
+    superficial, deep: (16, 16) uint16 ADC counts (0..4095), [row, column]; row i is along y,
+    column j along x (taxel centre x_j = (j - 7.5) * pitch_mm, y_i likewise).
+    """
+
+    superficial: np.ndarray
+    deep: np.ndarray
+    seq: int  # device frame counter (wraps are unwrapped by the driver)
+    device_t_ns: int  # device clock
+    host_t_ns: int  # host monotonic receive time
+
+
+@dataclass(frozen=True, slots=True)
+class Wrench:
+    """One F/T sample: force (3,) in N and torque (3,) in N·m in the sensor frame."""
+
+    force_n: np.ndarray
+    torque_nm: np.ndarray
+    seq: int  # RDT sequence number
+    device_t_ns: int
+    host_t_ns: int
+    status: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Pose:
+    """A rigid pose: position (3,) in m, orientation quaternion (4,) as x, y, z, w."""
+
+    position_m: np.ndarray
+    orientation_xyzw: np.ndarray
+    frame_id: str
+    device_t_ns: int
+    host_t_ns: int
+    seq: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class StagePosition:
+    """Three-axis platform position (3,) in mm (indenter tip in the skin frame)."""
+
+    position_mm: np.ndarray
+    seq: int
+    device_t_ns: int
+    host_t_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class MarkerDetection:
+    """One ArUco marker seen in one camera image.
+
+    pose: marker pose in the camera frame (from PnP). corners_px: (4, 2) image corners.
+    device_t_ns is the image's capture time on the camera clock (before pipeline latency).
+    """
+
+    marker_id: int
+    pose: Pose
+    corners_px: np.ndarray
+    frame_seq: int
+    device_t_ns: int
+    host_t_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class GripperState:
+    """Robotiq Hand-E state: jaw opening in mm, speed and force in the gripper's own units (0..255)."""
+
+    position_mm: float
+    requested_mm: float
+    speed: int
+    force: int
+    object_detected: bool
+    fault: int
+    device_t_ns: int
+    host_t_ns: int
+    seq: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ProtocolEvent:
+    """A protocol happening: phase change, contact detected, stop reason, safety trip.
+
+    kind: short machine name ("phase", "contact", "stop", "safety", "error").
+    detail: free-form key/value pairs (JSON-serialisable).
+    """
+
+    kind: str
+    message: str
+    host_t_ns: int
+    device_t_ns: int = 0
+    detail: dict = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class StreamHealth:
+    """Health counters every acquired stream reports the same way."""
+
+    received: int = 0
+    lost: int = 0  # gaps in the device sequence number
+    duplicate: int = 0
+    out_of_order: int = 0
+    corrupt: int = 0  # bytes or packets rejected by a parser (after resync)
+    reconnects: int = 0
+
+    def observe_seq(self, last_seq: int | None, seq: int) -> None:
+        """Update the counters from one sequence number, given the previous one."""
+        self.received += 1
+        if last_seq is None:
+            return
+        if seq == last_seq:
+            self.duplicate += 1
+        elif seq < last_seq:
+            self.out_of_order += 1
+        elif seq > last_seq + 1:
+            self.lost += seq - last_seq - 1
