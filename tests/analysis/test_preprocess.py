@@ -1,0 +1,56 @@
+"""Preprocessing against direct scipy/numpy computations of the same definitions."""
+
+import numpy as np
+import pytest
+from scipy.ndimage import uniform_filter1d
+
+from analysis.preprocess import layer_scale, preprocess_counts, smooth_downsample, two_layer_features
+from layerskin_exp.config import SkinConfig
+from layerskin_exp.features import layer_features
+
+
+def _reference(x, window, factor):
+    ma = uniform_filter1d(x.astype(np.float64), size=window, axis=0, mode="nearest")
+    k = x.shape[0] // factor
+    return ma[: k * factor].reshape((k, factor) + x.shape[1:]).mean(axis=1)
+
+
+@pytest.mark.parametrize("n", [1, 4, 5, 9, 13, 57, 2003])
+@pytest.mark.parametrize("window,factor", [(5, 5), (3, 4), (1, 1), (7, 2)])
+def test_smooth_downsample_is_moving_average_then_block_mean(n, window, factor):
+    rng = np.random.default_rng(n)
+    x = rng.integers(0, 4096, (n, 2, 3), dtype=np.uint16)
+    got = smooth_downsample(x, window, factor, chunk=16)
+    np.testing.assert_allclose(got, _reference(x, window, factor), rtol=1e-5, atol=1e-3)
+
+
+def test_smooth_downsample_rejects_even_window():
+    with pytest.raises(ValueError, match="window=4"):
+        smooth_downsample(np.zeros((10, 2)), 4, 5)
+
+
+def test_preprocess_removes_baseline_and_clips_noise():
+    rng = np.random.default_rng(0)
+    base = rng.integers(50, 300, (2, 16, 16))
+    counts = np.repeat(base[None], 100, axis=0).astype(np.uint16)
+    counts[60:, 0, 5, 6] += 1000
+    maps = preprocess_counts(counts, 5, 5, baseline_frames=20)
+    assert maps.shape == (20, 2, 16, 16)
+    assert maps.min() >= 0
+    assert maps[:11].max() < 1e-3  # before the load (frames < 55 raw) nothing is left
+    assert maps[-1, 0, 5, 6] == pytest.approx(1000)
+    assert maps[-1, 1].max() < 1e-3
+
+
+def test_two_layer_features_match_layer_features_and_scale_normalises():
+    rng = np.random.default_rng(5)
+    maps = rng.random((30, 2, 16, 16)).astype(np.float32)
+    maps[:, 1] *= 0.2
+    s = layer_scale(maps, 100.0)
+    assert maps[:, 1].sum((-2, -1)).max() / s[1] == pytest.approx(1.0)
+    f = two_layer_features(maps, SkinConfig())
+    g = layer_features(maps[:, 1], SkinConfig())
+    np.testing.assert_allclose(f["p_d"], g["total"], rtol=1e-6)
+    np.testing.assert_allclose(f["cop_d"], g["cop_mm"], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(f["angle_d"], g["angle_rad"], rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(f["dc"], f["cop_s"] - f["cop_d"])
