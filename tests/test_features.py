@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 
 from layerskin_exp.config import SkinConfig
-from layerskin_exp.features import centre_of_pressure, interlayer_shift, layer_features, pca_angle, total_pressure
+from layerskin_exp.features import (
+    centre_of_pressure,
+    interlayer_shift,
+    layer_features,
+    pca_angle,
+    total_pressure,
+)
 
 SKIN = SkinConfig()
 X = SKIN.taxel_centres_mm()

@@ -1,0 +1,43 @@
+"""The study's physics-inspired linear baseline for three-axis force."""
+
+from __future__ import annotations
+
+import numpy as np
+
+FEATURE_NAMES = ("dx_mm", "dy_mm", "p_s", "p_d", "dx_pbar", "dy_pbar")
+
+
+def linear_features(dc_mm: np.ndarray, p_s: np.ndarray, p_d: np.ndarray) -> np.ndarray:
+    """φ = [Δx, Δy, p_s, p_d, Δx·p̄, Δy·p̄] with p̄ = (p_s + p_d)/2.
+
+    dc_mm (N, 2) inter-layer CoP shift, p_s, p_d (N,) layer totals -> (N, 6).
+    """
+    pbar = 0.5 * (p_s + p_d)
+    return np.column_stack([dc_mm[:, 0], dc_mm[:, 1], p_s, p_d, dc_mm[:, 0] * pbar, dc_mm[:, 1] * pbar])
+
+
+class LinearForceModel:
+    """Per-axis least squares with an intercept on the six features (numpy.linalg.lstsq).
+
+    fit(X (N, 6), y (N, 3) N) / predict(X (N, 6)) -> (N, 3) N. coef_: (7, 3), last row intercept.
+    """
+
+    def __init__(self) -> None:
+        self.coef_: np.ndarray | None = None
+
+    @staticmethod
+    def _design(X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, np.float64)
+        return np.column_stack([X, np.ones(len(X))])
+
+    def fit(self, X: np.ndarray, y: np.ndarray) -> LinearForceModel:
+        if len(X) != len(y):
+            raise ValueError(f"X has {len(X)} rows but y has {len(y)}; they must be the same frames")
+        # One lstsq solves every axis at once; each column is its own independent fit.
+        self.coef_ = np.linalg.lstsq(self._design(X), np.asarray(y, np.float64), rcond=None)[0]
+        return self
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        if self.coef_ is None:
+            raise RuntimeError("LinearForceModel.predict before fit: call fit(X, y) first")
+        return self._design(X) @ self.coef_

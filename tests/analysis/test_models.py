@@ -1,0 +1,132 @@
+"""Force models: the linear fit against a closed form, the CNN-GRU's shapes, training and checkpoints."""
+
+import numpy as np
+import pytest
+import torch
+
+from analysis.cnn import (
+    CnnGru,
+    CnnGruForceModel,
+    batch_forward,
+    input_channels,
+    naive_plan,
+    segment_batches,
+    shared_plan,
+    trial_starts,
+    weighted_smooth_l1,
+    window_indices,
+)
+from analysis.config import CnnConfig
+from analysis.linear import LinearForceModel, linear_features
+from analysis.metrics import mae, r2_score, split_trials
+
+
+def test_linear_model_recovers_exact_coefficients():
+    rng = np.random.default_rng(0)
+    dc = rng.normal(size=(200, 2))
+    ps, pd = rng.random(200), rng.random(200)
+    X = linear_features(dc, ps, pd)
+    np.testing.assert_allclose(X[:, 4], dc[:, 0] * (ps + pd) / 2)
+    coef = rng.normal(size=(6, 3))
+    y = X @ coef + np.array([0.1, -0.2, 0.3])
+    m = LinearForceModel().fit(X, y)
+    np.testing.assert_allclose(m.coef_[:6], coef, atol=1e-9)
+    np.testing.assert_allclose(m.predict(X), y, atol=1e-9)
+
+
+def test_metrics_match_definitions():
+    y = np.array([[1.0, 2.0], [2.0, 4.0], [3.0, 9.0]])
+    p = np.array([[1.0, 3.0], [2.5, 4.0], [2.0, 8.0]])
+    r2 = r2_score(y, p)
+    assert r2[0] == pytest.approx(1 - (0.25 + 1) / 2)
+    np.testing.assert_allclose(mae(y, p), [0.5, 2 / 3])
+
+
+def test_split_is_by_trial_disjoint_and_seeded():
+    ids = np.repeat(np.arange(40), 7)
+    a = split_trials(ids, seed=3)
+    b = split_trials(ids, seed=3)
+    assert [len(s) for s in a] == [28, 6, 6]
+    assert set(np.concatenate(a)) == set(range(40))
+    assert not set(a[0]) & set(a[2])
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_windows_repeat_trial_start_and_never_cross_trials():
+    trials = np.array([0, 0, 0, 1, 1, 1, 1])
+    st = trial_starts(trials)
+    np.testing.assert_array_equal(st, [0, 0, 0, 3, 3, 3, 3])
+    w = window_indices(np.arange(7), st, 3)
+    np.testing.assert_array_equal(w[3], [3, 3, 3])
+    np.testing.assert_array_equal(w[5], [3, 4, 5])
+    np.testing.assert_array_equal(w[1], [0, 0, 1])
+
+
+def test_architecture_shapes():
+    m = CnnGru(3)
+    assert m.encode(torch.zeros(7, 3, 16, 16)).shape == (7, 64)
+    assert m(torch.zeros(4, 5, 3, 16, 16)).shape == (4, 3)
+    assert m.encoder[7].in_features == 4096
+    assert input_channels(np.ones((2, 2, 16, 16)), "T").shape == (2, 3, 16, 16)
+
+
+def test_shared_encoding_gives_the_same_loss_and_gradients_as_naive_batching():
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    trials = np.repeat(np.arange(4), 50)
+    st = trial_starts(trials)
+    x = torch.randn(len(trials), 3, 16, 16)
+    y = torch.randn(len(trials), 3)
+    model = CnnGru(3, dropout=0.0)
+    w = torch.tensor([1.0, 2.0, 0.5])
+    batches = segment_batches(np.arange(len(trials)), st, 16, 64, rng)
+    assert all(len(b) <= 64 for b in batches)
+    ends = batches[0]
+    grads = []
+    for plan in (naive_plan, shared_plan):
+        model.zero_grad()
+        fidx, pos = plan(ends, st, 5)
+        loss = weighted_smooth_l1(batch_forward(model, x, fidx, pos), y[ends], w, 1.0)
+        loss.backward()
+        grads.append((loss.item(), [p.grad.clone() for p in model.parameters()], len(fidx)))
+    assert grads[0][0] == pytest.approx(grads[1][0], rel=1e-5)
+    for a, b in zip(grads[0][1], grads[1][1], strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6)
+    assert grads[1][2] < grads[0][2] / 3  # shared plan encodes far fewer frames
+
+
+def _toy_data(n_trials=12, n=40, seed=0):
+    """Maps whose blob amplitude sets Fz and superficial/deep offset sets Fx."""
+    rng = np.random.default_rng(seed)
+    X = np.zeros((n_trials * n, 2, 16, 16), np.float32)
+    y = np.zeros((n_trials * n, 3), np.float32)
+    for k in range(n_trials):
+        amp = np.abs(np.sin(np.linspace(0, np.pi, n))) * rng.uniform(0.5, 1.5)
+        shift = rng.integers(-3, 4)
+        for i in range(n):
+            X[k * n + i, 0, 6:9, 6 + shift:9 + shift] = amp[i]
+            X[k * n + i, 1, 6:9, 6:9] = amp[i] * 0.8
+        y[k * n:(k + 1) * n] = np.column_stack([shift * amp * 0.3, 0 * amp, amp * 4])
+    return X, y, np.repeat(np.arange(n_trials), n)
+
+
+def test_cnn_trains_loss_decreases_and_checkpoint_round_trips(tmp_path):
+    X, y, trials = _toy_data()
+    cfg = CnnConfig(max_epochs=3, patience=3, batch_size=64, segment_windows=16, torch_threads=1, lr=2e-3)
+    m = CnnGruForceModel("T-s5", cfg).fit(X, y, trials)
+    assert len(m.history) == 3
+    assert m.history[-1]["train_loss"] < m.history[0]["train_loss"]
+    pred = m.predict(X, trials)
+    assert pred.shape == (len(X), 3)
+    path = tmp_path / "t-s5.pt"
+    m.save(path)
+    ck = torch.load(path, weights_only=True)
+    assert set(ck) >= {"state_dict", "config", "norm"}
+    m2 = CnnGruForceModel.load(path, device="cpu")
+    np.testing.assert_allclose(m2.predict(X, trials), pred, rtol=1e-5, atol=1e-5)
+
+
+def test_predict_before_fit_names_the_fix():
+    with pytest.raises(RuntimeError, match="fit"):
+        CnnGruForceModel("S-s1").predict(np.zeros((2, 2, 16, 16)))
