@@ -1,0 +1,25 @@
+"""The session log: one MCAP file per trial, written crash-safely, read back as numpy arrays.
+
+    from layerskin_exp.log import SessionWriter, load_session
+    with SessionWriter(path, metadata={...}, labels={...}) as w:
+        w.write(record)
+    s = load_session(path)
+
+Stream layout of Session.streams (every stream also has "t_ns": device time mapped onto the
+host timeline, "host_t_ns", "device_t_ns", "seq"; all (N,) int64):
+    skin     superficial, deep (N, 16, 16) uint16
+    wrench   force_n (N, 3), torque_nm (N, 3), status (N,)
+    stage    position_mm (N, 3)
+    tcp      position_m (N, 3), orientation_xyzw (N, 4), frame_id list[str]
+    gripper  position_mm, requested_mm (N,) float; speed, force, fault (N,) int; object_detected (N,) bool
+    markers  marker_id (N,), position_m (N, 3), orientation_xyzw (N, 4), corners_px (N, 4, 2), frame_seq
+    camera   image (N, H, W) uint8 (or a list if sizes differ)
+    events   kind, message list[str], detail list[dict]  (t_ns = host_t_ns, no seq)
+Poses written with write_pose(p, topic) on other topics appear under their topic name.
+"""
+
+from layerskin_exp.log.reader import Session, SessionWarning, load_session
+from layerskin_exp.log.scan import SessionFileError
+from layerskin_exp.log.writer import SessionClosedError, SessionWriter
+
+__all__ = ["Session", "SessionClosedError", "SessionFileError", "SessionWarning", "SessionWriter", "load_session"]

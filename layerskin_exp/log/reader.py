@@ -1,0 +1,280 @@
+"""load_session: a session file -> numpy arrays per stream on one host timeline."""
+
+from __future__ import annotations
+
+import json
+import warnings as _warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from layerskin_exp.log import schema as S
+from layerskin_exp.log.scan import ChannelMessages, McapScan, SessionFileError, scan
+from layerskin_exp.sync import ClockMap, estimate_clock_map
+from layerskin_exp.types import SKIN_SHAPE
+
+
+class SessionWarning(UserWarning):
+    """A session file was damaged or incomplete; what could be read was read."""
+
+
+@dataclass
+class Session:
+    """One trial read back.
+
+    streams: {name: {field: array}}; every stream has "t_ns" (N,) int64 on the common host
+    timeline, "host_t_ns" and (except events) "device_t_ns" and "seq". See layerskin_exp.log.
+    complete: the writer finished the file and recorded outcome "complete".
+    clock_sync: {stream: ClockMap} used for t_ns (from the file, or estimated on reading).
+    """
+
+    path: Path
+    metadata: dict
+    labels: dict
+    outcome: str | None
+    complete: bool
+    clock_sync: dict[str, ClockMap]
+    streams: dict[str, dict]
+    warnings: list[str] = field(default_factory=list)
+
+
+def _decode_meta(values: dict) -> dict:
+    out = {}
+    for k, v in values.items():
+        try:
+            out[k] = json.loads(v)
+        except ValueError:
+            out[k] = v  # a plain string from another writer
+    return out
+
+
+def load_session(path, *, warn: bool = True) -> Session:
+    """Read a session file. Never raises on a damaged or truncated tail: reads up to the damage,
+    reports it in Session.warnings (and as a SessionWarning unless warn=False).
+
+    Raises SessionFileError for an empty file, a non-MCAP file, or an MCAP file that is not a
+    layerskin session.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise SessionFileError(f"{path}: no such session file")
+    sc = scan(path)
+    records = {name: _decode_meta(values) for name, values in sc.metadata}
+    session_meta = records.get(S.META_SESSION, {})
+    if session_meta.get("format") != S.FORMAT:
+        topics = sorted({c.topic for c in sc.channels.values()})[:6]
+        raise SessionFileError(
+            f"{path}: an MCAP file but not a layerskin session (no '{S.META_SESSION}' metadata with "
+            f"format={S.FORMAT!r}; topics {topics}). Open it with Foxglove or the mcap library instead."
+        )
+    msgs = list(sc.warnings)
+    metadata = {k: v for k, v in session_meta.items() if k not in ("format", "format_version")}
+    for name, values in records.items():
+        if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC):
+            metadata[name] = values
+    outcome = records.get(S.META_OUTCOME, {}).get("outcome")
+    streams = _decode_streams(sc, msgs)
+    stored = records.get(S.META_CLOCK_SYNC, {})
+    clock_sync = {}
+    for name, arrays in streams.items():
+        if name == "events":
+            arrays["t_ns"] = arrays["host_t_ns"].copy()
+            continue
+        if name in stored and isinstance(stored[name], dict):
+            cmap = ClockMap.from_dict(stored[name])
+        elif arrays["host_t_ns"].size:
+            cmap = estimate_clock_map(arrays["device_t_ns"], arrays["host_t_ns"])
+        else:
+            arrays["t_ns"] = arrays["host_t_ns"].copy()
+            continue
+        clock_sync[name] = cmap
+        arrays["t_ns"] = cmap.to_host(arrays["device_t_ns"])
+    complete = sc.has_footer and outcome == "complete"
+    if outcome is None:
+        msgs.append("no outcome recorded: the writer did not close this session (crash or kill?)")
+    if msgs and warn:
+        _warnings.warn(f"{path}: " + "; ".join(msgs), SessionWarning, stacklevel=2)
+    return Session(path=path, metadata=metadata, labels=records.get(S.META_LABELS, {}), outcome=outcome,
+                   complete=complete, clock_sync=clock_sync, streams=streams, warnings=msgs)
+
+
+# ------------------------------------------------------------------------------ per-stream decoding
+
+def _times(m: ChannelMessages) -> dict:
+    h = m.header
+    return {
+        "host_t_ns": h["log_time"].astype(np.int64),
+        "device_t_ns": h["publish_time"].astype(np.int64),
+        "seq": h["sequence"].astype(np.int64),
+    }
+
+
+def _decode_streams(sc: McapScan, msgs: list[str]) -> dict[str, dict]:
+    groups: dict[str, list[ChannelMessages]] = {}
+    for cid, m in sc.messages.items():
+        if m.channel is None:
+            msgs.append(f"channel {cid} has no channel record; its {m.count} messages are skipped")
+            continue
+        stream = m.channel.metadata.get("stream")
+        if stream is None:
+            msgs.append(f"topic {m.channel.topic} is not a layerskin stream; skipped")
+            continue
+        groups.setdefault(stream, []).append(m)
+    streams = {}
+    for stream, chans in groups.items():
+        if stream == "skin":
+            streams[stream] = _decode_skin(sc, chans, msgs)
+        elif stream == "markers":
+            streams[stream] = _decode_markers(sc, chans)
+        elif stream == "camera":
+            streams[stream] = _decode_camera(sc, chans[0])
+        elif chans[0].channel.message_encoding == "protobuf":
+            streams[stream] = _decode_poses(sc, chans[0])
+        else:
+            streams[stream] = _decode_json(sc, chans[0], stream)
+    return streams
+
+
+def _skin_pixels(sc: McapScan, m: ChannelMessages, msgs: list[str]) -> np.ndarray:
+    """(N, 16, 16) uint16 from the last 512 bytes of each RawImage payload, checked vectorised;
+    messages that do not have that layout are decoded with protobuf."""
+    n = m.count
+    nbytes = S.SKIN_DATA_BYTES
+    end = m.payload_end
+    tail = S.SKIN_TAIL
+    lead = len(tail)
+    start = m.payload_start
+    fits = (end - start) >= nbytes + lead
+    pix = np.empty((n, nbytes), np.uint8)
+    if n and fits.all():
+        prefix = sliding_window_view(sc.data, lead)[end - nbytes - lead]
+        fits = np.all(prefix == np.frombuffer(tail, np.uint8), axis=1)
+        pix[fits] = sliding_window_view(sc.data, nbytes)[(end - nbytes)[fits]]
+    bad = np.flatnonzero(~fits)
+    if bad.size:
+        from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+        for i in bad.tolist():
+            img = RawImage.FromString(sc.data[start[i] : end[i]].tobytes())
+            if (img.width, img.height, img.encoding, len(img.data)) != (SKIN_SHAPE[1], SKIN_SHAPE[0], "mono16", nbytes):
+                raise SessionFileError(
+                    f"{m.channel.topic}: message {i} is a {img.width}x{img.height} {img.encoding!r} image, "
+                    f"not the 16x16 mono16 skin layer"
+                )
+            pix[i] = np.frombuffer(img.data, np.uint8)
+    return pix.view("<u2").reshape(n, *SKIN_SHAPE)
+
+
+def _decode_skin(sc: McapScan, chans: list[ChannelMessages], msgs: list[str]) -> dict:
+    layers = {m.channel.metadata.get("layer"): m for m in chans}
+    sup, deep = layers.get("superficial"), layers.get("deep")
+    if sup is None or deep is None:
+        raise SessionFileError(f"skin stream needs both layers' channels, found {sorted(map(str, layers))}")
+    times_s, times_d = _times(sup), _times(deep)
+    pix_s, pix_d = _skin_pixels(sc, sup, msgs), _skin_pixels(sc, deep, msgs)
+    if sup.count == deep.count and np.array_equal(times_s["seq"], times_d["seq"]):
+        keep_s = keep_d = slice(None)
+    else:
+        # A frame pair split by a crash, or dropped messages: keep frames present in both layers.
+        _, keep_s, keep_d = np.intersect1d(times_s["seq"], times_d["seq"], return_indices=True)
+        msgs.append(f"skin layers hold {sup.count} and {deep.count} frames; kept the {keep_s.size} in both")
+    out = {k: v[keep_s] for k, v in times_s.items()}
+    out["superficial"] = pix_s[keep_s]
+    out["deep"] = pix_d[keep_d]
+    return out
+
+
+def _json_rows(sc: McapScan, m: ChannelMessages) -> list[dict]:
+    if m.count == 0:
+        return []
+    return json.loads(b"[" + b",".join(sc.payloads(m)) + b"]")
+
+
+def _float_array(rows, key, width=None) -> np.ndarray:
+    vals = [r[key] for r in rows]
+    a = np.array(vals, dtype=np.float64) if vals else np.zeros((0,) if width is None else (0, width))
+    return a
+
+
+def _decode_json(sc: McapScan, m: ChannelMessages, stream: str) -> dict:
+    rows = _json_rows(sc, m)
+    out = _times(m)
+    if stream == "events":
+        out.pop("seq")
+        out["kind"] = [r["kind"] for r in rows]
+        out["message"] = [r["message"] for r in rows]
+        out["detail"] = [r["detail"] for r in rows]
+        return out
+    sample = rows[0] if rows else {}
+    for key, value in sample.items():
+        if key in ("host_t_ns", "device_t_ns", "seq"):
+            continue
+        if isinstance(value, bool):
+            out[key] = np.array([r[key] for r in rows], dtype=bool)
+        elif isinstance(value, int):
+            out[key] = np.array([r[key] for r in rows], dtype=np.int64)
+        else:
+            out[key] = _float_array(rows, key)
+    return out
+
+
+def _decode_poses(sc: McapScan, m: ChannelMessages) -> dict:
+    from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+
+    n = m.count
+    vals = np.empty((n, 7), np.float64)
+    frame_ids = []
+    for i, payload in enumerate(sc.payloads(m)):
+        msg = PoseInFrame.FromString(payload)
+        p, q = msg.pose.position, msg.pose.orientation
+        vals[i] = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+        frame_ids.append(msg.frame_id)
+    out = _times(m)
+    out["position_m"] = vals[:, :3].copy()
+    out["orientation_xyzw"] = vals[:, 3:].copy()
+    out["frame_id"] = frame_ids
+    return out
+
+
+def _decode_markers(sc: McapScan, chans: list[ChannelMessages]) -> dict:
+    poses = [m for m in chans if m.channel.metadata.get("part") == "pose"]
+    dets = {m.channel.metadata.get("marker_id"): m for m in chans if m.channel.metadata.get("part") == "detection"}
+    parts = []
+    for pm in poses:
+        mid = pm.channel.metadata.get("marker_id")
+        p = _decode_poses(sc, pm)
+        rows = _json_rows(sc, dets[mid]) if mid in dets else []
+        n = min(len(rows), pm.count)
+        p = {k: v[:n] for k, v in p.items()}
+        p["marker_id"] = np.full(n, int(mid), np.int64)
+        p["corners_px"] = np.array([r["corners_px"] for r in rows[:n]], np.float64).reshape(n, 4, 2)
+        parts.append(p)
+    keys = parts[0].keys()
+    out = {}
+    for k in keys:
+        if isinstance(parts[0][k], list):
+            out[k] = [x for p in parts for x in p[k]]
+        else:
+            out[k] = np.concatenate([p[k] for p in parts])
+    order = np.lexsort((out["seq"], out["host_t_ns"]))
+    out = {k: (v[order] if isinstance(v, np.ndarray) else [v[i] for i in order]) for k, v in out.items()}
+    out["frame_seq"] = out["seq"].copy()
+    return out
+
+
+def _decode_camera(sc: McapScan, m: ChannelMessages) -> dict:
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+
+    images = []
+    for payload in sc.payloads(m):
+        msg = CompressedImage.FromString(payload)
+        images.append(cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_UNCHANGED))
+    out = _times(m)
+    if images and all(im.shape == images[0].shape for im in images):
+        out["image"] = np.stack(images)
+    else:
+        out["image"] = images
+    return out

@@ -1,0 +1,190 @@
+"""What goes on which channel, and how each payload is encoded.
+
+Skin layers and poses use Foxglove's well-known protobuf schemas so a session opens in
+Foxglove Studio as it is; streams with no fitting Foxglove schema are JSON with a JSON schema.
+Every channel carries metadata {"stream": <reader stream name>, ...} so the reader groups
+channels by what they hold, not by topic spelling.
+
+Times: MCAP log_time = host receive ns, publish_time = device ns, sequence = device sequence
+number. JSON payloads repeat host_t_ns / device_t_ns / seq; protobuf payloads put the device
+time in their `timestamp`.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from layerskin_exp.types import SKIN_SHAPE
+
+FORMAT = "layerskin-session"
+FORMAT_VERSION = "1"
+
+SKIN_TOPICS = {"superficial": "/skin/superficial", "deep": "/skin/deep"}
+WRENCH_TOPIC = "/ft/wrench"
+STAGE_TOPIC = "/stage/position"
+TCP_TOPIC = "/arm/tcp"
+GRIPPER_TOPIC = "/gripper/state"
+EVENTS_TOPIC = "/events"
+CAMERA_TOPIC = "/camera/image"
+
+
+def marker_pose_topic(marker_id: int) -> str:
+    return f"/markers/{int(marker_id)}"
+
+
+def marker_detection_topic(marker_id: int) -> str:
+    return f"/markers/{int(marker_id)}/detection"
+
+
+# MCAP metadata record names.
+META_SESSION = "session"
+META_LABELS = "labels"
+META_OUTCOME = "outcome"
+META_CLOCK_SYNC = "clock_sync"
+META_RECOVERED = "recovered"
+
+# ---------------------------------------------------------------------------- protobuf schemas
+
+PROTO_CLASSES = {cls.DESCRIPTOR.full_name: cls for cls in (RawImage, PoseInFrame, CompressedImage)}
+
+
+def proto_schema_data(cls) -> bytes:
+    """Serialized FileDescriptorSet for a protobuf class (MCAP `protobuf` schema encoding)."""
+    return build_file_descriptor_set(cls).SerializeToString()
+
+
+# ---------------------------------------------------------------------------- JSON schemas
+
+_INT = {"type": "integer"}
+_NUM = {"type": "number"}
+_VEC3 = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
+_TIMES = {"host_t_ns": _INT, "device_t_ns": _INT, "seq": _INT}
+
+
+def _object(name: str, props: dict) -> bytes:
+    return json.dumps(
+        {"title": name, "type": "object", "properties": props, "required": sorted(props)}
+    ).encode()
+
+
+JSON_SCHEMAS = {
+    "layerskin.Wrench": _object(
+        "layerskin.Wrench", {**_TIMES, "status": _INT, "force_n": _VEC3, "torque_nm": _VEC3}
+    ),
+    "layerskin.StagePosition": _object("layerskin.StagePosition", {**_TIMES, "position_mm": _VEC3}),
+    "layerskin.GripperState": _object(
+        "layerskin.GripperState",
+        {
+            **_TIMES,
+            "position_mm": _NUM,
+            "requested_mm": _NUM,
+            "speed": _INT,
+            "force": _INT,
+            "object_detected": {"type": "boolean"},
+            "fault": _INT,
+        },
+    ),
+    "layerskin.MarkerDetection": _object(
+        "layerskin.MarkerDetection",
+        {
+            "host_t_ns": _INT,
+            "device_t_ns": _INT,
+            "marker_id": _INT,
+            "frame_seq": _INT,
+            "corners_px": {"type": "array", "items": {"type": "array", "items": _NUM}},
+        },
+    ),
+    "layerskin.ProtocolEvent": _object(
+        "layerskin.ProtocolEvent",
+        {
+            "host_t_ns": _INT,
+            "device_t_ns": _INT,
+            "kind": {"type": "string"},
+            "message": {"type": "string"},
+            "detail": {"type": "object"},
+        },
+    ),
+}
+
+
+def to_jsonable(value):
+    """json.dumps default: numpy scalars and arrays become plain Python values."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if hasattr(value, "items"):  # e.g. an OmegaConf DictConfig
+        return {str(k): v for k, v in value.items()}
+    if isinstance(value, (tuple, set, frozenset)):
+        return list(value)
+    raise TypeError(f"cannot store {type(value).__name__} {value!r} in the session log as JSON")
+
+
+def dumps(obj) -> bytes:
+    # allow_nan=False: NaN/inf are not JSON and would not reopen in other tools.
+    return json.dumps(obj, default=to_jsonable, allow_nan=False, separators=(",", ":")).encode()
+
+
+# ---------------------------------------------------------------------------- fast RawImage bytes
+
+_PIXELS = SKIN_SHAPE[0] * SKIN_SHAPE[1]
+SKIN_DATA_BYTES = 2 * _PIXELS
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        bits = value & 0x7F
+        value >>= 7
+        if value:
+            out.append(bits | 0x80)
+        else:
+            out.append(bits)
+            return bytes(out)
+
+
+def _skin_tail() -> bytes:
+    """RawImage fields 2..6 up to the pixel bytes: width, height, encoding, step, data header."""
+    msg = RawImage(
+        width=SKIN_SHAPE[1], height=SKIN_SHAPE[0], encoding="mono16", step=2 * SKIN_SHAPE[1],
+        data=bytes(SKIN_DATA_BYTES),
+    )
+    full = msg.SerializeToString()  # timestamp unset, frame_id empty: tail is everything
+    return full[: len(full) - SKIN_DATA_BYTES]
+
+
+SKIN_TAIL = _skin_tail()
+"""Bytes that precede the 512 pixel bytes at the end of every skin RawImage payload."""
+
+
+def skin_payload(device_t_ns: int, pixels: bytes) -> bytes:
+    """Protobuf bytes of a foxglove.RawImage (16x16 mono16, little-endian, frame_id empty).
+
+    Equivalent to RawImage(...).SerializeToString() (fields in number order: timestamp, width,
+    height, encoding, step, data), built without the per-message protobuf object. The pixel
+    bytes end the message, which the reader relies on (and checks).
+    """
+    sec, nsec = divmod(device_t_ns, 1_000_000_000)
+    ts = b""
+    if sec:
+        ts += b"\x08" + _varint(sec)
+    if nsec:
+        ts += b"\x10" + _varint(nsec)
+    head = b"\x0a" + bytes((len(ts),)) + ts if ts else b""
+    return head + SKIN_TAIL + pixels
+
+
+def pose_payload(position_m, orientation_xyzw, frame_id: str, device_t_ns: int) -> bytes:
+    msg = PoseInFrame(frame_id=frame_id)
+    msg.timestamp.FromNanoseconds(int(device_t_ns))
+    p = msg.pose.position
+    p.x, p.y, p.z = (float(v) for v in position_m)
+    q = msg.pose.orientation
+    q.x, q.y, q.z, q.w = (float(v) for v in orientation_xyzw)
+    return msg.SerializeToString()

@@ -1,0 +1,375 @@
+"""SessionWriter: one MCAP file per trial, written crash-safely as data arrives."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from mcap.writer import CompressionType, Writer
+
+import layerskin_exp
+from layerskin_exp.log import schema as S
+from layerskin_exp.sync import estimate_clock_map
+from layerskin_exp.types import (
+    SKIN_SHAPE,
+    GripperState,
+    MarkerDetection,
+    Pose,
+    ProtocolEvent,
+    StagePosition,
+    TwoLayerFrame,
+    Wrench,
+)
+
+_COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+_U32_MAX = 2**32 - 1
+_U64_MAX = 2**64 - 1
+
+
+class SessionClosedError(RuntimeError):
+    """A record was written to a SessionWriter that is already closed."""
+
+
+class SessionWriter:
+    """Write one trial to an MCAP file.
+
+    path: the .mcap file to create (refused if it exists, unless overwrite=True).
+    metadata: {"config": dict, "backend": str, "calibration": dict, ...}; dict values become
+        their own MCAP metadata records, other values go into the "session" record.
+    labels: trial labels (position index, direction, grip depth, motion, trial index, ...).
+    compression: "zstd" (default), "lz4" or "none", per chunk.
+    chunk_span_ns / chunk_bytes: a chunk is closed and handed to the OS as soon as it spans
+        chunk_span_ns of log (host) time or holds chunk_bytes, so a kill loses at most that
+        much data. Protocol events are flushed at once.
+
+    Use as a context manager: an exception inside closes the file with outcome
+    "aborted: <Type: message>" (KeyboardInterrupt -> "aborted: interrupted") and propagates.
+    """
+
+    def __init__(
+        self,
+        path,
+        metadata: dict | None = None,
+        labels: dict | None = None,
+        *,
+        compression: str = "zstd",
+        chunk_span_ns: int = 100_000_000,
+        chunk_bytes: int = 1 << 20,
+        overwrite: bool = False,
+    ) -> None:
+        if compression not in _COMPRESSION:
+            raise ValueError(f"compression={compression!r}: use one of {sorted(_COMPRESSION)}")
+        self.path = Path(path)
+        if self.path.exists() and not overwrite:
+            raise FileExistsError(
+                f"session file {self.path} already exists; refusing to overwrite recorded data "
+                f"(choose another path or pass overwrite=True)"
+            )
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, "wb")
+        self._mcap = Writer(
+            self._file,
+            chunk_size=1 << 40,  # chunks are closed here, by span and size, not by the library
+            compression=_COMPRESSION[compression],
+        )
+        self._mcap.start(profile="", library=f"layerskin-exp/{layerskin_exp.__version__}")
+        self._chunk_span_ns = int(chunk_span_ns)
+        self._chunk_bytes = int(chunk_bytes)
+        self._chunk_start_ns: int | None = None
+        self._chunk_fill = 0
+        self._closed = False
+        self.outcome: str | None = None
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        # Per-stream (device_t, host_t) pairs for the clock map computed at close.
+        self._clock_pairs: dict[str, tuple[list[int], list[int]]] = {}
+        self._write_metadata(metadata or {}, labels or {})
+        skin = {layer: self._channel(topic, RawImage, {"stream": "skin", "layer": layer})
+                for layer, topic in S.SKIN_TOPICS.items()}
+        self._skin_sup, self._skin_deep = skin["superficial"], skin["deep"]
+        self._skin_clock = self._clock("skin")
+        self._dispatch = {
+            TwoLayerFrame: self.write_frame,
+            Wrench: self.write_wrench,
+            StagePosition: self.write_stage,
+            Pose: self.write_pose,
+            GripperState: self.write_gripper,
+            MarkerDetection: self.write_marker,
+            ProtocolEvent: self.write_event,
+        }
+
+    # ------------------------------------------------------------------ set-up
+
+    def _write_metadata(self, metadata: dict, labels: dict) -> None:
+        session = {"format": S.FORMAT, "format_version": S.FORMAT_VERSION,
+                   "version": layerskin_exp.__version__}
+        records = {}
+        for key, value in metadata.items():
+            if hasattr(value, "items"):
+                records[str(key)] = value
+            else:
+                session[str(key)] = value
+        reserved = {S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_RECOVERED}
+        clash = reserved & set(records)
+        if clash:
+            raise ValueError(f"metadata keys {sorted(clash)} are reserved by the session log; rename them")
+        self._add_metadata(S.META_SESSION, session)
+        for name, value in records.items():
+            self._add_metadata(name, value)
+        self._add_metadata(S.META_LABELS, labels)
+
+    def _add_metadata(self, name: str, values) -> None:
+        # MCAP metadata maps str -> str: each value is stored as JSON so types come back.
+        items = values.items() if hasattr(values, "items") else values
+        self._mcap.add_metadata(name, {str(k): S.dumps(v).decode() for k, v in items})
+        self._file.flush()
+
+    def _schema(self, name: str) -> int:
+        sid = self._schemas.get(name)
+        if sid is None:
+            if name in S.PROTO_CLASSES:
+                sid = self._mcap.register_schema(name, "protobuf", S.proto_schema_data(S.PROTO_CLASSES[name]))
+            else:
+                sid = self._mcap.register_schema(name, "jsonschema", S.JSON_SCHEMAS[name])
+            self._schemas[name] = sid
+        return sid
+
+    def _channel(self, topic: str, schema, meta: dict) -> int:
+        cid = self._channels.get(topic)
+        if cid is None:
+            # Close the open chunk first, so channel records always start a chunk: the reader
+            # finds them without walking every message.
+            self._mcap.flush()
+            self._chunk_start_ns, self._chunk_fill = None, 0
+            name = schema if isinstance(schema, str) else schema.DESCRIPTOR.full_name
+            encoding = "json" if isinstance(schema, str) else "protobuf"
+            cid = self._mcap.register_channel(topic, encoding, self._schema(name), meta)
+            self._channels[topic] = cid
+        return cid
+
+    def _clock(self, stream: str) -> tuple[list[int], list[int]]:
+        pairs = self._clock_pairs.get(stream)
+        if pairs is None:
+            pairs = self._clock_pairs[stream] = ([], [])
+        return pairs
+
+    # ------------------------------------------------------------------ low-level add
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise SessionClosedError(
+                f"session {self.path} is closed (outcome {self.outcome!r}); open a new SessionWriter"
+            )
+
+    def _add(self, channel: int, host_t_ns: int, device_t_ns: int, seq: int, payload: bytes) -> None:
+        if not (0 <= host_t_ns <= _U64_MAX and 0 <= device_t_ns <= _U64_MAX):
+            raise ValueError(
+                f"times must be non-negative ns (MCAP stores u64): host_t_ns={host_t_ns}, "
+                f"device_t_ns={device_t_ns}"
+            )
+        if not 0 <= seq <= _U32_MAX:
+            raise ValueError(f"sequence number {seq} does not fit MCAP's u32 sequence field")
+        self._mcap.add_message(channel, host_t_ns, payload, device_t_ns, seq)
+        start = self._chunk_start_ns
+        if start is None:
+            self._chunk_start_ns = start = host_t_ns
+        self._chunk_fill += len(payload) + 31
+        if host_t_ns - start >= self._chunk_span_ns or self._chunk_fill >= self._chunk_bytes:
+            self.flush()
+
+    def flush(self) -> None:
+        """Close the open chunk and hand everything written so far to the OS."""
+        self._mcap.flush()
+        self._chunk_start_ns, self._chunk_fill = None, 0
+
+    # ------------------------------------------------------------------ records
+
+    def write(self, record) -> None:
+        """Write one record, dispatching on its type (see layerskin_exp.types)."""
+        self._check_open()
+        method = self._dispatch.get(type(record))
+        if method is None:
+            raise TypeError(
+                f"SessionWriter.write cannot log a {type(record).__name__}; expected one of "
+                f"{', '.join(t.__name__ for t in self._dispatch)}"
+            )
+        method(record)
+
+    def write_frame(self, frame: TwoLayerFrame) -> None:
+        """Both layers as foxglove.RawImage mono16 on /skin/superficial and /skin/deep."""
+        self._check_open()
+        sup = _skin_bytes(frame.superficial, "superficial")
+        deep = _skin_bytes(frame.deep, "deep")
+        dev, host, seq = int(frame.device_t_ns), int(frame.host_t_ns), int(frame.seq)
+        if dev < 0:
+            raise ValueError(f"device_t_ns={dev} is negative; device times must be >= 0 ns")
+        self._add(self._skin_sup, host, dev, seq, S.skin_payload(dev, sup))
+        self._add(self._skin_deep, host, dev, seq, S.skin_payload(dev, deep))
+        pairs = self._skin_clock
+        pairs[0].append(dev)
+        pairs[1].append(host)
+
+    def _write_json(self, topic: str, schema: str, stream: str, host: int, dev: int, seq: int,
+                    body: dict, meta: dict | None = None) -> None:
+        channel = self._channel(topic, schema, {"stream": stream, **(meta or {})})
+        self._add(channel, host, dev, seq, S.dumps(body))
+        pairs = self._clock(stream)
+        pairs[0].append(dev)
+        pairs[1].append(host)
+
+    def write_wrench(self, w: Wrench) -> None:
+        self._check_open()
+        host, dev, seq = int(w.host_t_ns), int(w.device_t_ns), int(w.seq)
+        body = {"host_t_ns": host, "device_t_ns": dev, "seq": seq, "status": int(w.status),
+                "force_n": _vec(w.force_n, 3, "force_n"), "torque_nm": _vec(w.torque_nm, 3, "torque_nm")}
+        self._write_json(S.WRENCH_TOPIC, "layerskin.Wrench", "wrench", host, dev, seq, body)
+
+    def write_stage(self, p: StagePosition) -> None:
+        self._check_open()
+        host, dev, seq = int(p.host_t_ns), int(p.device_t_ns), int(p.seq)
+        body = {"host_t_ns": host, "device_t_ns": dev, "seq": seq,
+                "position_mm": _vec(p.position_mm, 3, "position_mm")}
+        self._write_json(S.STAGE_TOPIC, "layerskin.StagePosition", "stage", host, dev, seq, body)
+
+    def write_gripper(self, g: GripperState) -> None:
+        self._check_open()
+        host, dev, seq = int(g.host_t_ns), int(g.device_t_ns), int(g.seq)
+        body = {"host_t_ns": host, "device_t_ns": dev, "seq": seq,
+                "position_mm": float(g.position_mm), "requested_mm": float(g.requested_mm),
+                "speed": int(g.speed), "force": int(g.force),
+                "object_detected": bool(g.object_detected), "fault": int(g.fault)}
+        self._write_json(S.GRIPPER_TOPIC, "layerskin.GripperState", "gripper", host, dev, seq, body)
+
+    def write_pose(self, pose: Pose, topic: str = S.TCP_TOPIC) -> None:
+        """A pose as foxglove.PoseInFrame. Default topic /arm/tcp (reader stream "tcp");
+        other topics appear in the reader under their topic name."""
+        self._check_open()
+        stream = "tcp" if topic == S.TCP_TOPIC else topic
+        self._write_pose(pose, topic, stream, {}, int(pose.seq), int(pose.device_t_ns), int(pose.host_t_ns))
+
+    def _write_pose(self, pose: Pose, topic: str, stream: str, meta: dict, seq: int, dev: int, host: int):
+        channel = self._channel(topic, PoseInFrame, {"stream": stream, **meta})
+        payload = S.pose_payload(_vec(pose.position_m, 3, "position_m"),
+                                 _vec(pose.orientation_xyzw, 4, "orientation_xyzw"), pose.frame_id, dev)
+        self._add(channel, host, dev, seq, payload)
+        pairs = self._clock(stream)
+        pairs[0].append(dev)
+        pairs[1].append(host)
+
+    def write_marker(self, m: MarkerDetection) -> None:
+        """Marker pose as PoseInFrame on /markers/<id> (for Foxglove), and the detection itself
+        (image corners, frame sequence) as JSON on /markers/<id>/detection."""
+        self._check_open()
+        mid, host, dev, seq = int(m.marker_id), int(m.host_t_ns), int(m.device_t_ns), int(m.frame_seq)
+        meta = {"marker_id": str(mid)}
+        corners = np.asarray(m.corners_px, dtype=np.float64)
+        if corners.shape != (4, 2):
+            raise ValueError(f"marker {mid}: corners_px has shape {corners.shape}, expected (4, 2)")
+        self._write_pose(m.pose, S.marker_pose_topic(mid), "markers", {**meta, "part": "pose"}, seq, dev, host)
+        body = {"host_t_ns": host, "device_t_ns": dev, "marker_id": mid, "frame_seq": seq,
+                "corners_px": corners.tolist()}
+        channel = self._channel(S.marker_detection_topic(mid), "layerskin.MarkerDetection",
+                                {"stream": "markers", **meta, "part": "detection"})
+        self._add(channel, host, dev, seq, S.dumps(body))
+
+    def write_event(self, e: ProtocolEvent) -> None:
+        """Protocol events are rare and matter most after a crash: flushed at once."""
+        self._check_open()
+        host, dev = int(e.host_t_ns), int(e.device_t_ns)
+        body = {"host_t_ns": host, "device_t_ns": dev, "kind": str(e.kind), "message": str(e.message),
+                "detail": dict(e.detail)}
+        channel = self._channel(S.EVENTS_TOPIC, "layerskin.ProtocolEvent", {"stream": "events"})
+        self._add(channel, host, dev, 0, S.dumps(body))
+        self.flush()
+
+    def write_image(self, gray_uint8: np.ndarray, device_t_ns: int, host_t_ns: int, seq: int = 0) -> None:
+        """A camera image (H, W) uint8 (or (H, W, 3) BGR) as a PNG foxglove.CompressedImage."""
+        self._check_open()
+        img = np.asarray(gray_uint8)
+        if img.dtype != np.uint8 or img.ndim not in (2, 3):
+            raise ValueError(f"write_image needs an (H, W) or (H, W, 3) uint8 image, got {img.dtype} {img.shape}")
+        ok, png = cv2.imencode(".png", img)
+        if not ok:
+            raise ValueError(f"could not PNG-encode an image of shape {img.shape}")
+        msg = CompressedImage(format="png", frame_id="camera", data=png.tobytes())
+        msg.timestamp.FromNanoseconds(int(device_t_ns))
+        channel = self._channel(S.CAMERA_TOPIC, CompressedImage, {"stream": "camera"})
+        self._add(channel, int(host_t_ns), int(device_t_ns), int(seq), msg.SerializeToString())
+        pairs = self._clock("camera")
+        pairs[0].append(int(device_t_ns))
+        pairs[1].append(int(host_t_ns))
+
+    # ------------------------------------------------------------------ closing
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def clock_maps(self) -> dict:
+        """Per-stream clock maps from the pairs written so far: {stream: ClockMap}."""
+        return {stream: estimate_clock_map(np.asarray(d, np.int64), np.asarray(h, np.int64))
+                for stream, (d, h) in self._clock_pairs.items() if d}
+
+    def close(self, outcome: str = "complete") -> None:
+        """Record the clock sync and the outcome ("complete" or "aborted: <reason>"), write the
+        MCAP summary and close the file. Closing twice is a no-op."""
+        if self._closed:
+            return
+        if not (outcome == "complete" or outcome.startswith("aborted")):
+            raise ValueError(f"outcome {outcome!r}: use 'complete' or 'aborted: <reason>'")
+        try:
+            self.flush()
+            try:
+                maps = {k: m.to_dict() for k, m in self.clock_maps().items()}
+            except Exception as exc:  # never lose the session over a failed fit
+                maps = {"error": f"{type(exc).__name__}: {exc}"}
+            self._add_metadata(S.META_CLOCK_SYNC, maps)
+            self._add_metadata(S.META_OUTCOME, {"outcome": outcome})
+            self._mcap.finish()
+            self._file.flush()
+            os.fsync(self._file.fileno())
+        finally:
+            self._file.close()
+            self._closed = True
+            self.outcome = outcome
+
+    def __enter__(self) -> SessionWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            self.close("complete")
+        elif issubclass(exc_type, KeyboardInterrupt):
+            self.close("aborted: interrupted")
+        else:
+            self.close(f"aborted: {exc_type.__name__}: {exc}")
+        return False
+
+
+def _skin_bytes(layer, name: str) -> bytes:
+    """(16, 16) counts -> 512 little-endian uint16 bytes; refuses values that would wrap."""
+    a = layer
+    if not (isinstance(a, np.ndarray) and a.dtype == np.uint16):
+        a = np.asarray(a)
+        if a.size and (a.min() < 0 or a.max() > 65535 or not np.all(np.isfinite(a))):
+            raise ValueError(f"{name} layer has values outside 0..65535 (min {a.min()}, max {a.max()})")
+        a = a.astype(np.uint16)
+    if a.shape != SKIN_SHAPE:
+        raise ValueError(f"{name} layer has shape {a.shape}, expected {SKIN_SHAPE}")
+    return a.astype("<u2", copy=False).tobytes()
+
+
+def _vec(values, n: int, name: str) -> list[float]:
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if v.size != n:
+        raise ValueError(f"{name} has {v.size} values, expected {n}")
+    out = v.tolist()
+    if not np.all(np.isfinite(v)):
+        # JSON has no NaN: store null, which the reader turns back into NaN. Never drop the sample.
+        out = [x if np.isfinite(x) else None for x in out]
+    return out
