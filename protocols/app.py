@@ -1,0 +1,114 @@
+"""What both Hydra apps share: config checks before anything moves, the rig's life cycle, exit codes.
+
+Exit codes: 0 done; 2 configuration refused (nothing connected, nothing written); 1 a device
+error, a refused motion or a timeout stopped the run (motion stopped, trial file closed
+"aborted: ..."); 130 Ctrl-C (same). Rerunning the same command resumes.
+"""
+
+from __future__ import annotations
+
+import itertools
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
+from omegaconf import DictConfig, OmegaConf
+
+from layerskin_exp.config import ConfigError, format_config_error, validate
+
+CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+EXIT_CONFIG = 2
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+def _refuse(err: Exception) -> None:
+    print(format_config_error(err), file=sys.stderr)
+    sys.exit(EXIT_CONFIG)
+
+
+def _one_line(err: Exception) -> str:
+    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+    return " ".join(lines[:2]) if lines else type(err).__name__
+
+
+def expand_sweep(overrides: list[str]) -> list[list[str]]:
+    """The override lists of every job a basic-sweeper multirun would launch (cartesian product)."""
+    parsed = OverridesParser.create().parse_overrides(overrides)
+    choices = []
+    for o in parsed:
+        key = o.get_key_element()
+        values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
+        choices.append([f"{key}={v}" for v in values])
+    return [list(combo) for combo in itertools.product(*choices)]
+
+
+def preflight(config_name: str, argv: list[str]) -> None:
+    """Compose and validate the config of every job the command line asks for, before Hydra runs.
+
+    Catches unknown group options (`hardware=foo`), type errors and range errors as one line and
+    exit code 2, so a sweep is refused as a whole rather than failing at job 37.
+    """
+    if any(a in ("--help", "-h", "--hydra-help", "--info", "-i", "--cfg", "-c", "--shell-completion", "-sc",
+                 "--config-path", "-cp", "--config-name", "-cn", "--config-dir", "-cd") for a in argv):
+        return  # Hydra's own modes and alternative configs: let Hydra handle them
+    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    multirun = "-m" in argv or "--multirun" in argv
+    try:
+        jobs = expand_sweep(overrides) if multirun else [overrides]
+    except HydraException as e:
+        _refuse(ConfigError(f"override: {_one_line(e)}"))
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        for job in jobs:
+            try:
+                cfg = compose(config_name=config_name, overrides=job)
+                validate(cfg)
+            except ConfigError as e:
+                _refuse(e)
+            except HydraException as e:
+                _refuse(ConfigError(_one_line(e)))
+    GlobalHydra.instance().clear()
+
+
+def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object]):
+    """Validate, build and connect the rig, run body(typed_cfg, rig, metadata), always stop and disconnect.
+
+    Nothing moves before every device is connected and the config validated.
+    """
+    from hardware import build_rig  # the backends import heavy optional drivers
+
+    try:
+        typed = validate(cfg)
+        rig = build_rig(cfg, setup)
+    except ConfigError as e:
+        _refuse(e)
+    try:
+        rig.connect()
+    except Exception as e:  # noqa: BLE001 - any failure to connect ends the run before motion
+        print(f"error: could not connect the {rig.backend} rig: {_one_line(e)}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
+    metadata = {"config": OmegaConf.to_container(cfg, resolve=True), "backend": rig.backend,
+                "calibration": rig.skin.calibration()}
+    try:
+        return body(typed, rig, metadata)
+    except KeyboardInterrupt:
+        rig.stop_motion()
+        print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
+              "to resume", file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED)
+    except ConfigError as e:
+        rig.stop_motion()
+        _refuse(e)
+    except Exception as e:
+        rig.stop_motion()
+        print(f"error: {type(e).__name__}: {_one_line(e)} (motion stopped, the trial file is marked aborted; "
+              "rerun the same command to resume)", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
+    finally:
+        rig.stop_motion()
+        rig.disconnect()

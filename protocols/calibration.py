@@ -1,0 +1,281 @@
+"""Force-calibration campaign on the three-axis platform with the F/T reference.
+
+At each contact position: `press.repeats` normal presses to `press.target_normal_n`, then
+`slide.repeats` shear slides from a `slide.preload_n` preload in a random in-plane direction,
+with a random vertical offset reached over the first `slide.z_ramp_mm` of travel. A slide stops
+at |(Fx, Fy)| >= `slide.shear_stop_n` ("shear_reached"), at the skin edge ("skin_edge"), or when
+the normal-force guard trips ("force_limit"). One session file per trial; the plan (positions,
+directions, offsets) follows from the seed and the trial's labels, so a resumed campaign plans
+the same trials.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from hardware.interfaces import DeviceError, Rig
+from layerskin_exp.config import ConfigError
+from protocols.config import SKIN_HALF_WIDTH_MM, ForceCalibrationConfig, PositionsConfig
+from protocols.runner import TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
+from protocols.safety import FORCE_LIMIT, Safety
+
+PROTOCOL = "force_calibration"
+
+
+@dataclass(frozen=True)
+class CalibrationTrial:
+    position_index: int
+    position_mm: tuple[float, float]
+    kind: str  # "press" | "slide"
+    repeat: int
+    direction_rad: float | None = None
+    z_offset_mm: float | None = None
+
+    @property
+    def name(self) -> str:
+        return f"pos{self.position_index:03d}_{self.kind}{self.repeat}"
+
+    @property
+    def labels(self) -> dict:
+        return {"protocol": PROTOCOL, "position_index": self.position_index,
+                "position_mm": [float(v) for v in self.position_mm], "kind": self.kind, "repeat": self.repeat,
+                "direction_rad": self.direction_rad, "z_offset_mm": self.z_offset_mm}
+
+
+def plan_positions(cfg: PositionsConfig, seed: int) -> np.ndarray:
+    """(count, 2) contact centres in mm, inside the sensing area less the margin.
+
+    random: each position drawn from its own generator (seed, index), so the first k positions
+    do not depend on count. grid: ceil(sqrt(count)) per side, row-major, first `count`.
+    """
+    half_mm = SKIN_HALF_WIDTH_MM - cfg.margin_mm
+    if cfg.layout == "grid":
+        n = int(np.ceil(np.sqrt(cfg.count)))
+        axis = np.linspace(-half_mm, half_mm, n) if n > 1 else np.zeros(1)
+        yy, xx = np.meshgrid(axis, axis, indexing="ij")
+        return np.column_stack([xx.ravel(), yy.ravel()])[: cfg.count]
+    return np.array([trial_rng(seed, PROTOCOL, "position", i).uniform(-half_mm, half_mm, 2)
+                     for i in range(cfg.count)])
+
+
+def plan_trials(cfg: ForceCalibrationConfig) -> list[CalibrationTrial]:
+    """Every trial of the campaign, in run order."""
+    trials: list[CalibrationTrial] = []
+    for i, (x, y) in enumerate(plan_positions(cfg.positions, cfg.seed)):
+        xy = (round(float(x), 4), round(float(y), 4))
+        trials += [CalibrationTrial(i, xy, "press", r) for r in range(cfg.press.repeats)]
+        for r in range(cfg.slide.repeats):
+            rng = trial_rng(cfg.seed, PROTOCOL, "slide", i, r)
+            direction = float(rng.uniform(0.0, 2 * np.pi))
+            z_offset = float(rng.uniform(-cfg.slide.z_offset_mm, cfg.slide.z_offset_mm))
+            trials.append(CalibrationTrial(i, xy, "slide", r, round(direction, 6), round(z_offset, 6)))
+    return trials
+
+
+def distance_to_edge_mm(start_xy: np.ndarray, direction_xy: np.ndarray, half_mm: float) -> float:
+    """In-plane travel from start along the unit direction until |x| or |y| reaches half_mm."""
+    with np.errstate(divide="ignore"):
+        limits = np.where(direction_xy > 0, (half_mm - start_xy) / direction_xy,
+                          np.where(direction_xy < 0, (-half_mm - start_xy) / direction_xy, np.inf))
+    return float(max(0.0, limits.min()))
+
+
+class PlatformControl:
+    """Moves of the platform as one trial sees them: every command passes the safety checks,
+    every wait advances the rig clock in control ticks and drains the streams into the log."""
+
+    def __init__(self, rig: Rig, safety: Safety, cfg: ForceCalibrationConfig) -> None:
+        self.safety, self.cfg = safety, cfg
+        self.platform = rig.platform
+        self.clock = rig.clock
+        self.log: TrialLog | None = None
+        self._known_mm: np.ndarray | None = None  # last reported position, kept across trials
+
+    def bind(self, log: TrialLog) -> PlatformControl:
+        """Use this trial's log from now on."""
+        self.log = log
+        return self
+
+    def position_mm(self) -> np.ndarray:
+        """Latest reported tip position (3,) mm; waits a tick for the first report if need be."""
+        if self.log.last_stage is None and self._known_mm is None:
+            self.clock.sleep(self.cfg.control_period_s)
+            self.log.drain()
+        if self.log.last_stage is not None:
+            self._known_mm = np.asarray(self.log.last_stage.position_mm, float)
+        if self._known_mm is None:
+            raise DeviceError("platform: no position received; is the platform streaming?")
+        return self._known_mm
+
+    def move(self, target_mm, speed_mm_s: float, stop_when=None) -> str | None:
+        """Move to target; returns None when it got there, or why it stopped early.
+
+        stop_when(wrenches) -> reason | None is checked each tick on the new F/T samples.
+        A guard trip returns FORCE_LIMIT (the backend has already stopped the motion).
+        """
+        target_mm = np.asarray(target_mm, float)
+        self.safety.check_platform_move(target_mm, speed_mm_s)
+        distance_mm = float(np.linalg.norm(target_mm - self.position_mm()))
+        self.platform.move_to(target_mm, speed_mm_s)
+        deadline_ns = self.clock.now_ns() + int((1.5 * distance_mm / speed_mm_s + 2.0) * 1e9)
+        while True:
+            self.clock.sleep(self.cfg.control_period_s)
+            _, wrenches = self.log.drain()
+            if self.log.rig.tripped is not None and not self.safety.unloading:
+                self.wait_stopped()
+                return FORCE_LIMIT
+            reason = stop_when(wrenches) if stop_when is not None else None
+            if reason is not None:
+                self.platform.stop()
+                self.wait_stopped()
+                return reason
+            if not self.platform.is_moving():
+                return None
+            if self.clock.now_ns() > deadline_ns:
+                raise TimeoutError(f"platform move to {np.round(target_mm, 3).tolist()} mm did not finish "
+                                   f"in time; check the platform")
+
+    def wait_stopped(self) -> None:
+        deadline_ns = self.clock.now_ns() + int(2e9)
+        while self.platform.is_moving():
+            if self.clock.now_ns() > deadline_ns:
+                raise TimeoutError("platform did not stop within 2 s")
+            self.clock.sleep(self.cfg.control_period_s)
+            self.log.drain()
+        self.log.drain()
+
+    def hold(self, duration_s: float) -> None:
+        end_ns = self.clock.now_ns() + int(duration_s * 1e9)
+        while self.clock.now_ns() < end_ns:
+            self.clock.sleep(self.cfg.control_period_s)
+            self.log.drain()
+
+    def lift(self, xy_mm) -> None:
+        """Retract straight up to the clearance height; allowed while the force guard is tripped."""
+        self.log.event("phase", "retract")
+        target = np.array([*xy_mm, self.cfg.approach.clearance_mm], float)
+        tripped = self.log.rig.tripped is not None
+        if tripped:
+            self.safety.unloading = True
+        try:
+            self.move(target, self.cfg.approach.travel_speed_mm_s)
+        finally:
+            self.safety.unloading = False
+            if tripped:
+                self.safety.clear_trip()
+
+    def press(self, target_n: float, stop_reason_on_target: bool) -> str:
+        """Press down at the contact point until Fz >= target_n; returns the stop reason."""
+        cfg = self.cfg
+        contact = {"seen": False}
+
+        def check(wrenches) -> str | None:
+            if not wrenches:
+                return None
+            fz_n = np.array([w.force_n[2] for w in wrenches])
+            if not contact["seen"] and fz_n.max() >= cfg.approach.contact_force_n:
+                contact["seen"] = True
+                self.log.event("contact", "contact", fz_n=float(fz_n.max()))
+            return "target_reached" if fz_n.max() >= target_n else None
+
+        x, y = self.position_mm()[:2]
+        bottom = np.array([x, y, cfg.safety.platform_min_mm[2]])
+        reason = self.move(bottom, cfg.press.speed_mm_s, check) or "depth_limit"
+        if reason != "target_reached" or stop_reason_on_target:
+            fz = None if self.log.last_wrench is None else float(self.log.last_wrench.force_n[2])
+            self.log.stop(reason, fz_n=fz, tripped=self.log.rig.tripped)
+        if reason == FORCE_LIMIT:
+            self.log.event("safety", str(self.log.rig.tripped))
+        return reason
+
+
+def run_press(ctl: PlatformControl, trial: CalibrationTrial) -> None:
+    cfg = ctl.cfg
+    ctl.log.event("phase", "press", target_n=cfg.press.target_normal_n)
+    reason = ctl.press(cfg.press.target_normal_n, stop_reason_on_target=True)
+    if reason == "target_reached":
+        ctl.log.event("phase", "hold")
+        ctl.hold(cfg.press.hold_s)
+    ctl.lift(trial.position_mm)
+
+
+def run_slide(ctl: PlatformControl, trial: CalibrationTrial) -> None:
+    cfg, log = ctl.cfg, ctl.log
+    log.event("phase", "press", target_n=cfg.slide.preload_n)
+    reason = ctl.press(cfg.slide.preload_n, stop_reason_on_target=False)
+    if reason == FORCE_LIMIT:
+        ctl.lift(trial.position_mm)
+        return
+    start = ctl.position_mm()
+    direction = np.array([np.cos(trial.direction_rad), np.sin(trial.direction_rad)])
+    travel_mm = distance_to_edge_mm(start[:2], direction, SKIN_HALF_WIDTH_MM - cfg.slide.edge_margin_mm)
+    ramp_mm = min(cfg.slide.z_ramp_mm, travel_mm)
+    z_lo, z_hi = cfg.safety.platform_min_mm[2], cfg.approach.clearance_mm
+    z_end = float(np.clip(start[2] + trial.z_offset_mm * ramp_mm / cfg.slide.z_ramp_mm, z_lo, z_hi))
+    waypoints = [np.array([*(start[:2] + ramp_mm * direction), z_end]),
+                 np.array([*(start[:2] + travel_mm * direction), z_end])]
+    log.event("phase", "slide", direction_rad=trial.direction_rad, z_offset_mm=trial.z_offset_mm,
+              travel_mm=travel_mm, start_mm=start.tolist())
+
+    def shear(wrenches) -> str | None:
+        if wrenches and max(np.hypot(w.force_n[0], w.force_n[1]) for w in wrenches) >= cfg.slide.shear_stop_n:
+            return "shear_reached"
+        return None
+
+    reason = None
+    for wp in waypoints:
+        if travel_mm <= 0:
+            break
+        reason = ctl.move(wp, cfg.slide.speed_mm_s, shear)
+        if reason is not None:
+            break
+    reason = reason or "skin_edge"
+    last = log.last_wrench
+    log.stop(reason, fz_n=None if last is None else float(last.force_n[2]),
+             shear_n=None if last is None else float(np.hypot(*last.force_n[:2])),
+             position_mm=ctl.position_mm().tolist())
+    if reason == FORCE_LIMIT:
+        log.event("safety", str(log.rig.tripped))
+    ctl.lift(ctl.position_mm()[:2])
+
+
+def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict) -> list[TrialResult]:
+    """Run every trial not yet complete under cfg.data_root; returns the results of this run."""
+    if rig.platform is None or rig.ft is None:
+        raise ConfigError(f"hardware: backend {rig.backend!r} gave no platform/F-T sensor; the force "
+                          "calibration needs the platform setup")
+    safety = Safety(cfg.safety, rig)
+    ctl = PlatformControl(rig, safety, cfg)
+    root = Path(cfg.data_root) / PROTOCOL
+    trials = plan_trials(cfg)
+    todo = [t for t in trials if not trial_is_complete(root / f"{t.name}.mcap")]
+    results: list[TrialResult] = []
+    with tqdm(total=len(trials), initial=len(trials) - len(todo), unit="trial", desc=PROTOCOL,
+              disable=not cfg.progress, dynamic_ncols=True) as bar:
+        if len(todo) < len(trials):
+            tqdm.write(f"{PROTOCOL}: {len(trials) - len(todo)} of {len(trials)} trials already complete "
+                       f"in {root}; running the other {len(todo)}")
+        for trial in todo:
+            def body(log: TrialLog, trial=trial) -> None:
+                ctl.bind(log)
+                log.event("phase", "approach", position_mm=list(trial.position_mm))
+                clearance = np.array([*trial.position_mm, cfg.approach.clearance_mm])
+                here = ctl.position_mm()
+                if here[2] < cfg.approach.clearance_mm - 1e-6:  # never travel sideways in contact
+                    ctl.move([here[0], here[1], cfg.approach.clearance_mm], cfg.approach.travel_speed_mm_s)
+                ctl.move(clearance, cfg.approach.travel_speed_mm_s)
+                if cfg.tare_each_trial:
+                    rig.ft.tare()
+                (run_press if trial.kind == "press" else run_slide)(ctl, trial)
+
+            meta = {**metadata, "protocol": PROTOCOL, "plan": trial.labels}
+            result = run_trial(rig, root / f"{trial.name}.mcap", trial.labels, meta, body)
+            results.append(result)
+            bar.update(1)
+            if cfg.progress:
+                tqdm.write(result.summary())
+    return results

@@ -1,0 +1,266 @@
+"""Schemas of the protocol apps, stored in Hydra's ConfigStore at import.
+
+Two primary configs (`conf/force_calibration.yaml`, `conf/grip_depth.yaml`) and one group
+(`conf/trajectory/`). Every range check lives in `__post_init__` via `require`, so
+`layerskin_exp.config.validate(cfg)` refuses a bad override before any device is touched.
+Safety limits are part of the config (the framework enforces them, see `protocols/safety.py`);
+each protocol setting is also checked against them here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+from layerskin_exp.config import require
+
+SKIN_HALF_WIDTH_MM = 12.0  # the 24 x 24 mm sensing area, centred on the skin frame origin
+
+
+@dataclass
+class SafetyConfig:
+    """Limits the framework enforces on every backend (checked before each motion command,
+    and per F/T sample for the normal force)."""
+
+    max_normal_force_n: float = 6.0
+    platform_min_mm: list[float] = field(default_factory=lambda: [-13.0, -13.0, -2.5])
+    platform_max_mm: list[float] = field(default_factory=lambda: [13.0, 13.0, 10.0])
+    max_platform_speed_mm_s: float = 10.0
+    max_arm_speed_mm_s: float = 10.0
+    max_arm_angular_speed_deg_s: float = 10.0
+    arm_max_offset_mm: float = 15.0  # TCP distance from where the trial's motion started
+    arm_max_rotation_deg: float = 40.0
+    max_gripper_speed_mm_s: float = 50.0
+    max_grip_depth_mm: float = 20.0
+
+    def __post_init__(self) -> None:
+        require(0 < self.max_normal_force_n <= 50, "safety.max_normal_force_n", self.max_normal_force_n,
+                "must be in (0, 50] N")
+        require(len(self.platform_min_mm) == 3 and len(self.platform_max_mm) == 3, "safety.platform_min_mm",
+                self.platform_min_mm, "bounds need three values (x, y, z) in mm")
+        require(all(lo < hi for lo, hi in zip(self.platform_min_mm, self.platform_max_mm, strict=True)),
+                "safety.platform_max_mm", self.platform_max_mm, "each upper bound must exceed the lower one")
+        for key in ("max_platform_speed_mm_s", "max_arm_speed_mm_s", "max_arm_angular_speed_deg_s",
+                    "arm_max_offset_mm", "arm_max_rotation_deg", "max_gripper_speed_mm_s",
+                    "max_grip_depth_mm"):
+            value = getattr(self, key)
+            require(value > 0, f"safety.{key}", value, "must be > 0")
+
+
+def _check_speed(key: str, value: float, cap: float, cap_key: str) -> None:
+    require(0 < value <= cap, key, value, f"speed must be > 0 and at most {cap_key}={cap}")
+
+
+# --------------------------------------------------------------------------------------------
+# Force calibration
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class PositionsConfig:
+    """Where on the 24 x 24 mm area the indenter presses."""
+
+    layout: str = "random"  # "random" (uniform) or "grid" (row-major, ceil(sqrt(count)) per side)
+    count: int = 100
+    margin_mm: float = 2.0  # keep contact centres this far inside the sensing area
+
+    def __post_init__(self) -> None:
+        require(self.layout in ("random", "grid"), "positions.layout", self.layout, "use 'random' or 'grid'")
+        require(self.count > 0, "positions.count", self.count, "must be a positive number of positions")
+        require(0 <= self.margin_mm < SKIN_HALF_WIDTH_MM, "positions.margin_mm", self.margin_mm,
+                f"must be in [0, {SKIN_HALF_WIDTH_MM}) mm")
+
+
+@dataclass
+class ApproachConfig:
+    clearance_mm: float = 1.0  # tip height above the cover between trials
+    travel_speed_mm_s: float = 8.0  # moves in the air
+    contact_force_n: float = 0.05  # Fz above this logs the "contact" event
+
+
+@dataclass
+class PressConfig:
+    repeats: int = 5
+    target_normal_n: float = 5.0
+    speed_mm_s: float = 2.0
+    hold_s: float = 0.2
+
+
+@dataclass
+class SlideConfig:
+    repeats: int = 4
+    preload_n: float = 3.0  # normal load the slide starts from
+    z_offset_mm: float = 0.5  # vertical offset drawn uniform in [-z_offset_mm, z_offset_mm]
+    z_ramp_mm: float = 1.0  # in-plane travel over which the vertical offset is applied
+    speed_mm_s: float = 2.0
+    shear_stop_n: float = 2.0  # stop when |(Fx, Fy)| reaches this
+    edge_margin_mm: float = 0.5  # "skin edge": tip this far inside the sensing area
+
+
+@dataclass
+class ForceCalibrationConfig:
+    hardware: Any = MISSING
+    skin: Any = MISSING
+    sim: Any = None
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    positions: PositionsConfig = field(default_factory=PositionsConfig)
+    approach: ApproachConfig = field(default_factory=ApproachConfig)
+    press: PressConfig = field(default_factory=PressConfig)
+    slide: SlideConfig = field(default_factory=SlideConfig)
+    seed: int = 0
+    data_root: str = "data"
+    control_period_s: float = 0.01  # protocol loop tick; the force limit is checked per F/T sample
+    trial_timeout_s: float = 60.0
+    tare_each_trial: bool = True
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        s = self.safety
+        require(self.press.repeats >= 0, "press.repeats", self.press.repeats, "must be >= 0")
+        require(self.slide.repeats >= 0, "slide.repeats", self.slide.repeats, "must be >= 0")
+        require(self.press.repeats + self.slide.repeats > 0, "press.repeats", self.press.repeats,
+                "press.repeats + slide.repeats must be > 0")
+        require(0 < self.press.target_normal_n < s.max_normal_force_n, "press.target_normal_n",
+                self.press.target_normal_n, f"must be > 0 and below safety.max_normal_force_n={s.max_normal_force_n}")
+        require(0 < self.slide.preload_n < s.max_normal_force_n, "slide.preload_n", self.slide.preload_n,
+                f"must be > 0 and below safety.max_normal_force_n={s.max_normal_force_n}")
+        require(0 < self.slide.shear_stop_n, "slide.shear_stop_n", self.slide.shear_stop_n, "must be > 0 N")
+        require(0 <= self.slide.z_offset_mm <= 2.0, "slide.z_offset_mm", self.slide.z_offset_mm, "must be in [0, 2] mm")
+        require(self.slide.z_ramp_mm > 0, "slide.z_ramp_mm", self.slide.z_ramp_mm, "must be > 0 mm")
+        require(0 <= self.slide.edge_margin_mm < SKIN_HALF_WIDTH_MM, "slide.edge_margin_mm",
+                self.slide.edge_margin_mm, f"must be in [0, {SKIN_HALF_WIDTH_MM}) mm")
+        require(self.press.hold_s >= 0, "press.hold_s", self.press.hold_s, "must be >= 0 s")
+        require(self.approach.contact_force_n > 0, "approach.contact_force_n", self.approach.contact_force_n,
+                "must be > 0 N")
+        for key, value in (("press.speed_mm_s", self.press.speed_mm_s), ("slide.speed_mm_s", self.slide.speed_mm_s),
+                           ("approach.travel_speed_mm_s", self.approach.travel_speed_mm_s)):
+            _check_speed(key, value, s.max_platform_speed_mm_s, "safety.max_platform_speed_mm_s")
+        edge = SKIN_HALF_WIDTH_MM - self.slide.edge_margin_mm
+        require(all(lo <= -edge and hi >= edge for lo, hi in zip(s.platform_min_mm[:2], s.platform_max_mm[:2],
+                                                                  strict=True)),
+                "slide.edge_margin_mm", self.slide.edge_margin_mm,
+                "the skin edge lies outside safety.platform_min_mm/max_mm; raise the margin or widen the bounds")
+        require(s.platform_min_mm[2] < 0 < self.approach.clearance_mm <= s.platform_max_mm[2],
+                "approach.clearance_mm", self.approach.clearance_mm,
+                "must be > 0 and within safety.platform_max_mm[2] (and the z bounds must allow pressing below 0)")
+        require(0 < self.control_period_s <= 0.1, "control_period_s", self.control_period_s, "must be in (0, 0.1] s")
+        require(self.trial_timeout_s > 0, "trial_timeout_s", self.trial_timeout_s, "must be > 0 s")
+        require(bool(self.data_root), "data_root", self.data_root, "give a folder for the session files")
+
+
+# --------------------------------------------------------------------------------------------
+# Grip depth
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class TrajectoryConfig:
+    """A piecewise-linear motion imposed after the grip.
+
+    translation: waypoints in mm along `axis` (base frame, X0 = [1, 0, 0]), speed in mm/s.
+    torsion: waypoints in degrees about `axis` (tool frame: the normal of the skin pad), speed in °/s.
+    """
+
+    motion: str = "translation"
+    waypoints: list[float] = field(default_factory=lambda: [0.0, 5.0, 0.0, -5.0, 0.0])
+    speed: float = 2.0
+    axis: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])
+    accel_mm_s2: float = 100.0  # UR linear acceleration (also used, in rad/s^2 / 1000, for torsion)
+
+    def __post_init__(self) -> None:
+        require(self.motion in ("translation", "torsion"), "trajectory.motion", self.motion,
+                "use 'translation' or 'torsion'")
+        require(len(self.waypoints) >= 1, "trajectory.waypoints", self.waypoints, "give at least one waypoint")
+        require(self.speed > 0, "trajectory.speed", self.speed, "must be > 0 (mm/s or °/s)")
+        require(len(self.axis) == 3 and sum(a * a for a in self.axis) > 0, "trajectory.axis", self.axis,
+                "must be a non-zero 3-vector")
+        require(self.accel_mm_s2 > 0, "trajectory.accel_mm_s2", self.accel_mm_s2, "must be > 0")
+
+
+@dataclass
+class GripApproachConfig:
+    start_opening_mm: float = 40.0  # jaws open this far before the approach
+    min_opening_mm: float = 0.0  # the approach gives up (no contact) here
+    speed_mm_s: float = 5.0
+    force_pct: float = 20.0
+    threshold_counts: int = 500  # sum over both layers, after baseline subtraction
+    consecutive_frames: int = 5
+    baseline_s: float = 0.05  # skin frames averaged, jaws open, for the baseline
+
+
+@dataclass
+class GripCloseConfig:
+    speed_mm_s: float = 2.0
+    force_pct: float = 50.0
+    settle_s: float = 0.5  # hold after the jaws stop, before the motion
+
+
+@dataclass
+class GripReleaseConfig:
+    opening_mm: float = 40.0
+    speed_mm_s: float = 20.0
+
+
+@dataclass
+class GripDepthConfig:
+    hardware: Any = MISSING
+    skin: Any = MISSING
+    sim: Any = None
+    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    approach: GripApproachConfig = field(default_factory=GripApproachConfig)
+    close: GripCloseConfig = field(default_factory=GripCloseConfig)
+    release: GripReleaseConfig = field(default_factory=GripReleaseConfig)
+    grip_depth: float = 12.0  # mm of commanded closure after contact
+    trial: int = 0
+    seed: int = 0
+    data_root: str = "data"
+    save_images: bool = False
+    hold_s: float = 0.5  # pause before and after the motion
+    control_period_s: float = 0.01
+    trial_timeout_s: float = 300.0
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        s = self.safety
+        require(0 < self.grip_depth <= s.max_grip_depth_mm, "grip_depth", self.grip_depth,
+                f"must be > 0 mm and at most safety.max_grip_depth_mm={s.max_grip_depth_mm}")
+        require(self.trial >= 0, "trial", self.trial, "must be a trial index >= 0")
+        a = self.approach
+        require(0 <= a.min_opening_mm < a.start_opening_mm, "approach.start_opening_mm", a.start_opening_mm,
+                "must exceed approach.min_opening_mm >= 0")
+        require(a.threshold_counts > 0, "approach.threshold_counts", a.threshold_counts, "must be > 0 counts")
+        require(a.consecutive_frames >= 1, "approach.consecutive_frames", a.consecutive_frames, "must be >= 1")
+        require(a.baseline_s >= 0, "approach.baseline_s", a.baseline_s, "must be >= 0 s")
+        for key, value in (("approach.speed_mm_s", a.speed_mm_s), ("close.speed_mm_s", self.close.speed_mm_s),
+                           ("release.speed_mm_s", self.release.speed_mm_s)):
+            _check_speed(key, value, s.max_gripper_speed_mm_s, "safety.max_gripper_speed_mm_s")
+        for key, value in (("approach.force_pct", a.force_pct), ("close.force_pct", self.close.force_pct)):
+            require(0 <= value <= 100, key, value, "must be a percentage in [0, 100]")
+        t = self.trajectory
+        if t.motion == "translation":
+            _check_speed("trajectory.speed", t.speed, s.max_arm_speed_mm_s, "safety.max_arm_speed_mm_s")
+            require(max(abs(w) for w in t.waypoints) <= s.arm_max_offset_mm, "trajectory.waypoints", t.waypoints,
+                    f"must stay within safety.arm_max_offset_mm={s.arm_max_offset_mm}")
+        else:
+            _check_speed("trajectory.speed", t.speed, s.max_arm_angular_speed_deg_s,
+                         "safety.max_arm_angular_speed_deg_s")
+            require(max(abs(w) for w in t.waypoints) <= s.arm_max_rotation_deg, "trajectory.waypoints",
+                    t.waypoints, f"must stay within safety.arm_max_rotation_deg={s.arm_max_rotation_deg}")
+        require(self.hold_s >= 0, "hold_s", self.hold_s, "must be >= 0 s")
+        require(0 < self.control_period_s <= 0.1, "control_period_s", self.control_period_s, "must be in (0, 0.1] s")
+        require(self.trial_timeout_s > 0, "trial_timeout_s", self.trial_timeout_s, "must be > 0 s")
+        require(bool(self.data_root), "data_root", self.data_root, "give a folder for the session files")
+
+
+def _store() -> None:
+    cs = ConfigStore.instance()
+    cs.store(name="force_calibration_schema", node=ForceCalibrationConfig)
+    cs.store(name="grip_depth_schema", node=GripDepthConfig)
+    cs.store(group="trajectory", name="trajectory_schema", node=TrajectoryConfig)
+
+
+_store()

@@ -1,0 +1,26 @@
+"""`python -m protocols.force_calibration [overrides]`: the force-calibration campaign (see conf/force_calibration.yaml)."""
+
+from __future__ import annotations
+
+import sys
+
+import hydra
+from omegaconf import DictConfig
+
+from layerskin_exp.config import register_all
+
+register_all()
+
+from protocols.app import preflight, run_app  # noqa: E402
+from protocols.calibration import run_campaign  # noqa: E402
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="force_calibration")
+def main(cfg: DictConfig) -> dict:
+    results = run_app(cfg, "platform", run_campaign)
+    return {"summary": f"{len(results)} trials run", "trials": [r.as_dict() for r in results]}
+
+
+if __name__ == "__main__":
+    preflight("force_calibration", sys.argv[1:])
+    main()

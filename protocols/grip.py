@@ -1,0 +1,186 @@
+"""Grip-depth protocol on the arm + gripper rig: one trial per run.
+
+Open the jaws, measure the skin baseline, close slowly until the sum of both layers (baseline
+subtracted) exceeds `approach.threshold_counts` for `approach.consecutive_frames` frames in a
+row, stop, close a further `grip_depth` mm, run the trajectory (arm translation along X0 or
+torsion about the skin normal), release. Logs skin frames, TCP pose, gripper state, marker poses
+(and optionally images) and events.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hardware.interfaces import Rig
+from layerskin_exp.config import ConfigError
+from protocols.config import GripDepthConfig, TrajectoryConfig
+from protocols.runner import TrialLog, TrialResult, run_trial
+from protocols.safety import Safety
+
+PROTOCOL = "grip_depth"
+
+
+def trial_labels(cfg: GripDepthConfig) -> dict:
+    return {"protocol": PROTOCOL, "grip_depth_mm": float(cfg.grip_depth), "motion": cfg.trajectory.motion,
+            "trial": int(cfg.trial)}
+
+
+def trial_name(labels: dict) -> str:
+    return f"g{labels['grip_depth_mm']:g}_{labels['motion']}_t{labels['trial']}"
+
+
+def trial_path(cfg: GripDepthConfig) -> Path:
+    return Path(cfg.data_root) / PROTOCOL / f"{trial_name(trial_labels(cfg))}.mcap"
+
+
+def trajectory_poses(start_pose6: np.ndarray, traj: TrajectoryConfig) -> list[np.ndarray]:
+    """(6,) UR poses for each waypoint after the first, from the start pose.
+
+    translation: the position moves waypoint mm along the (base-frame) axis.
+    torsion: the orientation turns waypoint degrees about the (tool-frame) axis, about the TCP.
+    """
+    axis = np.asarray(traj.axis, float)
+    axis /= np.linalg.norm(axis)
+    start_rot = Rotation.from_rotvec(start_pose6[3:])
+    poses = []
+    for w in traj.waypoints[1:]:
+        pose = np.array(start_pose6, float)
+        if traj.motion == "translation":
+            pose[:3] = start_pose6[:3] + 1e-3 * w * axis
+        else:
+            pose[3:] = (start_rot * Rotation.from_rotvec(np.radians(w) * axis)).as_rotvec()
+        poses.append(pose)
+    return poses
+
+
+class GripControl:
+    """Gripper and arm moves of one trial: safety-checked, clock-ticked, streams drained."""
+
+    def __init__(self, log: TrialLog, safety: Safety, cfg: GripDepthConfig) -> None:
+        self.log, self.safety, self.cfg = log, safety, cfg
+        self.rig = log.rig
+        self.clock = log.rig.clock
+
+    def tick(self):
+        self.clock.sleep(self.cfg.control_period_s)
+        return self.log.drain()
+
+    def wait(self, busy, timeout_s: float, what: str) -> None:
+        deadline_ns = self.clock.now_ns() + int(timeout_s * 1e9)
+        while busy():
+            if self.clock.now_ns() > deadline_ns:
+                raise TimeoutError(f"{what} did not finish within {timeout_s:.1f} s")
+            self.tick()
+        self.log.drain()
+
+    def hold(self, duration_s: float) -> list:
+        """Let duration_s pass; returns the skin frames acquired meanwhile."""
+        frames = []
+        end_ns = self.clock.now_ns() + int(duration_s * 1e9)
+        while self.clock.now_ns() < end_ns:
+            frames += self.tick()[0]
+        return frames
+
+    def gripper_opening_mm(self) -> float:
+        if self.log.last_gripper is None:
+            self.log.drain()
+        if self.log.last_gripper is None:
+            raise RuntimeError("gripper: no state received yet; is the gripper streaming?")
+        return float(self.log.last_gripper.position_mm)
+
+    def move_gripper(self, opening_mm: float, speed_mm_s: float, force_pct: float, min_opening_mm: float) -> None:
+        self.safety.check_gripper_move(opening_mm, speed_mm_s, min_opening_mm)
+        self.rig.gripper.move(opening_mm, speed_mm_s, force_pct)
+        self.tick()  # let the move start before asking whether it is moving
+        travel_mm = abs(self.gripper_opening_mm() - opening_mm)
+        self.wait(self.rig.gripper.is_moving, 1.5 * travel_mm / speed_mm_s + 3.0, "gripper move")
+
+    def approach(self) -> float:
+        """Close until contact; returns the jaw opening (mm) where contact was declared."""
+        a = self.cfg.approach
+        self.log.event("phase", "approach")
+        self.safety.check_gripper_move(a.min_opening_mm, a.speed_mm_s, a.min_opening_mm)
+        baseline_frames = self.hold(a.baseline_s)
+        baseline = (float(np.mean([_total(f) for f in baseline_frames])) if baseline_frames else 0.0)
+        self.rig.gripper.move(a.min_opening_mm, a.speed_mm_s, a.force_pct)
+        run = 0
+        deadline_ns = self.clock.now_ns() + int((a.start_opening_mm / a.speed_mm_s * 1.5 + 3.0) * 1e9)
+        started = False
+        while True:
+            frames, _ = self.tick()
+            for f in frames:
+                run = run + 1 if _total(f) - baseline > a.threshold_counts else 0
+                if run >= a.consecutive_frames:
+                    self.rig.gripper.stop()
+                    self.wait(self.rig.gripper.is_moving, 3.0, "gripper stop")
+                    opening = self.gripper_opening_mm()
+                    self.log.event("contact", "contact", opening_mm=opening, baseline_counts=baseline,
+                                   frame_seq=int(f.seq), total_counts=int(_total(f)))
+                    return opening
+            moving = self.rig.gripper.is_moving()
+            started |= moving
+            if (started and not moving) or self.clock.now_ns() > deadline_ns:
+                self.log.stop("no_contact", opening_mm=self.gripper_opening_mm())
+                raise RuntimeError(f"no contact before the jaws reached {self.gripper_opening_mm():.1f} mm "
+                                   "(approach.min_opening_mm); check the rod position or approach.threshold_counts")
+
+    def move_arm(self, pose6: np.ndarray, start_pose6: np.ndarray, traj: TrajectoryConfig) -> None:
+        if traj.motion == "translation":
+            speed_mm_s, angular_deg_s = traj.speed, None
+        else:
+            speed_mm_s, angular_deg_s = min(1.0, self.cfg.safety.max_arm_speed_mm_s), traj.speed
+        self.safety.check_arm_move(pose6, start_pose6, speed_mm_s, angular_deg_s)
+        here = self.rig.arm.tcp_pose6()
+        if traj.motion == "translation":
+            duration_s = 1000.0 * float(np.linalg.norm(pose6[:3] - here[:3])) / traj.speed
+        else:
+            rel = Rotation.from_rotvec(pose6[3:]) * Rotation.from_rotvec(here[3:]).inv()
+            duration_s = float(np.degrees(rel.magnitude())) / traj.speed
+        self.rig.arm.move_linear(pose6, speed_mm_s / 1000.0, traj.accel_mm_s2 / 1000.0,
+                                 None if angular_deg_s is None else float(np.radians(angular_deg_s)))
+        self.tick()
+        self.wait(self.rig.arm.is_moving, 1.5 * duration_s + 5.0, "arm move")
+
+
+def _total(frame) -> int:
+    """Sum of both layers' counts of one frame pair."""
+    return int(frame.superficial.sum(dtype=np.int64) + frame.deep.sum(dtype=np.int64))
+
+
+def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict) -> TrialResult:
+    if rig.arm is None or rig.gripper is None:
+        raise ConfigError(f"hardware: backend {rig.backend!r} gave no arm/gripper; the grip-depth protocol "
+                          "needs the gripper setup")
+    safety = Safety(cfg.safety, rig)
+    safety.check_grip_depth(cfg.grip_depth)
+    labels = trial_labels(cfg)
+
+    def body(log: TrialLog) -> None:
+        ctl = GripControl(log, safety, cfg)
+        a = cfg.approach
+        log.event("phase", "open")
+        ctl.move_gripper(a.start_opening_mm, cfg.release.speed_mm_s, a.force_pct, a.min_opening_mm)
+        contact_mm = ctl.approach()
+        target_mm = contact_mm - cfg.grip_depth
+        log.event("phase", "close", grip_depth_mm=cfg.grip_depth, contact_opening_mm=contact_mm,
+                  target_opening_mm=target_mm)
+        ctl.move_gripper(target_mm, cfg.close.speed_mm_s, cfg.close.force_pct, a.min_opening_mm)
+        log.event("phase", "hold", opening_mm=ctl.gripper_opening_mm())
+        ctl.hold(max(cfg.close.settle_s, cfg.hold_s))
+        start = np.asarray(rig.arm.tcp_pose6(), float)
+        log.event("phase", "motion", motion=cfg.trajectory.motion, waypoints=list(cfg.trajectory.waypoints),
+                  speed=cfg.trajectory.speed, start_pose6=start.tolist())
+        for i, pose in enumerate(trajectory_poses(start, cfg.trajectory), start=1):
+            log.event("waypoint", f"{cfg.trajectory.waypoints[i]:g}", index=i)
+            ctl.move_arm(pose, start, cfg.trajectory)
+        log.stop("target_reached")
+        log.event("phase", "hold")
+        ctl.hold(cfg.hold_s)
+        log.event("phase", "release")
+        ctl.move_gripper(cfg.release.opening_mm, cfg.release.speed_mm_s, a.force_pct, a.min_opening_mm)
+
+    meta = {**metadata, "protocol": PROTOCOL, "plan": labels}
+    return run_trial(rig, trial_path(cfg), labels, meta, body, save_images=cfg.save_images)

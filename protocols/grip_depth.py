@@ -1,0 +1,27 @@
+"""`python -m protocols.grip_depth [overrides]`: one grip-depth trial (see conf/grip_depth.yaml); `-m` sweeps."""
+
+from __future__ import annotations
+
+import sys
+
+import hydra
+from omegaconf import DictConfig
+
+from layerskin_exp.config import register_all
+
+register_all()
+
+from protocols.app import preflight, run_app  # noqa: E402
+from protocols.grip import run_grip_trial  # noqa: E402
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="grip_depth")
+def main(cfg: DictConfig) -> dict:
+    result = run_app(cfg, "gripper", run_grip_trial)
+    print(result.summary(), flush=True)
+    return {**result.as_dict(), "summary": result.summary()}
+
+
+if __name__ == "__main__":
+    preflight("grip_depth", sys.argv[1:])
+    main()

@@ -1,0 +1,226 @@
+"""The shared trial runner: file naming, resume, logging, safe abort, per-trial summary.
+
+A trial is one session file. It is written under a temporary name (`<name>.mcap.partial`) and
+renamed atomically once closed "complete", so a campaign stopped at any point leaves each trial
+either complete under its final name or not there at all (an interrupted attempt stays as the
+`.partial` file, readable and marked aborted, until the rerun overwrites it). Whether a trial is
+complete is read back from the file itself.
+"""
+
+from __future__ import annotations
+
+import os
+import zlib
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hardware.interfaces import Rig
+from layerskin_exp.log import SessionFileError, SessionWriter, load_session
+from layerskin_exp.types import (
+    GripperState,
+    MarkerDetection,
+    ProtocolEvent,
+    StagePosition,
+    TwoLayerFrame,
+    Wrench,
+)
+
+PARTIAL_SUFFIX = ".partial"
+
+
+def trial_rng(seed: int, *keys: int | str) -> np.random.Generator:
+    """A generator determined by the seed and the trial's labels only (not by run order)."""
+    entropy = [seed & 0xFFFFFFFF] + [k & 0xFFFFFFFF if isinstance(k, int) else zlib.crc32(k.encode())
+                                     for k in keys]
+    return np.random.default_rng(np.random.SeedSequence(entropy))
+
+
+def trial_is_complete(path: Path) -> bool:
+    """True when `path` is a readable session whose outcome is "complete"."""
+    if not path.exists():
+        return False
+    try:
+        return bool(load_session(path).complete)
+    except SessionFileError:
+        return False
+
+
+def count_complete(paths: Iterable[Path]) -> int:
+    return sum(trial_is_complete(p) for p in paths)
+
+
+@dataclass
+class TrialResult:
+    """What a trial did; `summary()` is the one line printed per trial."""
+
+    name: str
+    labels: dict
+    path: str
+    outcome: str
+    duration_s: float = 0.0
+    peak_fz_n: float | None = None
+    peak_shear_n: float | None = None
+    stop_reason: str | None = None
+    skipped: bool = False
+    extra: dict = field(default_factory=dict)
+
+    def summary(self) -> str:
+        if self.skipped:
+            return f"{self.name}: already complete, skipped"
+        parts = [self.name, f"{self.duration_s:.2f} s"]
+        if self.peak_fz_n is not None:
+            parts.append(f"Fz max {self.peak_fz_n:.2f} N")
+        if self.peak_shear_n is not None:
+            parts.append(f"|Fxy| max {self.peak_shear_n:.2f} N")
+        parts += [f"{k} {v}" for k, v in self.extra.items()]
+        parts.append(f"stop {self.stop_reason or '-'}")
+        parts.append(self.outcome)
+        return " | ".join(parts)
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "labels": self.labels, "path": self.path, "outcome": self.outcome,
+                "duration_s": self.duration_s, "peak_fz_n": self.peak_fz_n, "peak_shear_n": self.peak_shear_n,
+                "stop_reason": self.stop_reason, "skipped": self.skipped}
+
+
+class TrialLog:
+    """An open session file bound to the rig: `drain()` moves everything acquired into the log.
+
+    Keeps the latest samples and running peaks the protocols decide on.
+    """
+
+    def __init__(self, writer: SessionWriter, rig: Rig, save_images: bool = False) -> None:
+        self.writer = writer
+        self.rig = rig
+        self.save_images = save_images
+        self.peak_fz_n: float | None = None
+        self.peak_shear_n: float | None = None
+        self.last_wrench: Wrench | None = None
+        self.last_stage: StagePosition | None = None
+        self.last_gripper: GripperState | None = None
+        self.stop_reason: str | None = None
+        self._last_image_seq: int | None = None
+
+    def event(self, kind: str, message: str, **detail) -> None:
+        t_ns = self.rig.clock.now_ns()
+        self.writer.write(ProtocolEvent(kind=kind, message=message, host_t_ns=t_ns, device_t_ns=t_ns,
+                                        detail=detail))
+
+    def stop(self, reason: str, **detail) -> str:
+        """Log the reason the motion ended (kind "stop"); the first one is the trial's."""
+        self.event("stop", reason, **detail)
+        if self.stop_reason is None:
+            self.stop_reason = reason
+        return reason
+
+    def drain(self) -> tuple[list[TwoLayerFrame], list[Wrench]]:
+        """Write every sample acquired since the last call; returns the new skin frames and wrenches."""
+        rig, w = self.rig, self.writer
+        frames = rig.skin.read_available()
+        for f in frames:
+            w.write(f)
+        wrenches: list[Wrench] = []
+        if rig.ft is not None:
+            wrenches = rig.ft.read_available()
+            for s in wrenches:
+                w.write(s)
+            if wrenches:
+                self.last_wrench = wrenches[-1]
+                force_n = np.stack([s.force_n for s in wrenches])
+                fz_max = float(force_n[:, 2].max())
+                shear_max = float(np.hypot(force_n[:, 0], force_n[:, 1]).max())
+                self.peak_fz_n = fz_max if self.peak_fz_n is None else max(self.peak_fz_n, fz_max)
+                self.peak_shear_n = shear_max if self.peak_shear_n is None else max(self.peak_shear_n, shear_max)
+        for dev in (rig.platform, rig.arm, rig.gripper):
+            if dev is None:
+                continue
+            records = dev.read_available()
+            for rec in records:
+                w.write(rec)
+            if records and dev is rig.platform:
+                self.last_stage = records[-1]
+            elif records and dev is rig.gripper:
+                self.last_gripper = records[-1]
+        if rig.camera is not None:
+            detections: list[MarkerDetection] = rig.camera.read_available()
+            for d in detections:
+                w.write(d)
+            if self.save_images and detections and detections[-1].frame_seq != self._last_image_seq:
+                image = rig.camera.latest_image()
+                if image is not None:
+                    w.write_image(image, detections[-1].device_t_ns, detections[-1].host_t_ns)
+                    self._last_image_seq = detections[-1].frame_seq
+        return frames, wrenches
+
+
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted (Ctrl-C)"
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def _fsync_path(path: Path) -> None:
+    """Flush a file (or a folder's entry list) to disk, so a power loss keeps the rename."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
+              save_images: bool = False) -> TrialResult:
+    """Run one trial into `path` (skipped when already complete).
+
+    body(log) drives the rig and calls log.drain() as the clock advances. If it raises (a device
+    error, a refused command, Ctrl-C), motion is stopped first, the file is closed
+    "aborted: <reason>" and left as `<path>.partial`, and the exception propagates.
+    """
+    path = Path(path)
+    name = path.stem
+    if trial_is_complete(path):
+        return TrialResult(name, labels, str(path), "complete", skipped=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + PARTIAL_SUFFIX)
+    t0_ns = rig.clock.now_ns()
+    writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True)
+    log = TrialLog(writer, rig, save_images)
+    try:
+        body(log)
+        log.drain()
+    except BaseException as exc:
+        rig.stop_motion()
+        reason = _describe(exc)
+        try:
+            log.drain()
+            log.event("error", reason)
+        except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
+            pass
+        writer.close(f"aborted: {reason}")
+        raise
+    writer.close("complete")
+    _fsync_path(tmp)
+    os.replace(tmp, path)
+    _fsync_path(path.parent)
+    return TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
+                       peak_fz_n=log.peak_fz_n, peak_shear_n=log.peak_shear_n, stop_reason=log.stop_reason)
+
+
+def wait_until(log: TrialLog, done: Callable[[], bool], period_s: float, timeout_s: float, what: str) -> None:
+    """Advance the clock in ticks, draining the streams, until done() or the timeout (then raise)."""
+    clock = log.rig.clock
+    deadline_ns = clock.now_ns() + int(timeout_s * 1e9)
+    while not done():
+        if clock.now_ns() > deadline_ns:
+            raise TimeoutError(f"{what} did not finish within {timeout_s:.1f} s")
+        clock.sleep(period_s)
+        log.drain()

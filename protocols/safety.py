@@ -1,0 +1,93 @@
+"""Safety limits enforced by the framework, on every backend.
+
+- Normal force: a guard on the rig, so the backend checks every F/T sample as it is acquired
+  and stops motion on the first one over the limit (the protocol loop is far coarser).
+- Workspace bounds and speed caps: checked before each motion command; a command outside them
+  is refused (`SafetyError`) and never reaches the device.
+- Grip depth: capped, and a closure may not command the jaws below their minimum opening.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hardware.interfaces import Rig
+from layerskin_exp.types import Wrench
+from protocols.config import SafetyConfig
+
+FORCE_LIMIT = "force_limit"
+
+
+class SafetyError(RuntimeError):
+    """A motion command was refused because it breaks a configured limit."""
+
+
+class Safety:
+    """The configured limits of one protocol run, bound to its rig."""
+
+    def __init__(self, cfg: SafetyConfig, rig: Rig) -> None:
+        self.cfg = cfg
+        self.rig = rig
+        self.lo_mm = np.asarray(cfg.platform_min_mm, float)
+        self.hi_mm = np.asarray(cfg.platform_max_mm, float)
+        # While lifting off after a trip the load is still above the limit; moving away from
+        # the skin is what makes it safe, so the guard lets that one kind of move run.
+        self.unloading = False
+        if rig.ft is not None:
+            rig.add_guard(self._normal_force_guard)
+
+    # ---- per-sample guard -----------------------------------------------------------------
+    def _normal_force_guard(self, sample: Wrench) -> str | None:
+        fz_n = float(sample.force_n[2])
+        if fz_n > self.cfg.max_normal_force_n and not self.unloading:
+            return f"{FORCE_LIMIT}: Fz={fz_n:.3f} N exceeds {self.cfg.max_normal_force_n} N"
+        return None
+
+    def clear_trip(self) -> str | None:
+        """Acknowledge a trip (after it was logged) so the next move may run; returns the reason."""
+        reason, self.rig.tripped = self.rig.tripped, None
+        return reason
+
+    # ---- command checks -------------------------------------------------------------------
+    def check_platform_move(self, target_mm: np.ndarray, speed_mm_s: float) -> None:
+        target_mm = np.asarray(target_mm, float)
+        if not np.all(np.isfinite(target_mm)) or np.any(target_mm < self.lo_mm) or np.any(target_mm > self.hi_mm):
+            raise SafetyError(f"platform target {np.round(target_mm, 3).tolist()} mm is outside the workspace "
+                              f"{self.lo_mm.tolist()}..{self.hi_mm.tolist()} (safety.platform_min_mm/max_mm)")
+        if not 0 < speed_mm_s <= self.cfg.max_platform_speed_mm_s:
+            raise SafetyError(f"platform speed {speed_mm_s} mm/s is outside (0, "
+                              f"safety.max_platform_speed_mm_s={self.cfg.max_platform_speed_mm_s}]")
+        if self.rig.tripped is not None and not self.unloading:
+            raise SafetyError(f"guard tripped ({self.rig.tripped}); acknowledge it before moving again")
+
+    def check_arm_move(self, pose6: np.ndarray, start_pose6: np.ndarray, speed_mm_s: float,
+                       angular_speed_deg_s: float | None) -> None:
+        offset_mm = 1000.0 * float(np.linalg.norm(np.asarray(pose6[:3]) - np.asarray(start_pose6[:3])))
+        if offset_mm > self.cfg.arm_max_offset_mm + 1e-6:
+            raise SafetyError(f"arm target {offset_mm:.2f} mm from the start pose exceeds "
+                              f"safety.arm_max_offset_mm={self.cfg.arm_max_offset_mm}")
+        rel = Rotation.from_rotvec(pose6[3:]) * Rotation.from_rotvec(start_pose6[3:]).inv()
+        angle_deg = float(np.degrees(rel.magnitude()))
+        if angle_deg > self.cfg.arm_max_rotation_deg + 1e-6:
+            raise SafetyError(f"arm target rotated {angle_deg:.2f}° from the start pose exceeds "
+                              f"safety.arm_max_rotation_deg={self.cfg.arm_max_rotation_deg}")
+        if not 0 < speed_mm_s <= self.cfg.max_arm_speed_mm_s:
+            raise SafetyError(f"arm speed {speed_mm_s} mm/s is outside (0, "
+                              f"safety.max_arm_speed_mm_s={self.cfg.max_arm_speed_mm_s}]")
+        if angular_speed_deg_s is not None and not 0 < angular_speed_deg_s <= self.cfg.max_arm_angular_speed_deg_s:
+            raise SafetyError(f"arm angular speed {angular_speed_deg_s} °/s is outside (0, "
+                              f"safety.max_arm_angular_speed_deg_s={self.cfg.max_arm_angular_speed_deg_s}]")
+
+    def check_gripper_move(self, opening_mm: float, speed_mm_s: float, min_opening_mm: float) -> None:
+        if not np.isfinite(opening_mm) or opening_mm < min_opening_mm:
+            raise SafetyError(f"gripper opening {opening_mm:.2f} mm is below the minimum {min_opening_mm} mm "
+                              "(approach.min_opening_mm); lower grip_depth")
+        if not 0 < speed_mm_s <= self.cfg.max_gripper_speed_mm_s:
+            raise SafetyError(f"gripper speed {speed_mm_s} mm/s is outside (0, "
+                              f"safety.max_gripper_speed_mm_s={self.cfg.max_gripper_speed_mm_s}]")
+
+    def check_grip_depth(self, grip_depth_mm: float) -> None:
+        if not 0 < grip_depth_mm <= self.cfg.max_grip_depth_mm:
+            raise SafetyError(f"grip depth {grip_depth_mm} mm is outside (0, "
+                              f"safety.max_grip_depth_mm={self.cfg.max_grip_depth_mm}]")
