@@ -1,0 +1,51 @@
+"""Simulated UR5e: linear tool moves under speed limits, TCP pose streamed at 500 Hz (RTDE)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hardware.interfaces import Arm
+from hardware.sim.stream_device import SimStreamMixin
+from layerskin_exp.sim.grip_scene import GripScene
+from layerskin_exp.sim.rig_config import ArmConfig
+from layerskin_exp.sim.world import World
+from layerskin_exp.types import Pose
+
+
+class SimArm(SimStreamMixin, Arm):
+    def __init__(self, world: World, scene: GripScene, cfg: ArmConfig) -> None:
+        super().__init__()
+        self.world, self.scene, self.cfg = world, scene, cfg
+        self.stream = world.new_stream("arm", cfg.clock, 1.0 / cfg.rate_hz)
+        self._noise_rng = np.random.default_rng(self.stream.rng.integers(2**63))
+        world.add_producer(self.stream, self._produce)
+
+    def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
+        snap = world.snapshots(idx)
+        p = snap[:, :3] + self._noise_rng.normal(0.0, self.cfg.position_noise_m, (len(t_s), 3))
+        q = Rotation.from_matrix(snap[:, 3:12].reshape(-1, 3, 3)).as_quat()  # x, y, z, w
+        seq, dev_ns, host_ns = self.stream.stamp(t_s)
+        for i in range(len(t_s)):
+            self.stream.push(int(host_ns[i]), Pose(p[i], q[i], "tcp", int(dev_ns[i]), int(host_ns[i]), int(seq[i])))
+
+    def move_linear(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
+                    angular_speed_rad_s: float | None = None) -> None:
+        self._require_connected()
+        self.scene.command_arm(pose6, speed_m_s, accel_m_s2, angular_speed_rad_s)
+
+    def stop(self) -> None:
+        self._require_connected()
+        self.scene.stop_arm()
+
+    def is_moving(self) -> bool:
+        self._require_connected()
+        return self.scene.pos.moving or self.scene.rot.moving
+
+    def tcp_pose6(self) -> np.ndarray:
+        self._require_connected()
+        rv = Rotation.from_matrix(self.scene.tcp_rotation()).as_rotvec()
+        return np.concatenate((np.asarray(self.scene.pos.position, float), rv))
+
+    def read_available(self) -> list[Pose]:
+        return self._drain()

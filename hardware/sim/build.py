@@ -1,0 +1,66 @@
+"""Assemble the simulated rig for one setup: world, skin model, device twins, virtual clock."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from hardware.interfaces import DeviceError, Rig
+from hardware.sim.arm import SimArm
+from hardware.sim.clock import SimClock
+from hardware.sim.ft import SimForceTorque
+from hardware.sim.gripper import SimGripper
+from hardware.sim.platform import SimPlatform
+from hardware.sim.skin import SimSkinReader
+from layerskin_exp.config import SkinConfig
+from layerskin_exp.sim.clocks import device_rng
+from layerskin_exp.sim.grip_scene import GripScene
+from layerskin_exp.sim.platform_scene import PlatformScene
+from layerskin_exp.sim.world import World
+
+SETUPS = ("platform", "gripper")
+
+
+def _default_skin_model(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm):
+    from layerskin_exp.sim.skin import SkinModel
+
+    return SkinModel(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm=support_stiffness_n_per_mm)
+
+
+def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory: Callable | None = None) -> Rig:
+    """The simulated rig for `setup` ("platform" or "gripper"), deterministic under sim_cfg.seed.
+
+    sim_cfg: SimConfig (seed, rig parameters, skin physics); skin_cfg: SkinConfig.
+    skin_model_factory(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm) builds the
+    skin mechanics (default: layerskin_exp.sim.skin.SkinModel).
+    Rig.extras["world"] is the World (for tests and benchmarks; protocols must not use it).
+    """
+    if setup not in SETUPS:
+        raise DeviceError(f"sim: unknown setup {setup!r}; choose one of {SETUPS}")
+    rc = sim_cfg.rig
+    scene = PlatformScene(rc.platform) if setup == "platform" else GripScene(rc.arm, rc.gripper)
+    factory = skin_model_factory or _default_skin_model
+    model = factory(sim_cfg, skin_cfg, scene.indenter, device_rng(sim_cfg.seed, "skin_model"),
+                    scene.support_stiffness_n_per_mm)
+    world = World(rc, skin_cfg, sim_cfg.seed, scene, model)
+    clock = SimClock(world)
+    skin = SimSkinReader(world, rc.skin)
+    rig = Rig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup})
+    if setup == "platform":
+        rig.ft = SimForceTorque(world, rc.ft, device_rng(sim_cfg.seed, "ft"), on_sample=rig.check_guards)
+        rig.platform = SimPlatform(world, scene, rc.platform)
+    else:
+        rig.arm = SimArm(world, scene, rc.arm)
+        rig.gripper = SimGripper(world, scene, rc.gripper)
+        rig.extras["skin_in_tcp"] = {
+            "rotation": scene_rotation_doc(),
+            "translation_axis_tcp": [1.0, 0.0, 0.0],
+            "torsion_axis_tcp": [0.0, 1.0, 0.0],
+        }
+    return rig
+
+
+def scene_rotation_doc() -> list[list[float]]:
+    """Skin axes in the TCP frame (columns x_s, y_s, z_s), as nested lists for metadata."""
+    from layerskin_exp.sim.grip_scene import R_TCP_SKIN
+
+    return R_TCP_SKIN.tolist()

@@ -1,0 +1,49 @@
+"""Simulated Robotiq Hand-E: jaw moves within the stroke and speed range, state polled at rate_hz."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hardware.interfaces import Gripper
+from hardware.sim.stream_device import SimStreamMixin
+from layerskin_exp.sim.grip_scene import GripScene
+from layerskin_exp.sim.rig_config import GripperConfig
+from layerskin_exp.sim.world import World
+from layerskin_exp.types import GripperState
+
+
+class SimGripper(SimStreamMixin, Gripper):
+    def __init__(self, world: World, scene: GripScene, cfg: GripperConfig) -> None:
+        super().__init__()
+        self.world, self.scene, self.cfg = world, scene, cfg
+        self.stream = world.new_stream("gripper", cfg.clock, 1.0 / cfg.rate_hz)
+        world.add_producer(self.stream, self._produce)
+
+    def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
+        snap = world.snapshots(idx)
+        res = self.cfg.position_resolution_mm
+        opening = np.round(snap[:, 12] / res) * res if res > 0 else snap[:, 12]
+        sc = self.scene
+        speed = int(round(255 * (sc.grip_speed_mm_s - self.cfg.min_speed_mm_s)
+                          / (self.cfg.max_speed_mm_s - self.cfg.min_speed_mm_s)))
+        force = int(round(255 * sc.force_pct / 100.0))
+        seq, dev_ns, host_ns = self.stream.stamp(t_s)
+        for i in range(len(t_s)):
+            self.stream.push(int(host_ns[i]), GripperState(
+                float(opening[i]), sc.requested_mm, speed, force, bool(snap[i, 13] > 0.5), 0,
+                int(dev_ns[i]), int(host_ns[i]), int(seq[i])))
+
+    def move(self, opening_mm: float, speed_mm_s: float, force_pct: float) -> None:
+        self._require_connected()
+        self.scene.command_gripper(opening_mm, speed_mm_s, force_pct)
+
+    def stop(self) -> None:
+        self._require_connected()
+        self.scene.stop_gripper()
+
+    def is_moving(self) -> bool:
+        self._require_connected()
+        return self.scene.jaw.moving
+
+    def read_available(self) -> list[GripperState]:
+        return self._drain()

@@ -1,0 +1,56 @@
+"""Time in the simulated world: one true timeline, the host's monotonic clock, and each device's clock.
+
+The world runs on true time t (s, from world start). The host clock reads t plus a fixed start
+value. Every device keeps its own oscillator: device time = offset + (1 + drift) * t, read with a
+small timestamp jitter; what it sends reaches the host after a one-sided transport delay, first
+in first out (a serial line or a TCP stream never reorders).
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+
+from layerskin_exp.sim.rig_config import DeviceClockConfig
+
+
+def device_rng(seed: int, name: str) -> np.random.Generator:
+    """A generator for one named part of the world, reproducible from the world seed alone."""
+    return np.random.default_rng([int(seed) & 0xFFFFFFFF, zlib.crc32(name.encode())])
+
+
+class DeviceClock:
+    """One device's oscillator and link: device timestamps and host receive times for sample times."""
+
+    def __init__(self, cfg: DeviceClockConfig, rng: np.random.Generator, host_start_ns: int) -> None:
+        self.offset_ns = int(rng.uniform(0.0, cfg.offset_max_s) * 1e9)
+        self.drift = float(rng.normal(0.0, cfg.drift_ppm_std)) * 1e-6
+        self.jitter_ns = cfg.timestamp_jitter_us * 1e3
+        self.delay_min_ns = cfg.delay_min_ms * 1e6
+        self.delay_extra_ns = cfg.delay_mean_extra_ms * 1e6
+        self.host_start_ns = host_start_ns
+        self._rng = rng
+        self._last_host_ns = -1
+
+    def device_ns(self, t_s: np.ndarray) -> np.ndarray:
+        """(N,) device timestamps (int64 ns) of events at true times t_s (N,)."""
+        t_s = np.asarray(t_s, dtype=float)
+        jitter = self._rng.normal(0.0, self.jitter_ns, t_s.shape) if self.jitter_ns > 0 else 0.0
+        return (self.offset_ns + t_s * 1e9 * (1.0 + self.drift) + jitter).astype(np.int64)
+
+    def true_s_of_device(self, device_ns: np.ndarray) -> np.ndarray:
+        """Inverse of the oscillator (no jitter): true time (s) at which the device clock reads device_ns."""
+        return (np.asarray(device_ns, dtype=float) - self.offset_ns) / (1e9 * (1.0 + self.drift))
+
+    def host_receive_ns(self, t_s: np.ndarray) -> np.ndarray:
+        """(N,) host receive times (int64 ns) of samples sent at true times t_s (N,), kept FIFO."""
+        t_s = np.asarray(t_s, dtype=float)
+        delay = self.delay_min_ns
+        if self.delay_extra_ns > 0:
+            delay = delay + self._rng.exponential(self.delay_extra_ns, t_s.shape)
+        host = (self.host_start_ns + t_s * 1e9 + delay).astype(np.int64)
+        if host.size:
+            host = np.maximum.accumulate(np.maximum(host, self._last_host_ns))
+            self._last_host_ns = int(host[-1])
+        return host

@@ -1,0 +1,174 @@
+"""The manipulation rig: a UR5e carrying a Hand-E whose skin-covered finger presses a fixed rod.
+
+Frames (all right-handed):
+- base: the UR base; the TCP pose comes from the arm's motion.
+- TCP: z is the approach direction, the jaws close along y; the skin finger is the -y jaw.
+- skin: attached to the skin finger's cover. x = TCP x, y = -TCP z, z = TCP y (the skin normal,
+  pointing from the finger toward the rod). Its origin, the sensing area's centre, lies on the
+  TCP y axis at -opening/2 (symmetric jaws: closing the opening by d moves each finger d/2).
+- rod: fixed in base, axis along TCP z at the home pose (so along the skin's y axis), placed
+  so that the skin cover touches it at `contact_opening_mm` with the arm at home.
+
+Arm translation along base X0 (= TCP x at the home pose) moves the rod along skin x; a rotation
+of the tool about its y axis (the skin normal) turns the rod about the skin normal (yaw). The
+other finger is `contact_opening_mm - rod_diameter_mm` away from the rod at contact and closes
+only half the commanded closure, so within the stroke used it never touches the rod.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hardware.interfaces import DeviceError
+from layerskin_exp.sim.kinematics import LimitedMotion
+from layerskin_exp.sim.rig_config import ArmConfig, GripperConfig
+
+# Skin axes expressed in the TCP frame (columns): x_s = x_t, y_s = -z_t, z_s = y_t.
+R_TCP_SKIN = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def rotvec_to_matrix(rv: list[float]) -> np.ndarray:
+    """Rodrigues' formula for a rotation vector (3,) -> (3, 3); cheaper than scipy per call."""
+    x, y, z = rv
+    th = math.sqrt(x * x + y * y + z * z)
+    if th < 1e-12:
+        return np.eye(3)
+    kx, ky, kz = x / th, y / th, z / th
+    c, s = math.cos(th), math.sin(th)
+    v = 1.0 - c
+    return np.array([[c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s],
+                     [ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s],
+                     [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v]])
+
+
+class GripScene:
+    indenter = "rod"
+    # snapshot: TCP position (3, m), TCP rotation matrix row-major (9), jaw opening (mm), stalled (0/1)
+    snapshot_names = ("x_m", "y_m", "z_m") + tuple(f"r{i}{j}" for i in range(3) for j in range(3)) + (
+        "opening_mm", "stalled")
+
+    def __init__(self, arm: ArmConfig, grip: GripperConfig) -> None:
+        self.arm_cfg, self.grip_cfg = arm, grip
+        self.support_stiffness_n_per_mm = grip.support_stiffness_n_per_mm
+        home = np.asarray(arm.home_pose6, float)
+        self.home_p_m = home[:3].copy()
+        self.R_ref = Rotation.from_rotvec(home[3:]).as_matrix()
+        self.pos = LimitedMotion(home[:3].tolist(), arm.max_accel_m_s2)
+        self.rot = LimitedMotion([0.0, 0.0, 0.0], arm.max_angular_accel_rad_s2)
+        self.jaw = LimitedMotion([grip.initial_opening_mm], grip.accel_mm_s2)
+        self.requested_mm = grip.initial_opening_mm
+        self.grip_speed_mm_s = grip.max_speed_mm_s
+        self.force_pct = 0.0
+        self.force_limit_n = grip.force_min_n
+        self.stalled = False
+        self.radius_mm = grip.rod_diameter_mm / 2.0
+        # The rod, fixed in base (m): axis point and unit direction.
+        c_tcp = np.array([0.0, -grip.contact_opening_mm / 2.0 + self.radius_mm, 0.0]) * 1e-3
+        self.rod_c_m = self.home_p_m + self.R_ref @ c_tcp
+        self.rod_a = self.R_ref @ np.array([0.0, 0.0, 1.0])
+        self._R_tcp = self.R_ref.copy()
+        self._cache = None
+
+    # ---- commands (validated against the devices' physical range) ----------------------------
+    def command_arm(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
+                    angular_speed_rad_s: float | None) -> None:
+        cfg = self.arm_cfg
+        pose6 = np.asarray(pose6, dtype=float).reshape(-1)
+        if pose6.shape != (6,) or not np.all(np.isfinite(pose6)):
+            raise DeviceError(f"arm: pose {pose6.tolist()} must be six finite values [x, y, z, rx, ry, rz]")
+        lo, hi = np.asarray(cfg.workspace_min_m), np.asarray(cfg.workspace_max_m)
+        if np.any(pose6[:3] < lo) or np.any(pose6[:3] > hi):
+            raise DeviceError(f"arm: target position {np.round(pose6[:3], 5).tolist()} m is outside the reachable "
+                              f"box {lo.tolist()}..{hi.tolist()} m (sim.rig.arm.workspace_*)")
+        if not (np.isfinite(speed_m_s) and 0 < speed_m_s <= cfg.max_speed_m_s):
+            raise DeviceError(f"arm: speed {speed_m_s!r} m/s is outside (0, {cfg.max_speed_m_s}] m/s")
+        if not (np.isfinite(accel_m_s2) and 0 < accel_m_s2 <= cfg.max_accel_m_s2):
+            raise DeviceError(f"arm: acceleration {accel_m_s2!r} m/s^2 is outside (0, {cfg.max_accel_m_s2}]")
+        w = cfg.max_angular_speed_rad_s if angular_speed_rad_s is None else float(angular_speed_rad_s)
+        if not (np.isfinite(w) and 0 < w <= cfg.max_angular_speed_rad_s):
+            raise DeviceError(f"arm: angular speed {angular_speed_rad_s!r} rad/s is outside "
+                              f"(0, {cfg.max_angular_speed_rad_s}]")
+        # Re-reference the rotation at the current orientation; the new target is relative to it.
+        self.R_ref = self.tcp_rotation()
+        rel = Rotation.from_matrix(self.R_ref.T @ Rotation.from_rotvec(pose6[3:]).as_matrix()).as_rotvec()
+        self.rot.position = [0.0, 0.0, 0.0]
+        self.pos.command(pose6[:3].tolist(), speed_m_s, accel_m_s2)
+        self.rot.command(rel.tolist(), w)
+        self._cache = None
+
+    def command_gripper(self, opening_mm: float, speed_mm_s: float, force_pct: float) -> None:
+        cfg = self.grip_cfg
+        if not (np.isfinite(opening_mm) and 0 <= opening_mm <= cfg.stroke_mm):
+            raise DeviceError(f"gripper: opening {opening_mm!r} mm is outside the stroke 0..{cfg.stroke_mm} mm")
+        if not (np.isfinite(speed_mm_s) and cfg.min_speed_mm_s <= speed_mm_s <= cfg.max_speed_mm_s):
+            raise DeviceError(f"gripper: speed {speed_mm_s!r} mm/s is outside the Hand-E's "
+                              f"{cfg.min_speed_mm_s}..{cfg.max_speed_mm_s} mm/s")
+        if not (np.isfinite(force_pct) and 0 <= force_pct <= 100):
+            raise DeviceError(f"gripper: force {force_pct!r} % is outside 0..100 %")
+        self.requested_mm = float(opening_mm)
+        self.grip_speed_mm_s = float(speed_mm_s)
+        self.force_pct = float(force_pct)
+        self.force_limit_n = cfg.force_min_n + force_pct / 100.0 * (cfg.force_max_n - cfg.force_min_n)
+        self.stalled = False
+        self.jaw.command([self.requested_mm], self.grip_speed_mm_s)
+        self._cache = None
+
+    def stop_arm(self) -> None:
+        self.pos.stop()
+        self.rot.stop()
+
+    def stop_gripper(self) -> None:
+        self.jaw.stop()
+
+    def stop_all(self) -> None:
+        self.stop_arm()
+        self.stop_gripper()
+
+    # ---- world stepping ----------------------------------------------------------------------
+    def step(self, dt_s: float) -> None:
+        if self.pos.moving or self.rot.moving or self.jaw.moving:
+            self.pos.step(dt_s)
+            self.rot.step(dt_s)
+            self.jaw.step(dt_s)
+            self._cache = None
+
+    def tcp_rotation(self) -> np.ndarray:
+        return self.R_ref @ rotvec_to_matrix(self.rot.position)
+
+    @property
+    def opening_mm(self) -> float:
+        return self.jaw.position[0]
+
+    def skin_pose(self, p_m: np.ndarray, R_tcp: np.ndarray, opening_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """Skin frame in base: origin (3, m) and rotation (3, 3)."""
+        origin = p_m + R_tcp @ np.array([0.0, -opening_mm / 2.0 * 1e-3, 0.0])
+        return origin, R_tcp @ R_TCP_SKIN
+
+    def indenter_pose(self) -> tuple[list[float], float]:
+        """Rod in the skin frame: the axis point nearest the skin origin (x, y mm), the height of the
+        rod's surface above the undeformed cover (z mm, negative = pressed), and its yaw (rad, 0 when
+        the axis lies along skin y)."""
+        if self._cache is not None:
+            return self._cache
+        self._R_tcp = R_tcp = self.tcp_rotation()
+        origin, R_skin = self.skin_pose(np.asarray(self.pos.position), R_tcp, self.opening_mm)
+        c_s = R_skin.T @ (self.rod_c_m - origin) * 1e3
+        a_s = R_skin.T @ self.rod_a
+        pt = c_s - (c_s @ a_s) * a_s
+        yaw = math.atan2(-a_s[0], a_s[1])
+        yaw = (yaw + math.pi / 2) % math.pi - math.pi / 2  # a rod has no head or tail
+        self._cache = ([float(pt[0]), float(pt[1]), float(pt[2]) - self.radius_mm], yaw)
+        return self._cache
+
+    def after_state(self, state) -> None:
+        """The Hand-E stops its jaws once the grip force reaches its force setting."""
+        if self.jaw.moving and self.jaw.velocity[0] < 0 and float(state.force_n[2]) >= self.force_limit_n:
+            self.jaw.halt()
+            self.stalled = True
+
+    def snapshot(self) -> tuple[float, ...]:
+        p = self.pos.position
+        return (p[0], p[1], p[2], *self._R_tcp.ravel().tolist(), self.jaw.position[0], float(self.stalled))

@@ -1,0 +1,55 @@
+"""The force-calibration platform: a three-axis stage pressing a hemispherical indenter into the skin.
+
+The stage carries the indenter; its position is the indenter tip in the skin frame (mm), z the
+height of the tip above the undeformed cover. The skin lies on the F/T sensor on a rigid table.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hardware.interfaces import DeviceError
+from layerskin_exp.sim.kinematics import LimitedMotion
+from layerskin_exp.sim.rig_config import PlatformConfig
+
+
+class PlatformScene:
+    indenter = "hemisphere"
+    support_stiffness_n_per_mm = None  # rigid table under the F/T sensor
+    snapshot_names = ("x_mm", "y_mm", "z_mm")
+
+    def __init__(self, cfg: PlatformConfig) -> None:
+        self.cfg = cfg
+        self.stage = LimitedMotion(list(cfg.home_mm), cfg.max_accel_mm_s2)
+        self.lo = np.asarray(cfg.workspace_min_mm, float)
+        self.hi = np.asarray(cfg.workspace_max_mm, float)
+
+    def command_move(self, target_mm: np.ndarray, speed_mm_s: float) -> None:
+        """Validate against the stage's physical range, then start the move."""
+        target = np.asarray(target_mm, dtype=float).reshape(-1)
+        if target.shape != (3,) or not np.all(np.isfinite(target)):
+            raise DeviceError(f"platform: target {target_mm!r} must be three finite values (x, y, z mm)")
+        if np.any(target < self.lo) or np.any(target > self.hi):
+            raise DeviceError(f"platform: target {np.round(target, 4).tolist()} mm is outside the stage's travel "
+                              f"{self.lo.tolist()}..{self.hi.tolist()} mm; command a reachable point")
+        if not (np.isfinite(speed_mm_s) and 0 < speed_mm_s <= self.cfg.max_speed_mm_s):
+            raise DeviceError(f"platform: speed {speed_mm_s!r} mm/s is outside (0, {self.cfg.max_speed_mm_s}] "
+                              "mm/s (sim.rig.platform.max_speed_mm_s)")
+        self.stage.command(target.tolist(), float(speed_mm_s))
+
+    def step(self, dt_s: float) -> None:
+        self.stage.step(dt_s)
+
+    def indenter_pose(self) -> tuple[list[float], float]:
+        """Indenter tip (x, y, z) mm in the skin frame and its yaw (rad)."""
+        return self.stage.position, 0.0
+
+    def after_state(self, state) -> None:
+        """Nothing reacts to the load here: the stage is stiff and position controlled."""
+
+    def snapshot(self) -> tuple[float, ...]:
+        p = self.stage.position
+        return (p[0], p[1], p[2])
+
+    def stop_all(self) -> None:
+        self.stage.stop()
