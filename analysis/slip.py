@@ -1,0 +1,185 @@
+"""Slip-event detection: vision ground truth, tactile cue scores, matching, fitted detectors.
+
+All times are in seconds on the session's common timeline.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+from scipy.signal import butter, find_peaks, sosfiltfilt
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import maximum_bipartite_matching
+
+from analysis.config import SlipConfig
+
+MAD_TO_SIGMA = 1.4826
+
+
+def match_events(detected, truth, tolerance: float) -> tuple[int, int, int]:
+    """Maximum one-to-one matching of detected to true event times within ±tolerance s.
+
+    Returns (tp, fp, fn). Maximum, not greedy: a detection between two true events is given to
+    whichever leaves the most pairs matched.
+    """
+    d = np.asarray(detected, np.float64).ravel()
+    t = np.asarray(truth, np.float64).ravel()
+    if d.size == 0 or t.size == 0:
+        return 0, int(d.size), int(t.size)
+    ok = np.abs(d[:, None] - t[None, :]) <= tolerance
+    if ok.sum(axis=0).max() <= 1 and ok.sum(axis=1).max() <= 1:  # no contested pair: every edge matches
+        tp = int(ok.sum())
+        return tp, int(d.size) - tp, int(t.size) - tp
+    rows, cols = np.nonzero(ok)
+    graph = csr_matrix((np.ones(rows.size), (rows, cols)), shape=(d.size, t.size))
+    tp = int((maximum_bipartite_matching(graph, perm_type="column") >= 0).sum())
+    return tp, int(d.size) - tp, int(t.size) - tp
+
+
+def f1_score(tp: int, fp: int, fn: int) -> float:
+    """2TP / (2TP + FP + FN); 1.0 when there was nothing to find and nothing was found."""
+    den = 2 * tp + fp + fn
+    return 1.0 if den == 0 else 2.0 * tp / den
+
+
+def resample_uniform(t_s: np.ndarray, x: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Linear interpolation of x(t_s) onto a uniform grid at rate_hz spanning t_s."""
+    t_s = np.asarray(t_s, np.float64)
+    if t_s.size < 2:
+        return t_s.copy(), np.asarray(x, np.float64).copy()
+    grid = np.arange(t_s[0], t_s[-1], 1.0 / rate_hz)
+    return grid, np.interp(grid, t_s, x)
+
+
+def _mad(x: np.ndarray) -> float:
+    return float(np.median(np.abs(x - np.median(x))))
+
+
+def _filter_ok(sos: np.ndarray, n: int) -> bool:
+    return n > 3 * (2 * sos.shape[0] + 1)  # sosfiltfilt's default padding needs this many samples
+
+
+def vision_slip_events(t_s: np.ndarray, signal: np.ndarray, cfg: SlipConfig | None = None) -> np.ndarray:
+    """Ground-truth slip times from a vision displacement (mm) or angle (°) sampled at t_s.
+
+    Resampled onto a uniform grid at cfg.vision_rate_hz, Butterworth low-pass (cfg.truth_order,
+    cfg.truth_lowpass_hz, zero phase), differentiated; peaks of |v| above
+    median(|v|) + 1.4826·MAD(|v|) at least cfg.truth_min_interval_s apart. Returns (E,) s.
+    """
+    cfg = cfg or SlipConfig()
+    grid, x = resample_uniform(t_s, signal, cfg.vision_rate_hz)
+    fs = cfg.vision_rate_hz
+    sos = butter(cfg.truth_order, min(cfg.truth_lowpass_hz, 0.45 * fs), btype="low", fs=fs, output="sos")
+    if not _filter_ok(sos, grid.size):
+        return np.zeros(0)
+    speed = np.abs(np.gradient(sosfiltfilt(sos, x), 1.0 / fs))
+    thr = np.median(speed) + cfg.truth_mad_k * _mad(speed)
+    peaks, _ = find_peaks(speed, height=thr, distance=max(1, int(round(cfg.truth_min_interval_s * fs))))
+    return grid[peaks]
+
+
+def cue_score(signal: np.ndarray, fs_hz: float, cfg: SlipConfig | None = None) -> np.ndarray:
+    """Slip score of a tactile cue sampled uniformly at fs_hz: (N,) -> (N,) in MAD units.
+
+    Band-pass (zero phase) → derivative → RMS envelope over cfg.envelope_s → (x − median)/MAD.
+    """
+    cfg = cfg or SlipConfig()
+    x = np.asarray(signal, np.float64)
+    lo, hi = cfg.band_hz
+    hi = min(hi, 0.45 * fs_hz)
+    sos = butter(cfg.band_order, [lo, hi], btype="band", fs=fs_hz, output="sos")
+    if not _filter_ok(sos, x.size):
+        return np.zeros_like(x)
+    deriv = np.gradient(sosfiltfilt(sos, x), 1.0 / fs_hz)
+    env = np.sqrt(uniform_filter1d(deriv * deriv, size=max(1, int(round(cfg.envelope_s * fs_hz))), mode="nearest"))
+    mad = _mad(env)
+    return (env - np.median(env)) / (mad if mad > 0 else 1.0)
+
+
+def candidates(t_s: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Local maxima of a score: (times (M,) s, heights (M,))."""
+    idx, _ = find_peaks(score)
+    return np.asarray(t_s)[idx], score[idx]
+
+
+@dataclass
+class CueTrial:
+    """One trial's candidates and truth for one cue."""
+
+    cand_t_s: np.ndarray
+    cand_score: np.ndarray
+    truth_t_s: np.ndarray
+    group: object  # grip depth
+
+
+def f1_table(trials: list[CueTrial], offsets_s: np.ndarray, thresholds: np.ndarray,
+             tolerance_s: float) -> np.ndarray:
+    """F1[trial, offset, threshold] of detections cand_t + offset for cand_score >= threshold."""
+    out = np.zeros((len(trials), len(offsets_s), len(thresholds)))
+    for i, tr in enumerate(trials):
+        for k, th in enumerate(thresholds):
+            det = tr.cand_t_s[tr.cand_score >= th]
+            for j, off in enumerate(offsets_s):
+                out[i, j, k] = f1_score(*match_events(det + off, tr.truth_t_s, tolerance_s))
+    return out
+
+
+def _best(mean_f1: np.ndarray) -> tuple[int, int]:
+    """(offset index, threshold index) of the best mean F1 [offset, threshold].
+
+    Ties form plateaus (between two candidate scores; across the ±tolerance): take the middle
+    best threshold (the widest margin to both sides), then the middle tied offset there, which
+    centres the tactile events on the vision events.
+    """
+    best = mean_f1.max()
+    ks = np.flatnonzero((mean_f1 >= best - 1e-12).any(axis=0))
+    k = int(ks[len(ks) // 2])
+    tied = np.flatnonzero(mean_f1[:, k] >= best - 1e-12)
+    return int(tied[len(tied) // 2]), k
+
+
+def evaluate_loto(trials: list[CueTrial], cfg: SlipConfig | None = None) -> dict:
+    """Trial-macro F1 under leave-one-trial-out for the Global, Grip and Oracle settings.
+
+    Global: offset and threshold maximising mean F1 over all other trials. Grip: over the other
+    trials of the same grip depth (Global's choice when there are none). Oracle: the Grip offset
+    with the threshold that maximises the held-out trial's own F1 (label-informed upper bound).
+    """
+    cfg = cfg or SlipConfig()
+    n = len(trials)
+    if n < 2:
+        raise ValueError(f"{n} trial(s): leave-one-trial-out needs at least two")
+    offsets = np.arange(cfg.offset_min_s, cfg.offset_max_s + 1e-9, cfg.offset_step_s)
+    scores = np.concatenate([t.cand_score for t in trials]) if trials else np.zeros(0)
+    if scores.size == 0:
+        scores = np.zeros(1)
+    thresholds = np.unique(np.quantile(scores, np.linspace(0.0, 1.0, cfg.n_thresholds)))
+    table = f1_table(trials, offsets, thresholds, cfg.tolerance_s)
+    groups = np.array([t.group for t in trials])
+    res = {"global": [], "grip": [], "oracle": []}
+    chosen_offsets = []
+    for i in range(n):
+        others = np.arange(n) != i
+        jg, kg = _best(table[others].mean(axis=0))
+        res["global"].append(table[i, jg, kg])
+        same = others & (groups == groups[i])
+        if same.any():
+            jp, kp = _best(table[same].mean(axis=0))
+        else:
+            jp, kp = jg, kg
+        res["grip"].append(table[i, jp, kp])
+        res["oracle"].append(table[i, jp].max())
+        chosen_offsets.append(offsets[jp])
+    out = {k: float(np.mean(v)) for k, v in res.items()}
+    out["per_trial"] = {k: [float(x) for x in v] for k, v in res.items()}
+    out["median_offset_s"] = float(np.median(chosen_offsets))
+    out["n_trials"] = n
+    out["n_truth_events"] = int(sum(t.truth_t_s.size for t in trials))
+    return out
+
+
+def detect(cand_t_s: np.ndarray, cand_score: np.ndarray, threshold: float, offset_s: float) -> np.ndarray:
+    """Detected event times: candidates at or above threshold, shifted by the latency offset."""
+    return cand_t_s[cand_score >= threshold] + offset_s
