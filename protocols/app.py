@@ -18,6 +18,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 from omegaconf import DictConfig, OmegaConf
 
+from hardware.interfaces import DeviceError
 from layerskin_exp.config import ConfigError, format_config_error, validate
 
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
@@ -87,6 +88,9 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
         rig = build_rig(cfg, setup)
     except ConfigError as e:
         _refuse(e)
+    except DeviceError as e:
+        print(f"error: {_one_line(e)}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
     try:
         rig.connect()
     except Exception as e:  # noqa: BLE001 - any failure to connect ends the run before motion

@@ -1,0 +1,146 @@
+"""Protocol logic on the closed-form fake rig (tests/protocols/fake_rig.py): stop reasons, the
+per-sample force guard, safe abort, planning from seed + labels, the safety checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hardware.interfaces import DeviceError
+from layerskin_exp.log import load_session
+from protocols.calibration import distance_to_edge_mm, plan_trials, run_campaign
+from protocols.config import ForceCalibrationConfig, GripDepthConfig
+from protocols.grip import run_grip_trial, trajectory_poses
+from protocols.safety import Safety, SafetyError
+from tests.protocols.fake_rig import gripper_rig, platform_rig
+
+META = {"config": {}, "backend": "fake"}
+
+
+def _cal_cfg(tmp_path, **kw) -> ForceCalibrationConfig:
+    cfg = ForceCalibrationConfig(hardware={}, skin={}, data_root=str(tmp_path), progress=False)
+    cfg.positions.count = 1
+    cfg.press.repeats = 1
+    cfg.slide.repeats = 1
+    for k, v in kw.items():
+        obj, _, attr = k.rpartition(".")
+        setattr(cfg if not obj else getattr(cfg, obj), attr, v)
+    return cfg
+
+
+def _connected(rig):
+    rig.connect()
+    return rig
+
+
+def test_press_stops_at_target_and_slide_at_shear(tmp_path):
+    cfg = _cal_cfg(tmp_path)
+    results = run_campaign(cfg, _connected(platform_rig(k_n_per_mm=4.0, mu=0.9)), META)
+    press, slide = (load_session(r.path, warn=False) for r in results)
+    assert press.outcome == "complete" and slide.outcome == "complete"
+    fz = press.streams["wrench"]["force_n"][:, 2]
+    # one 10 ms tick at 2 mm/s on a 4 N/mm spring overshoots by at most 0.08 N
+    assert cfg.press.target_normal_n <= fz.max() <= cfg.press.target_normal_n + 4.0 * 2.0 * 0.01 + 1e-9
+    shear = np.hypot(*slide.streams["wrench"]["force_n"][:, :2].T)
+    assert results[1].stop_reason == "shear_reached" and shear.max() >= cfg.slide.shear_stop_n
+    ev = slide.streams["events"]
+    assert ev["message"][ev["kind"].index("stop")] == "shear_reached"
+    assert [m for k, m in zip(ev["kind"], ev["message"], strict=True) if k == "phase"] == \
+        ["approach", "press", "slide", "retract"]
+
+
+def test_slide_on_slippery_skin_runs_to_the_edge(tmp_path):
+    # mu * preload (0.3 * 3 N) < 2 N: the shear target is out of reach, the slide ends at the edge
+    cfg = _cal_cfg(tmp_path, **{"slide.z_offset_mm": 0.0})
+    results = run_campaign(cfg, _connected(platform_rig(mu=0.3)), META)
+    assert results[1].stop_reason == "skin_edge"
+    stage = load_session(results[1].path, warn=False).streams["stage"]["position_mm"]
+    edge = 12.0 - cfg.slide.edge_margin_mm
+    assert np.abs(stage[:, :2]).max() == pytest.approx(edge, abs=1e-6)
+
+
+def test_force_guard_stops_within_one_sample(tmp_path):
+    # A coarse 0.1 s loop at 10 mm/s on a stiff 40 N/mm spring: the loop alone would overshoot by
+    # 40 N; the per-sample guard must stop the platform within one F/T sample (40 N/mm x 10 um).
+    k, v, ft_hz = 40.0, 10.0, 1000.0
+    cfg = _cal_cfg(tmp_path, **{"press.speed_mm_s": v, "control_period_s": 0.1, "slide.repeats": 0})
+    results = run_campaign(cfg, _connected(platform_rig(k_n_per_mm=k, ft_hz=ft_hz)), META)
+    s = load_session(results[0].path, warn=False)
+    assert results[0].stop_reason == "force_limit"
+    assert s.streams["wrench"]["force_n"][:, 2].max() <= cfg.safety.max_normal_force_n + k * v / ft_hz + 1e-9
+    assert "safety" in s.streams["events"]["kind"]
+
+
+def test_device_error_stops_motion_then_closes_aborted(tmp_path):
+    rig = _connected(platform_rig(fail_after_s=1.5))
+    cfg = _cal_cfg(tmp_path)
+    with pytest.raises(DeviceError):
+        run_campaign(cfg, rig, META)
+    assert not rig.platform.is_moving()
+    partial = list((tmp_path / "force_calibration").glob("*.partial"))
+    assert len(partial) == 1 and not list((tmp_path / "force_calibration").glob("*.mcap"))
+    s = load_session(partial[0], warn=False)
+    assert s.outcome.startswith("aborted: DeviceError") and not s.complete
+    assert "error" in s.streams["events"]["kind"]
+
+
+def test_plan_depends_only_on_seed_and_labels(tmp_path):
+    a = plan_trials(_cal_cfg(tmp_path, **{"positions.count": 5, "slide.repeats": 4}))
+    b = plan_trials(_cal_cfg(tmp_path, **{"positions.count": 3, "slide.repeats": 4}))
+    assert a[: len(b)] == b  # the first positions do not depend on how many there are
+    c = plan_trials(_cal_cfg(tmp_path, **{"positions.count": 3, "slide.repeats": 4, "seed": 1}))
+    assert c != b
+    slides = [t for t in a if t.kind == "slide"]
+    assert all(0 <= t.direction_rad < 2 * np.pi and abs(t.z_offset_mm) <= 0.5 for t in slides)
+    assert len({t.direction_rad for t in slides}) == len(slides)
+
+
+def test_distance_to_edge_closed_form():
+    assert distance_to_edge_mm(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 11.5) == pytest.approx(11.5)
+    d = np.array([1.0, 1.0]) / np.sqrt(2)
+    assert distance_to_edge_mm(np.array([1.5, -3.0]), d, 11.5) == pytest.approx(10.0 * np.sqrt(2))
+    assert distance_to_edge_mm(np.array([11.5, 0.0]), np.array([1.0, 0.0]), 11.5) == 0.0
+
+
+def test_safety_refuses_commands_outside_limits():
+    rig = platform_rig()
+    safety = Safety(ForceCalibrationConfig(hardware={}, skin={}).safety, rig)
+    safety.check_platform_move(np.array([0.0, 0.0, 1.0]), 5.0)
+    with pytest.raises(SafetyError, match="workspace"):
+        safety.check_platform_move(np.array([0.0, 0.0, -3.0]), 5.0)
+    with pytest.raises(SafetyError, match="max_platform_speed"):
+        safety.check_platform_move(np.array([0.0, 0.0, 1.0]), 50.0)
+    with pytest.raises(SafetyError, match="max_grip_depth"):
+        safety.check_grip_depth(25.0)
+    start = np.array([0.4, 0.0, 0.3, 0.0, 0.0, 0.0])
+    with pytest.raises(SafetyError, match="arm_max_offset"):
+        safety.check_arm_move(start + [0.02, 0, 0, 0, 0, 0], start, 2.0, None)
+
+
+def test_trajectory_poses_follow_the_waypoints():
+    cfg = GripDepthConfig(hardware={}, skin={})
+    start = np.array([0.4, 0.1, 0.3, 0.0, np.pi / 2, 0.0])
+    poses = trajectory_poses(start, cfg.trajectory)
+    assert [1000 * (p[0] - start[0]) for p in poses] == pytest.approx([5.0, 0.0, -5.0, 0.0])
+    cfg.trajectory.motion, cfg.trajectory.waypoints, cfg.trajectory.axis = "torsion", [0, 25, 0, -25, 0], [0, 1, 0]
+    from scipy.spatial.transform import Rotation as R
+    rots = [R.from_rotvec(start[3:]).inv() * R.from_rotvec(p[3:]) for p in trajectory_poses(start, cfg.trajectory)]
+    assert [np.degrees(r.as_rotvec()[1]) for r in rots] == pytest.approx([25, 0, -25, 0], abs=1e-9)
+
+
+def test_grip_trial_contact_then_depth(tmp_path):
+    cfg = GripDepthConfig(hardware={}, skin={}, data_root=str(tmp_path), grip_depth=6.0, progress=False)
+    cfg.trajectory.waypoints = [0.0, 1.0, 0.0]
+    rig = _connected(gripper_rig(rod_contact_mm=20.0))
+    result = run_grip_trial(cfg, rig, META)
+    s = load_session(result.path, warn=False)
+    assert s.labels == {"protocol": "grip_depth", "grip_depth_mm": 6.0, "motion": "translation", "trial": 0}
+    assert result.path.endswith("grip_depth/g6_translation_t0.mcap")
+    ev = s.streams["events"]
+    contact = ev["detail"][ev["kind"].index("contact")]
+    # fake skin: both layers 256 taxels x 40 counts/mm past 20 mm; > 500 counts from the first frame in contact
+    assert 19.0 < contact["opening_mm"] < 20.0
+    g = s.streams["gripper"]
+    assert g["position_mm"].min() == pytest.approx(contact["opening_mm"] - 6.0)  # the fake jaws never stall
+    x_mm = 1000 * (s.streams["tcp"]["position_m"][:, 0] - 0.4)
+    assert x_mm.max() == pytest.approx(1.0, abs=1e-6)
