@@ -34,7 +34,11 @@ def _refuse(err: Exception) -> None:
 
 def _one_line(err: Exception) -> str:
     lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
-    return " ".join(lines[:2]) if lines else type(err).__name__
+    text = lines[0] if lines else type(err).__name__
+    options = getattr(err, "options", None)  # hydra's MissingConfigException: the group's choices
+    if options:
+        text = f"{text} (available: {', '.join(o for o in options if not o.endswith('_schema'))})"
+    return text
 
 
 def expand_sweep(overrides: list[str]) -> list[list[str]]:
