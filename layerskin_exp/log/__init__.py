@@ -22,4 +22,11 @@ from layerskin_exp.log.reader import Session, SessionWarning, load_session
 from layerskin_exp.log.scan import SessionFileError
 from layerskin_exp.log.writer import SessionClosedError, SessionWriter
 
-__all__ = ["Session", "SessionClosedError", "SessionFileError", "SessionWarning", "SessionWriter", "load_session"]
+__all__ = [
+    "Session",
+    "SessionClosedError",
+    "SessionFileError",
+    "SessionWarning",
+    "SessionWriter",
+    "load_session",
+]

@@ -64,6 +64,11 @@ def load_session(path, *, warn: bool = True) -> Session:
     sc = scan(path)
     records = {name: _decode_meta(values) for name, values in sc.metadata}
     session_meta = records.get(S.META_SESSION, {})
+    if session_meta.get("format") != S.FORMAT and not sc.has_footer and not sc.channels:
+        raise SessionFileError(
+            f"{path}: cut off ({path.stat().st_size} bytes) before any session metadata or data; "
+            f"there is nothing to read"
+        )
     if session_meta.get("format") != S.FORMAT:
         topics = sorted({c.topic for c in sc.channels.values()})[:6]
         raise SessionFileError(
@@ -97,11 +102,20 @@ def load_session(path, *, warn: bool = True) -> Session:
         msgs.append("no outcome recorded: the writer did not close this session (crash or kill?)")
     if msgs and warn:
         _warnings.warn(f"{path}: " + "; ".join(msgs), SessionWarning, stacklevel=2)
-    return Session(path=path, metadata=metadata, labels=records.get(S.META_LABELS, {}), outcome=outcome,
-                   complete=complete, clock_sync=clock_sync, streams=streams, warnings=msgs)
+    return Session(
+        path=path,
+        metadata=metadata,
+        labels=records.get(S.META_LABELS, {}),
+        outcome=outcome,
+        complete=complete,
+        clock_sync=clock_sync,
+        streams=streams,
+        warnings=msgs,
+    )
 
 
 # ------------------------------------------------------------------------------ per-stream decoding
+
 
 def _times(m: ChannelMessages) -> dict:
     h = m.header
@@ -159,7 +173,12 @@ def _skin_pixels(sc: McapScan, m: ChannelMessages, msgs: list[str]) -> np.ndarra
 
         for i in bad.tolist():
             img = RawImage.FromString(sc.data[start[i] : end[i]].tobytes())
-            if (img.width, img.height, img.encoding, len(img.data)) != (SKIN_SHAPE[1], SKIN_SHAPE[0], "mono16", nbytes):
+            if (img.width, img.height, img.encoding, len(img.data)) != (
+                SKIN_SHAPE[1],
+                SKIN_SHAPE[0],
+                "mono16",
+                nbytes,
+            ):
                 raise SessionFileError(
                     f"{m.channel.topic}: message {i} is a {img.width}x{img.height} {img.encoding!r} image, "
                     f"not the 16x16 mono16 skin layer"
@@ -241,7 +260,9 @@ def _decode_poses(sc: McapScan, m: ChannelMessages) -> dict:
 
 def _decode_markers(sc: McapScan, chans: list[ChannelMessages]) -> dict:
     poses = [m for m in chans if m.channel.metadata.get("part") == "pose"]
-    dets = {m.channel.metadata.get("marker_id"): m for m in chans if m.channel.metadata.get("part") == "detection"}
+    dets = {
+        m.channel.metadata.get("marker_id"): m for m in chans if m.channel.metadata.get("part") == "detection"
+    }
     parts = []
     for pm in poses:
         mid = pm.channel.metadata.get("marker_id")

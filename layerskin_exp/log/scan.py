@@ -28,8 +28,14 @@ MAGIC = b"\x89MCAP0\r\n"
 # Message record layout inside a chunk: opcode u8, length u64, channel u16, sequence u32,
 # log_time u64, publish_time u64, then the payload (31 bytes of header in all).
 MESSAGE_HEADER = np.dtype(
-    [("opcode", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
-     ("log_time", "<u8"), ("publish_time", "<u8")]
+    [
+        ("opcode", "u1"),
+        ("length", "<u8"),
+        ("channel", "<u2"),
+        ("sequence", "<u4"),
+        ("log_time", "<u8"),
+        ("publish_time", "<u8"),
+    ]
 )
 HEADER_BYTES = MESSAGE_HEADER.itemsize  # 31
 
@@ -187,8 +193,16 @@ def scan(path) -> McapScan:
         for c in range(len(base) - 1):
             _walk_chunk(data, int(base[c]), int(base[c + 1]), c, [], channels, schemas)
         messages = _message_tables(buf, data, base, index, extra, channels, schemas, warnings)
-    return McapScan(data=data, channels=channels, schemas=schemas, metadata=metadata, messages=messages,
-                    has_footer=has_footer, warnings=warnings, n_chunks=chunks_ok)
+    return McapScan(
+        data=data,
+        channels=channels,
+        schemas=schemas,
+        metadata=metadata,
+        messages=messages,
+        has_footer=has_footer,
+        warnings=warnings,
+        n_chunks=chunks_ok,
+    )
 
 
 def _decompress_all(buf: bytes, chunks, warnings) -> tuple[np.ndarray, np.ndarray, int]:
@@ -293,13 +307,21 @@ def _message_tables(buf, data, base, index, extra, channels, schemas, warnings) 
             offsets = np.unique(offsets)
         ok = (offsets >= 0) & (offsets + HEADER_BYTES <= data.size)
         if not ok.all():
-            warnings.append(f"channel {cid}: {int((~ok).sum())} index entries point outside the data; skipped")
+            warnings.append(
+                f"channel {cid}: {int((~ok).sum())} index entries point outside the data; skipped"
+            )
             offsets = offsets[ok]
-        header = windows[offsets].copy().view(MESSAGE_HEADER)[:, 0] if offsets.size else np.zeros(0, MESSAGE_HEADER)
+        header = (
+            windows[offsets].copy().view(MESSAGE_HEADER)[:, 0]
+            if offsets.size
+            else np.zeros(0, MESSAGE_HEADER)
+        )
         good = (header["opcode"] == Opcode.MESSAGE) & (header["channel"] == cid)
         good &= offsets + 9 + header["length"].astype(np.int64) <= data.size
         if not good.all():
-            warnings.append(f"channel {cid}: {int((~good).sum())} index entries do not point at its messages; skipped")
+            warnings.append(
+                f"channel {cid}: {int((~good).sum())} index entries do not point at its messages; skipped"
+            )
             offsets, header = offsets[good], header[good]
         channel = channels.get(cid)
         out[cid] = ChannelMessages(

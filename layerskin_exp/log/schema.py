@@ -152,7 +152,10 @@ def _varint(value: int) -> bytes:
 def _skin_tail() -> bytes:
     """RawImage fields 2..6 up to the pixel bytes: width, height, encoding, step, data header."""
     msg = RawImage(
-        width=SKIN_SHAPE[1], height=SKIN_SHAPE[0], encoding="mono16", step=2 * SKIN_SHAPE[1],
+        width=SKIN_SHAPE[1],
+        height=SKIN_SHAPE[0],
+        encoding="mono16",
+        step=2 * SKIN_SHAPE[1],
         data=bytes(SKIN_DATA_BYTES),
     )
     full = msg.SerializeToString()  # timestamp unset, frame_id empty: tail is everything
@@ -163,21 +166,32 @@ SKIN_TAIL = _skin_tail()
 """Bytes that precede the 512 pixel bytes at the end of every skin RawImage payload."""
 
 
-def skin_payload(device_t_ns: int, pixels: bytes) -> bytes:
-    """Protobuf bytes of a foxglove.RawImage (16x16 mono16, little-endian, frame_id empty).
+_last_sec: list = [None, b""]  # one-entry cache: consecutive frames share their second
 
-    Equivalent to RawImage(...).SerializeToString() (fields in number order: timestamp, width,
-    height, encoding, step, data), built without the per-message protobuf object. The pixel
-    bytes end the message, which the reader relies on (and checks).
+
+def skin_head(device_t_ns: int) -> bytes:
+    """Everything of a skin foxglove.RawImage payload before its 512 pixel bytes.
+
+    head + pixels (16x16 little-endian uint16) equals RawImage(timestamp=device time, width=16,
+    height=16, encoding="mono16", step=32, data=pixels).SerializeToString() (fields in number
+    order, frame_id empty), built without a protobuf object per message. The pixels end the
+    message, which the reader relies on (and checks).
     """
     sec, nsec = divmod(device_t_ns, 1_000_000_000)
-    ts = b""
-    if sec:
-        ts += b"\x08" + _varint(sec)
+    if sec == _last_sec[0]:
+        ts = _last_sec[1]
+    else:
+        ts = b"\x08" + _varint(sec) if sec else b""
+        _last_sec[0], _last_sec[1] = sec, ts
     if nsec:
-        ts += b"\x10" + _varint(nsec)
-    head = b"\x0a" + bytes((len(ts),)) + ts if ts else b""
-    return head + SKIN_TAIL + pixels
+        ts = ts + b"\x10" + _varint(nsec)
+    # The timestamp submessage is always present (even empty), as protobuf writes a set field.
+    return b"\x0a" + bytes((len(ts),)) + ts + SKIN_TAIL
+
+
+def skin_payload(device_t_ns: int, pixels: bytes) -> bytes:
+    """A whole skin RawImage payload (see skin_head)."""
+    return skin_head(device_t_ns) + pixels
 
 
 def pose_payload(position_m, orientation_xyzw, frame_id: str, device_t_ns: int) -> bytes:

@@ -1,0 +1,70 @@
+"""Rewrite a session whose writer died (no footer) into a valid, indexed MCAP marked incomplete."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from mcap.writer import Writer
+
+import layerskin_exp
+from layerskin_exp.log import schema as S
+from layerskin_exp.log.scan import SessionFileError, scan
+
+
+def recover(src, dst) -> int:
+    """Copy every readable record of `src` into a new MCAP file `dst`. Returns messages copied.
+
+    The outcome stays absent (the trial did not finish); a "recovered" metadata record names the
+    source and the number of messages saved. `dst` must not exist.
+    """
+    src, dst = Path(src), Path(dst)
+    if dst.exists():
+        raise FileExistsError(f"{dst} exists; recover into a new file")
+    if src.resolve() == dst.resolve():
+        raise ValueError("recover writes a new file; give an output path different from the input")
+    sc = scan(src)
+    if not any(name == S.META_SESSION for name, _ in sc.metadata):
+        raise SessionFileError(f"{src}: not a layerskin session; nothing to recover")
+    order = []  # (offset in data, old channel id, index within channel)
+    for cid, m in sc.messages.items():
+        if m.channel is not None:
+            order.append(np.stack([m.offset, np.full(m.count, cid), np.arange(m.count)], axis=1))
+    rows = np.concatenate(order) if order else np.zeros((0, 3), np.int64)
+    rows = rows[np.argsort(rows[:, 0], kind="stable")]
+    payloads = {cid: sc.payloads(m) for cid, m in sc.messages.items() if m.channel is not None}
+    with open(dst, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="", library=f"layerskin-exp/{layerskin_exp.__version__} recover")
+        for name, values in sc.metadata:
+            if name not in (S.META_OUTCOME, S.META_RECOVERED):
+                w.add_metadata(name, values)
+        schema_ids = {}
+        for sid, s in sorted(sc.schemas.items()):
+            schema_ids[sid] = w.register_schema(s.name, s.encoding, s.data)
+        channel_ids = {}
+        for cid in sorted(payloads):
+            c = sc.channels[cid]
+            channel_ids[cid] = w.register_channel(
+                c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), c.metadata
+            )
+        for off, cid, i in rows.tolist():
+            h = sc.messages[cid].header[i]
+            w.add_message(
+                channel_ids[cid],
+                int(h["log_time"]),
+                payloads[cid][i],
+                int(h["publish_time"]),
+                int(h["sequence"]),
+            )
+        note = "; ".join(sc.warnings) or "file was complete"
+        w.add_metadata(
+            S.META_RECOVERED,
+            {
+                "messages": str(len(rows)),
+                "source": S.dumps(str(src)).decode(),
+                "damage": S.dumps(note).decode(),
+            },
+        )
+        w.finish()
+    return len(rows)
