@@ -1,0 +1,218 @@
+"""Parameters of the simulated skin: spacer, cover, contact, FSR transduction, readout.
+
+Every default is a material datum or a geometric fact of the study's sensor, never a value
+fitted to the study's results. Each section checks its own ranges in `__post_init__` and raises
+a `ConfigError` naming the key (`sim.spacer.modulus=-3.0: ...`). `SimConfig` is stored in
+Hydra's ConfigStore as `sim/sim_schema`; `conf/sim/default.yaml` fills it in, so a design sweep
+is `-m sim.spacer.modulus=20,35,60`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from hydra.core.config_store import ConfigStore
+
+from layerskin_exp.config import require
+from layerskin_exp.sim.rig_config import RigConfig
+
+
+def _positive(value: float, key: str, what: str = "must be > 0") -> None:
+    require(value is not None and value > 0, key, value, what)
+
+
+def _fraction(value: float, key: str, lo_open: bool = False) -> None:
+    ok = value is not None and (0 < value < 1 if lo_open else 0 <= value < 1)
+    require(ok, key, value, "must lie in (0, 1)" if lo_open else "must lie in [0, 1)")
+
+
+@dataclass
+class SpacerConfig:
+    """The compliant lattice between the two FSR layers.
+
+    Ecoflex 00-10 has a 100 % modulus of 55 kPa (Smooth-On datasheet) and an initial Young's
+    modulus of roughly 40-55 kPa; 10 % thinner lowers it, hence 35 kPa for the solid walls.
+    A hexagonal honeycomb of cell pitch `cell` and wall thickness `wall` has solid fraction
+    2t/P (1 - t/2P); loaded along its prism axis its modulus is fraction x E and its transverse
+    shear modulus about half the solid's shear modulus times the fraction (Gibson & Ashby).
+    """
+
+    modulus: float = 35.0  # kPa, Young's modulus of the (thinned) solid silicone
+    poisson: float = 0.49  # silicone is nearly incompressible
+    thickness: float = 2.5  # mm, lattice height
+    cell: float = 2.0  # mm, hexagonal cell pitch (the "feature size")
+    wall: float = 0.5  # mm, wall thickness of the lattice
+    width: float = 26.0  # mm, side of the square spacer pad (24 mm array + border)
+    confinement_length: float = 2.0  # mm, half-width of the squeezed region (~ indenter radius), sets S
+    lattice_contrast: float = 0.25  # relative depth of the cell pattern seen by the deep layer
+    spread_ratio: float = 0.5  # deep spreading width / compressed spacer height (Boussinesq-like)
+
+    def __post_init__(self) -> None:
+        _positive(self.modulus, "sim.spacer.modulus", "Young's modulus must be > 0 kPa")
+        require(0 <= self.poisson < 0.5, "sim.spacer.poisson", self.poisson, "must lie in [0, 0.5)")
+        _positive(self.thickness, "sim.spacer.thickness", "spacer height must be > 0 mm")
+        _positive(self.cell, "sim.spacer.cell", "lattice cell pitch must be > 0 mm")
+        require(self.wall is not None and 0 < self.wall < self.cell, "sim.spacer.wall", self.wall,
+                "wall thickness must be > 0 and smaller than the cell pitch")
+        _positive(self.width, "sim.spacer.width", "pad side must be > 0 mm")
+        _positive(self.confinement_length, "sim.spacer.confinement_length", "must be > 0 mm")
+        require(self.lattice_contrast is not None and 0 <= self.lattice_contrast < 0.5,
+                "sim.spacer.lattice_contrast", self.lattice_contrast, "must lie in [0, 0.5) to keep the load positive")
+        _positive(self.spread_ratio, "sim.spacer.spread_ratio")
+
+    @property
+    def solid_fraction(self) -> float:
+        """Relative density of the hexagonal honeycomb (0..1)."""
+        r = self.wall / self.cell
+        return min(2.0 * r * (1.0 - 0.5 * r), 0.95)
+
+    @property
+    def densification_strain(self) -> float:
+        """Compressive strain at which the bulging walls fill the voids (1 - solid fraction)."""
+        return 1.0 - self.solid_fraction
+
+    @property
+    def lattice_modulus_kpa(self) -> float:
+        """Out-of-plane (prism-axis) modulus of the lattice, kPa."""
+        return self.solid_fraction * self.modulus
+
+    @property
+    def shear_modulus_kpa(self) -> float:
+        """Transverse shear modulus of the open lattice, kPa (~ fraction/2 x solid G)."""
+        return 0.5 * self.solid_fraction * self.solid_shear_modulus_kpa
+
+    @property
+    def solid_shear_modulus_kpa(self) -> float:
+        return self.modulus / (2.0 * (1.0 + self.poisson))
+
+
+@dataclass
+class CoverConfig:
+    """The 0.2 mm silicone cover on the contact side and its friction with the indenter.
+
+    Soft silicone on printed plastic has a static coefficient near 1 (0.8-1.5 is typical);
+    kinetic friction is lower. `aging_s`: time for the static coefficient to recover after a
+    slip (contact ageing); `overshoot`: how far a slip runs past the kinetic level, from an
+    undamped (1) to a critically damped (0) slip of the superficial layer.
+    """
+
+    thickness: float = 0.2  # mm
+    friction: float = 1.0  # static coefficient
+    kinetic_ratio: float = 0.75  # kinetic / static
+    aging_s: float = 0.05
+    overshoot: float = 0.5
+
+    def __post_init__(self) -> None:
+        _positive(self.thickness, "sim.cover.thickness", "cover thickness must be > 0 mm")
+        _positive(self.friction, "sim.cover.friction", "static friction coefficient must be > 0")
+        require(self.kinetic_ratio is not None and 0 < self.kinetic_ratio <= 1, "sim.cover.kinetic_ratio",
+                self.kinetic_ratio, "kinetic/static ratio must lie in (0, 1]")
+        require(self.aging_s is not None and self.aging_s >= 0, "sim.cover.aging_s", self.aging_s, "must be >= 0 s")
+        require(self.overshoot is not None and 0 <= self.overshoot <= 1, "sim.cover.overshoot", self.overshoot,
+                "must lie in [0, 1]")
+
+    @property
+    def kinetic(self) -> float:
+        return self.friction * self.kinetic_ratio
+
+
+@dataclass
+class ContactConfig:
+    """Indenter geometry and the numerical resolution of the contact model."""
+
+    hemisphere_radius_mm: float = 2.5  # the platform's 3D-printed indenter
+    rod_diameter_mm: float = 12.0  # the manipulation rig's fixed rod
+    quad_points: int = 3  # Gauss points per axis over each taxel electrode
+    table_points: int = 96  # indentation samples in the precomputed contact tables
+
+    def __post_init__(self) -> None:
+        _positive(self.hemisphere_radius_mm, "sim.contact.hemisphere_radius_mm")
+        _positive(self.rod_diameter_mm, "sim.contact.rod_diameter_mm")
+        require(self.quad_points in (1, 2, 3, 4), "sim.contact.quad_points", self.quad_points, "must be 1..4")
+        require(self.table_points >= 16, "sim.contact.table_points", self.table_points, "must be >= 16")
+
+
+@dataclass
+class FSRConfig:
+    """Velostat force-sensing resistor between crossed electrodes (one taxel).
+
+    Conductance rises as a power of pressure (percolation of carbon contacts) and saturates
+    once the contact spots merge: G = G_floor + G_sat x / (1 + x), x = (p / p_sat)^exponent.
+    """
+
+    exponent: float = 1.3
+    saturation_kpa: float = 150.0  # pressure at half the saturated conductance
+    saturated_kohm: float = 1.0  # 1 / G_sat for one 1.2 x 1.2 mm taxel
+    floor_mohm: float = 5.0  # unloaded leakage resistance
+    gain_cv: float = 0.14  # per-taxel conductance spread (lognormal), fixed per seed
+    hysteresis: float = 0.06  # relative play width: loading reads low, unloading high
+    creep: float = 0.08  # fraction of the response that settles with time constant creep_s
+    creep_s: float = 1.5
+    layer_thickness_mm: float = 0.2  # FPCB + Velostat + FPCB
+
+    def __post_init__(self) -> None:
+        _positive(self.exponent, "sim.fsr.exponent", "power-law exponent must be > 0")
+        _positive(self.saturation_kpa, "sim.fsr.saturation_kpa", "saturation pressure must be > 0 kPa")
+        _positive(self.saturated_kohm, "sim.fsr.saturated_kohm")
+        _positive(self.floor_mohm, "sim.fsr.floor_mohm")
+        require(self.gain_cv is not None and 0 <= self.gain_cv < 1, "sim.fsr.gain_cv", self.gain_cv,
+                "must lie in [0, 1)")
+        _fraction(self.hysteresis, "sim.fsr.hysteresis")
+        _fraction(self.creep, "sim.fsr.creep")
+        _positive(self.creep_s, "sim.fsr.creep_s", "creep time constant must be > 0 s")
+        _positive(self.layer_thickness_mm, "sim.fsr.layer_thickness_mm")
+
+    @property
+    def gain_sigma(self) -> float:
+        """Lognormal sigma giving the configured coefficient of variation."""
+        return math.sqrt(math.log1p(self.gain_cv**2))
+
+
+@dataclass
+class ReadoutConfig:
+    """Row-multiplexed passive matrix, column voltage dividers, 12-bit ADC (bits from `skin`)."""
+
+    divider_kohm: float = 10.0
+    supply_v: float = 3.3  # ADC reference is the supply (ratiometric)
+    mux_on_ohm: float = 70.0  # CD74HC4067 on-resistance at 3.3-4.5 V
+    leak_mohm: float = 100.0  # floating rows' leakage to ground (keeps the network regular)
+    noise_counts: float = 1.5  # rms ADC + amplifier noise
+    baseline_counts: float = 12.0  # mean per-taxel offset (ADC offset, laminate preload)
+    baseline_sd_counts: float = 6.0
+    crosstalk: bool = True  # solve the full row/column network (ghosting)
+    scan_jitter_ms: float = 0.01  # rms jitter of each row's sampling instant
+
+    def __post_init__(self) -> None:
+        _positive(self.divider_kohm, "sim.readout.divider_kohm")
+        _positive(self.supply_v, "sim.readout.supply_v")
+        require(self.mux_on_ohm is not None and self.mux_on_ohm >= 0, "sim.readout.mux_on_ohm",
+                self.mux_on_ohm, "must be >= 0 ohm")
+        _positive(self.leak_mohm, "sim.readout.leak_mohm")
+        for key in ("noise_counts", "baseline_counts", "baseline_sd_counts", "scan_jitter_ms"):
+            v = getattr(self, key)
+            require(v is not None and v >= 0, f"sim.readout.{key}", v, "must be >= 0")
+
+
+@dataclass
+class SimConfig:
+    """The simulated world: the skin's physics plus the rig (`rig`, owned by the rig model)."""
+
+    seed: int = 0
+    spacer: SpacerConfig = field(default_factory=SpacerConfig)
+    cover: CoverConfig = field(default_factory=CoverConfig)
+    contact: ContactConfig = field(default_factory=ContactConfig)
+    fsr: FSRConfig = field(default_factory=FSRConfig)
+    readout: ReadoutConfig = field(default_factory=ReadoutConfig)
+    rig: RigConfig = field(default_factory=RigConfig)
+
+    def __post_init__(self) -> None:
+        require(isinstance(self.seed, int) and self.seed >= 0, "sim.seed", self.seed,
+                "must be a non-negative integer")
+
+
+def _store() -> None:
+    ConfigStore.instance().store(group="sim", name="sim_schema", node=SimConfig)
+
+
+_store()

@@ -1,0 +1,404 @@
+"""The simulated two-layer skin under one rigid indenter: mechanics step and frame pipeline.
+
+Frames. The deep layer is bonded to the support: the skin frame is the deep layer's frame
+(origin at the array centre, x along columns, y along rows). The superficial layer rides on the
+spacer: it is displaced by `surface_shift_mm` and rotated by `surface_rotation_rad` about the
+contact point, so a point x_s of the superficial frame sits at
+    x_deep = a + u + R(theta) (x_s - a),  a = contact_xy_mm, u = surface_shift_mm.
+
+Mechanics (`step`, scalar, ~1 kHz). The realised indentation comes from the contact tables and
+the series support compliance; the spacer's shear stiffness (rising with compression) loads
+the stick-slip friction at the cover, which gives the tangential force and torque.
+
+Pressure maps (`pressure_maps`, vectorised). Superficial: the contact table's profile around
+the contact point, in the superficial frame. Deep: the profile spread through the spacer
+around the contact's deep-frame position, tilted so that the deep normal pressure balances
+the moment of the shear force about the deep plane (F_t H = F_z shift, H the compressed stack
+height), times the lattice's cell pattern. For the rod, torsion loads the line with traction
+proportional to the distance along it, whose local moments rotate the deep line.
+Each taxel integrates its electrode footprint with Gauss points.
+
+Frames (`frames`): row-sequential sampling instants, FSR hysteresis/creep and conductance,
+passive-matrix readout with crosstalk, offsets, noise and quantisation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from layerskin_exp.config import SkinConfig
+from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim.contact import ContactTables, build_tables
+from layerskin_exp.sim.friction import StickSlip
+from layerskin_exp.sim.fsr import FSRLayer
+from layerskin_exp.sim.readout import MatrixReadout
+from layerskin_exp.sim.spacer import SpacerLaw, hex_cell_pattern
+
+INDENTERS = ("hemisphere", "rod")
+
+
+@dataclass
+class MechState:
+    """One mechanical step (see module docstring for the frames). Units in the names."""
+
+    t_s: float
+    force_n: np.ndarray  # (3,) Fx, Fy tangential, Fz >= 0 compressive, on the skin, skin frame
+    torque_z_nmm: float
+    indentation_mm: float
+    contact_xy_mm: np.ndarray  # (2,) superficial-layer frame
+    indenter_yaw_rad: float  # rod axis direction in the skin frame
+    surface_shift_mm: np.ndarray  # (2,)
+    surface_rotation_rad: float
+    slipping: bool
+    slip_mm: np.ndarray  # (2,) cumulative slip of the cover relative to the indenter
+    slip_rad: float
+
+
+@dataclass
+class StateBatch:
+    """N mechanical states as arrays (what the vectorised pipeline consumes)."""
+
+    t_s: np.ndarray  # (N,)
+    force_n: np.ndarray  # (N, 3)
+    torque_z_nmm: np.ndarray  # (N,)
+    indentation_mm: np.ndarray  # (N,)
+    contact_xy_mm: np.ndarray  # (N, 2)
+    indenter_yaw_rad: np.ndarray  # (N,)
+    surface_shift_mm: np.ndarray  # (N, 2)
+    surface_rotation_rad: np.ndarray  # (N,)
+
+
+def stack_states(states: list[MechState]) -> StateBatch:
+    return StateBatch(
+        t_s=np.array([s.t_s for s in states], dtype=float),
+        force_n=np.array([s.force_n for s in states], dtype=float).reshape(-1, 3),
+        torque_z_nmm=np.array([s.torque_z_nmm for s in states], dtype=float),
+        indentation_mm=np.array([s.indentation_mm for s in states], dtype=float),
+        contact_xy_mm=np.array([s.contact_xy_mm for s in states], dtype=float).reshape(-1, 2),
+        indenter_yaw_rad=np.array([s.indenter_yaw_rad for s in states], dtype=float),
+        surface_shift_mm=np.array([s.surface_shift_mm for s in states], dtype=float).reshape(-1, 2),
+        surface_rotation_rad=np.array([s.surface_rotation_rad for s in states], dtype=float),
+    )
+
+
+_TABLE_CACHE: dict[str, ContactTables] = {}
+
+
+def tables_for(sim: SimConfig, kind: str) -> ContactTables:
+    """Contact tables for a design, computed once per distinct (spacer, cover, contact) config."""
+    key = repr((sim.spacer, sim.cover, sim.contact, kind))
+    if key not in _TABLE_CACHE:
+        if len(_TABLE_CACHE) > 16:
+            _TABLE_CACHE.clear()
+        _TABLE_CACHE[key] = build_tables(sim, kind)
+    return _TABLE_CACHE[key]
+
+
+def _chord(cx: float, cy: float, yaw: float, half: float) -> tuple[float, float]:
+    """Parameters s1 < 0 < s2 where the line c + s (cos yaw, sin yaw) leaves the square |x|,|y| <= half."""
+    lo, hi = -1e9, 1e9
+    for c, d in ((cx, math.cos(yaw)), (cy, math.sin(yaw))):
+        if abs(d) < 1e-12:
+            if abs(c) > half:
+                return 0.0, 0.0
+            continue
+        a, b = (-half - c) / d, (half - c) / d
+        lo, hi = max(lo, min(a, b)), min(hi, max(a, b))
+    if hi <= lo:
+        return 0.0, 0.0
+    return min(lo, 0.0), max(hi, 0.0)
+
+
+class SkinModel:
+    """Two-layer FSR skin under one rigid indenter ("hemisphere" or "rod")."""
+
+    def __init__(self, sim: SimConfig, skin: SkinConfig, indenter: str, rng: np.random.Generator,
+                 support_stiffness_n_per_mm: float | None = None):
+        if indenter not in INDENTERS:
+            raise ValueError(f"indenter={indenter!r}: must be one of {INDENTERS}")
+        if support_stiffness_n_per_mm is not None and not support_stiffness_n_per_mm > 0:
+            raise ValueError(f"support_stiffness_n_per_mm={support_stiffness_n_per_mm!r}: must be > 0 or None (rigid)")
+        self.sim, self.skin, self.kind, self.rng = sim, skin, indenter, rng
+        self.k_support = support_stiffness_n_per_mm
+        self.tab = tables_for(sim, indenter)
+        self.law = SpacerLaw(sim.spacer)
+        n = skin.n_taxels
+        # --- scalar tables for step() (plain lists: fast scalar lookups)
+        self._delta = self.tab.delta_mm.tolist()
+        self._load = self.tab.load.tolist()
+        self._shear = self.tab.shear_extra.tolist()
+        self._torsion = self.tab.torsion_extra.tolist()
+        self._fric_r = self.tab.friction_radius_mm.tolist()
+        self._dd = self.tab.d_delta
+        half = sim.spacer.width / 2
+        self._half = half
+        k0 = float(self.law.shear_stiffness_kpa_per_mm(0.0)) * 1e-3  # N/mm per mm^2
+        self._k0_area = k0 * sim.spacer.width**2
+        self._k0 = k0
+        self._j_pad = sim.spacer.width**4 / 6.0
+        self.friction = StickSlip(sim.cover.friction, sim.cover.kinetic, sim.cover.aging_s, sim.cover.overshoot)
+        self._prev = None  # (t, x, y, yaw)
+        # --- quadrature over each taxel's electrode
+        g, w = np.polynomial.legendre.leggauss(sim.contact.quad_points)
+        centres = skin.taxel_centres_mm()
+        self._q = (centres[:, None] + 0.5 * skin.electrode_mm * g[None, :]).ravel()  # (n*q,)
+        self._qw = 0.5 * w  # sums to 1
+        self._nq = sim.contact.quad_points
+        qx, qy = np.meshgrid(self._q, self._q)  # [y, x]
+        self._lattice = hex_cell_pattern(qx, qy, sim.spacer.cell, sim.spacer.lattice_contrast)
+        # --- transduction and readout
+        self.fsr = (FSRLayer(sim.fsr, (n, n), rng), FSRLayer(sim.fsr, (n, n), rng))
+        self.readout = MatrixReadout(sim.readout, skin.adc_bits, n)
+        r = sim.readout
+        self.baseline_counts = np.clip(rng.normal(r.baseline_counts, r.baseline_sd_counts, size=(2, n, n)), 0, None)
+        self._last_maps: np.ndarray | None = None  # (2, n, n) pressure at the last frame
+        self._last_t: float | None = None
+
+    # ------------------------------------------------------------------ mechanics
+    def _lookup(self, table: list, delta: float) -> float:
+        x = delta / self._dd
+        i = int(x)
+        last = len(table) - 1
+        if i >= last:
+            slope = (table[last] - table[last - 1]) / self._dd
+            return table[last] + slope * (delta - self._delta[last])
+        if i < 0:
+            return 0.0
+        t = x - i
+        return table[i] + t * (table[i + 1] - table[i])
+
+    def _realised_indentation(self, d_cmd: float, length: float) -> float:
+        if d_cmd <= 0.0:
+            return 0.0
+        if self.k_support is None:
+            return d_cmd
+        # solve delta + length * load(delta) / k = d_cmd (monotone): bisect the table, then the segment
+        ks, dl, ld = self.k_support, self._delta, self._load
+        g = [dl[i] + length * ld[i] / ks for i in (0, len(dl) - 1)]
+        if d_cmd >= g[1]:
+            i = len(dl) - 2
+        else:
+            lo, hi = 0, len(dl) - 1
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                if dl[mid] + length * ld[mid] / ks <= d_cmd:
+                    lo = mid
+                else:
+                    hi = mid
+            i = lo
+        g0 = dl[i] + length * ld[i] / ks
+        g1 = dl[i + 1] + length * ld[i + 1] / ks
+        t = (d_cmd - g0) / (g1 - g0)
+        return dl[i] + t * (dl[i + 1] - dl[i])
+
+    def step(self, t_s: float, indenter_xyz_mm: np.ndarray, indenter_yaw_rad: float = 0.0) -> MechState:
+        """Advance the contact to the commanded indenter pose; see the module docstring."""
+        x, y, z = float(indenter_xyz_mm[0]), float(indenter_xyz_mm[1]), float(indenter_xyz_mm[2])
+        yaw = float(indenter_yaw_rad)
+        if self.kind == "rod":
+            s1, s2 = _chord(x, y, yaw, self._half)
+            length = s2 - s1
+        else:
+            s1 = s2 = 0.0
+            length = 1.0
+        delta = self._realised_indentation(-z, length) if length > 0 else 0.0
+        fz = max(length * self._lookup(self._load, delta), 0.0) if delta > 0 else 0.0
+        j_pad = self._j_pad + self.sim.spacer.width**2 * (x * x + y * y)
+        if self.kind == "rod":
+            shear_line = self._lookup(self._shear, delta)
+            k_t = self._k0_area + length * shear_line
+            k_r = self._k0 * j_pad + shear_line * (s2**3 - s1**3) / 3.0
+            radius = (s1 * s1 + s2 * s2) / (2.0 * length) if length > 0 else 0.0
+        else:
+            k_t = self._k0_area + self._lookup(self._shear, delta)
+            k_r = self._k0 * j_pad + self._lookup(self._torsion, delta)
+            radius = self._lookup(self._fric_r, delta)
+        if self._prev is None:
+            dt, dx, dy, dyaw = 0.0, 0.0, 0.0, 0.0
+        else:
+            pt, px, py, pyaw = self._prev
+            dt, dx, dy, dyaw = t_s - pt, x - px, y - py, yaw - pyaw
+        self._prev = (t_s, x, y, yaw)
+        fr = self.friction
+        fx, fy, tq = fr.update(dt, dx, dy, dyaw, fz, k_t, k_r, radius)
+        return MechState(
+            t_s=float(t_s),
+            force_n=np.array((fx, fy, fz)),
+            torque_z_nmm=tq,
+            indentation_mm=delta,
+            contact_xy_mm=np.array((x - fr.ux, y - fr.uy)),
+            indenter_yaw_rad=yaw,
+            surface_shift_mm=np.array((fr.ux, fr.uy)),
+            surface_rotation_rad=fr.theta,
+            slipping=fr.slipping,
+            slip_mm=np.array((fr.slip_x, fr.slip_y)),
+            slip_rad=fr.slip_rad,
+        )
+
+    # ------------------------------------------------------------------ pressure maps
+    def stack_height_mm(self, delta_mm):
+        """Height of the cover surface above the deep sensing plane at the contact (mm)."""
+        s = self.sim
+        return s.cover.thickness + s.fsr.layer_thickness_mm + s.spacer.thickness - np.clip(
+            delta_mm, 0.0, 0.95 * s.spacer.thickness)
+
+    def _rows(self, table: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        x = np.clip(delta / self.tab.d_delta, 0.0, table.shape[0] - 1.000001)
+        i = x.astype(int)
+        t = (x - i)[:, None]
+        return table[i] * (1 - t) + table[i + 1] * t
+
+    def _profile(self, rows: np.ndarray, dist: np.ndarray) -> np.ndarray:
+        """Interpolate per-frame profiles rows (N, n_dist) at dist (N, ...)."""
+        d0, dd = self.tab.dist_mm[0], self.tab.d_dist
+        nd = rows.shape[1]
+        flat = dist.reshape(dist.shape[0], -1)
+        x = (flat - d0) / dd
+        inside = (x >= 0) & (x <= nd - 1)
+        x = np.clip(x, 0.0, nd - 1.000001)
+        j = x.astype(int)
+        u = x - j
+        v = np.take_along_axis(rows, j, axis=1) * (1 - u) + np.take_along_axis(rows, j + 1, axis=1) * u
+        return np.where(inside, v, 0.0).reshape(dist.shape)
+
+    def _taxel_mean(self, field: np.ndarray) -> np.ndarray:
+        n, q = self.skin.n_taxels, self._nq
+        f = field.reshape(field.shape[0], n, q, n, q)
+        return np.einsum("aiqjr,q,r->aij", f, self._qw, self._qw, optimize=True)
+
+    def pressure_fields(self, batch: StateBatch) -> tuple[np.ndarray, np.ndarray]:
+        """Pressure (kPa) at the quadrature points (N, n*q, n*q) of both layers, [y, x]."""
+        tab = self.tab
+        delta = batch.indentation_mm
+        fz = batch.force_n[:, 2]
+        ft = batch.force_n[:, :2]
+        a = batch.contact_xy_mm
+        cd = a + batch.surface_shift_mm  # contact in the deep frame
+        q = self._q
+        h_eff = self.stack_height_mm(delta)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            shift = np.where(fz > 0, np.hypot(ft[:, 0], ft[:, 1]) * h_eff / fz, 0.0)
+        sup_rows = self._rows(tab.superficial_kpa, delta)
+        deep_rows = self._rows(tab.deep_kpa, delta)
+        s_idx = np.clip(shift / (tab.tilt_shift_mm[1] - tab.tilt_shift_mm[0]), 0.0, len(tab.tilt_shift_mm) - 1.000001)
+        si = s_idx.astype(int)
+        su = s_idx - si
+        gam_rows, lz_rows = self._rows(tab.tilt_gamma, delta), self._rows(tab.tilt_logz, delta)
+        ar = np.arange(len(delta))
+        gamma = gam_rows[ar, si] * (1 - su) + gam_rows[ar, si + 1] * su
+        logz = lz_rows[ar, si] * (1 - su) + lz_rows[ar, si + 1] * su
+        dxs = q[None, :] - a[:, 0:1]  # superficial frame offsets (N, nq)
+        dys = q[None, :] - a[:, 1:2]
+        dxd = q[None, :] - cd[:, 0:1]
+        dyd = q[None, :] - cd[:, 1:2]
+        if self.kind == "hemisphere":
+            r_s = np.sqrt(dxs[:, None, :] ** 2 + dys[:, :, None] ** 2)
+            sup = self._profile(sup_rows, r_s)
+            r_d = np.sqrt(dxd[:, None, :] ** 2 + dyd[:, :, None] ** 2)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                nrm = np.where(shift[:, None] > 0, ft / np.hypot(ft[:, 0], ft[:, 1])[:, None], 0.0)
+            xi = nrm[:, 0, None, None] * dxd[:, None, :] + nrm[:, 1, None, None] * dyd[:, :, None]
+            deep = self._profile(deep_rows, r_d) * np.exp(gamma[:, None, None] * xi - logz[:, None, None])
+        else:
+            deep, sup = self._rod_fields(batch, sup_rows, deep_rows, gamma, logz, h_eff, dxs, dys, dxd, dyd)
+        sup = np.where(fz[:, None, None] > 0, sup, 0.0)
+        deep = np.where(fz[:, None, None] > 0, deep * self._lattice[None], 0.0)
+        return sup, deep
+
+    def _rod_fields(self, batch, sup_rows, deep_rows, gamma, logz, h_eff, dxs, dys, dxd, dyd):
+        yaw = batch.indenter_yaw_rad
+        yaw_s = yaw - batch.surface_rotation_rad  # rod axis in the superficial frame
+        ps = -np.sin(yaw_s)[:, None, None] * dxs[:, None, :] + np.cos(yaw_s)[:, None, None] * dys[:, :, None]
+        sup = self._profile(sup_rows, ps)
+        fz = batch.force_n[:, 2]
+        cd = batch.contact_xy_mm + batch.surface_shift_mm
+        chords = np.array([_chord(float(c[0]), float(c[1]), float(w), self._half) for c, w in zip(cd, yaw, strict=True)])
+        length = np.maximum(chords[:, 1] - chords[:, 0], 1e-9)
+        line_q = fz / length  # N/mm
+        i_s = (chords[:, 1] ** 3 - chords[:, 0] ** 3) / 3.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # torsion: traction T s / I_s across the line; its moment shifts the deep line by T H s / (I_s q)
+            twist = np.where(fz > 0, np.arctan(batch.torque_z_nmm * h_eff / (i_s * line_q)), 0.0)
+        yaw_d = yaw + twist
+        ex, ey = np.cos(yaw_d), np.sin(yaw_d)
+        along = ex[:, None, None] * dxd[:, None, :] + ey[:, None, None] * dyd[:, :, None]
+        perp = -ey[:, None, None] * dxd[:, None, :] + ex[:, None, None] * dyd[:, :, None]
+        ft = batch.force_n[:, :2]
+        f_perp = -ft[:, 0] * ey + ft[:, 1] * ex
+        f_along = ft[:, 0] * ex + ft[:, 1] * ey
+        sign = np.sign(f_perp)[:, None, None]
+        deep = self._profile(deep_rows, perp) * np.exp(sign * gamma[:, None, None] * perp - logz[:, None, None])
+        # along-axis shear: moment balanced by a linear load gradient along the line
+        mid = 0.5 * (chords[:, 0] + chords[:, 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            beta = np.where(fz > 0, f_along * h_eff / (line_q * length**3 / 12.0), 0.0)
+        deep = deep * np.clip(1.0 + beta[:, None, None] * (along - mid[:, None, None]), 0.0, None)
+        return deep, sup
+
+    def pressure_maps(self, states: list[MechState]) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 16, 16) mean pressure (kPa) over each taxel's electrode: superficial, deep."""
+        sup, deep = self.pressure_fields(stack_states(states))
+        return self._taxel_mean(sup), self._taxel_mean(deep)
+
+    # ------------------------------------------------------------------ frames
+    def _row_times(self, t_s: np.ndarray) -> np.ndarray:
+        """(N, 2, n) sampling instants: t_s[k] ends the frame; rows sampled in sequence before it."""
+        n = self.skin.n_taxels
+        period = self.skin.frame_period_ms * 1e-3
+        slot = np.arange(2 * n).reshape(2, n)
+        t = t_s[:, None, None] - (2 * n - 1 - slot)[None] * period / (2 * n)
+        jit = self.sim.readout.scan_jitter_ms * 1e-3
+        if jit > 0:
+            t = t + self.rng.normal(0.0, jit, size=t.shape)
+        return t
+
+    def frames(self, states: list[MechState], t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(superficial, deep) uint16 counts (N, 16, 16) for frames completed at t_s (N,)."""
+        t_s = np.asarray(t_s, dtype=float).reshape(-1)
+        if len(states) != len(t_s):
+            raise ValueError(f"frames: {len(states)} states for {len(t_s)} frame times; pass one state per frame")
+        sup, deep = self.pressure_maps(states)
+        maps = np.stack([sup, deep], axis=1)  # (N, 2, n, n)
+        prev_maps = np.concatenate([maps[:1] if self._last_maps is None else self._last_maps[None], maps[:-1]])
+        prev_t = np.concatenate([[t_s[0] - self.skin.frame_period_ms * 1e-3 if self._last_t is None
+                                  else self._last_t], t_s[:-1]])
+        span = np.maximum(t_s - prev_t, 1e-9)
+        rows_t = self._row_times(t_s)
+        w_prev = np.clip((t_s[:, None, None] - rows_t) / span[:, None, None], 0.0, 1.0)[..., None]
+        sampled = maps * (1 - w_prev) + prev_maps * w_prev  # each row at its own instant
+        self._last_maps, self._last_t = maps[-1], float(t_s[-1])
+        dt = np.diff(np.concatenate([[prev_t[0]], t_s]))
+        counts = []
+        for layer in range(2):
+            eff = self.fsr[layer].advance(sampled[:, layer], dt)
+            g = self.fsr[layer].conductance_s(eff)
+            c = self.readout.counts(self.readout.column_volts(g)) + self.baseline_counts[layer]
+            counts.append(c)
+        out = np.stack(counts, axis=0)
+        noise = self.sim.readout.noise_counts
+        if noise > 0:
+            out = out + self.rng.normal(0.0, noise, size=out.shape)
+        out = np.clip(np.rint(out), 0, self.readout.full_scale).astype(np.uint16)
+        return out[0], out[1]
+
+    # ------------------------------------------------------------------ board description
+    def calibration(self) -> dict:
+        """What the readout board reports about itself: geometry, scan and readout settings."""
+        s, r = self.skin, self.sim.readout
+        return {
+            "layers": list(s.layers),
+            "n_taxels": s.n_taxels,
+            "pitch_mm": s.pitch_mm,
+            "electrode_mm": s.electrode_mm,
+            "taxel_centres_mm": s.taxel_centres_mm().tolist(),
+            "adc_bits": s.adc_bits,
+            "adc_full_scale": int(2**s.adc_bits - 1),
+            "frame_period_ms": s.frame_period_ms,
+            "scan_order": "superficial rows 0..15, then deep rows 0..15; frame time = end of scan",
+            "divider_kohm": r.divider_kohm,
+            "supply_v": r.supply_v,
+            "indenter": self.kind,
+        }

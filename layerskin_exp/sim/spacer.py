@@ -1,0 +1,93 @@
+"""The lattice spacer: its compression law, shear stiffness, load spreading and cell pattern.
+
+The spacer is modelled as a nonlinear Winkler foundation (each column carries the pressure of
+its own compression) whose walls bulge into the voids and touch at the densification strain
+e_d = 1 - solid fraction; beyond that the column is squeezed solid silicone.
+Its transverse shear modulus rises from the open lattice's to the solid's as the walls close.
+Lengths mm, pressures kPa, stiffness per area kPa/mm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from layerskin_exp.sim.config import SpacerConfig
+
+_SOLID_STRAIN_CAP = 0.85  # beyond this the squeezed-solid law continues with its tangent (no pole)
+_TRANSITION = 0.02  # strain width over which the walls come into contact (smooth onset)
+
+
+class SpacerLaw:
+    """Pressure and shear stiffness of the spacer as functions of its local compression.
+
+    Below the densification strain e_d the open lattice carries p = E_lat e. Beyond it the
+    walls have filled the voids and the column is a thin layer of solid silicone of height
+    (1 - e_d) h, squeezed between the layers. A bonded incompressible layer of current
+    thickness t loaded over a half-width L compresses with E_s (1 + 2 S^2), shape factor
+    S = L / 2t (Gent & Lindley), and stiffens at finite strain:
+    p += E_s (1 + 2 S(e)^2) es / (1 - es), es = (e - e_d) / (1 - e_d), t = h (1 - e).
+    """
+
+    def __init__(self, cfg: SpacerConfig):
+        self.cfg = cfg
+        self.h_mm = cfg.thickness
+        self.e_lat_kpa = cfg.lattice_modulus_kpa
+        self.e_solid_kpa = cfg.modulus
+        self.conf_len_mm = cfg.confinement_length
+        self.e_d = cfg.densification_strain
+        self.g_open_kpa = cfg.shear_modulus_kpa
+        self.g_solid_kpa = cfg.solid_shear_modulus_kpa
+
+    def _solid_strain(self, e):
+        x = (e - self.e_d) / _TRANSITION
+        over = _TRANSITION * np.logaddexp(0.0, x)  # softplus: smooth onset of wall contact
+        return over / (1.0 - self.e_d)
+
+    def _squeezed(self, e):
+        es = self._solid_strain(e)
+        cap = _SOLID_STRAIN_CAP
+        finite = np.where(es <= cap, es / (1.0 - np.minimum(es, cap)),
+                          cap / (1.0 - cap) + (es - cap) / (1.0 - cap) ** 2)
+        t_mm = self.h_mm * np.maximum(1.0 - e, 0.05)
+        shape = self.conf_len_mm / (2.0 * t_mm)
+        return (1.0 + 2.0 * shape**2) * finite
+
+    def pressure_kpa(self, compression_mm):
+        """Normal pressure (kPa) carried by a column compressed by `compression_mm` (>= 0)."""
+        e = np.clip(np.asarray(compression_mm, dtype=float) / self.h_mm, 0.0, None)
+        squeezed = self._squeezed(e) - self._squeezed(0.0)  # zero at rest
+        return self.e_lat_kpa * e + self.e_solid_kpa * squeezed
+
+    def shear_stiffness_kpa_per_mm(self, compression_mm):
+        """Tangential stiffness per unit area G(e) / (h (1 - e)), kPa/mm.
+
+        G rises from the open lattice's to the solid's as the walls touch: (e/e_d)^2 blend.
+        """
+        e = np.clip(np.asarray(compression_mm, dtype=float) / self.h_mm, 0.0, 0.95)
+        closure = np.clip(e / self.e_d, 0.0, 1.0) ** 2
+        g = self.g_open_kpa + (self.g_solid_kpa - self.g_open_kpa) * closure
+        return g / (self.h_mm * (1.0 - e))
+
+    def pasternak_length_mm(self) -> float:
+        """Shear-coupling length sqrt(G_p / k) of the layer (Vlasov: G_p = G h / 3, k = E / h)."""
+        return self.h_mm * float(np.sqrt(self.g_open_kpa / (3.0 * self.e_lat_kpa)))
+
+    def spread_sigma_mm(self, indentation_mm):
+        """Width (Gaussian sigma) of the load spreading through the compressed spacer."""
+        h_now = self.h_mm - np.clip(indentation_mm, 0.0, self.e_d * self.h_mm)
+        return self.cfg.spread_ratio * h_now
+
+
+def hex_cell_pattern(x_mm: np.ndarray, y_mm: np.ndarray, cell_mm: float, contrast: float) -> np.ndarray:
+    """Fixed multiplicative load pattern of a hexagonal lattice of pitch `cell_mm`, mean 1.
+
+    Three plane waves at 120 deg form the hexagonal cell pattern; load concentrates on the walls
+    (where the sum is low the cell centre is open). Returns a factor in [1 - 2c, 1 + c], mean 1 (contrast < 0.5 keeps it positive).
+    """
+    k = 4.0 * np.pi / (np.sqrt(3.0) * cell_mm)  # reciprocal-lattice wave number of the hex pitch
+    s = np.zeros(np.broadcast(x_mm, y_mm).shape)
+    for ang in (0.0, 2.0 * np.pi / 3.0, 4.0 * np.pi / 3.0):
+        s = s + np.cos(k * (np.cos(ang) * x_mm + np.sin(ang) * y_mm))
+    # s ranges over [-1.5, 3] with zero mean over a cell: 3 at the cell centres (voids), low on
+    # the walls, which carry the load. Mean of the returned factor is exactly 1.
+    return 1.0 - contrast * s / 1.5
