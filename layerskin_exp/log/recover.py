@@ -48,7 +48,7 @@ def recover(src, dst) -> int:
             channel_ids[cid] = w.register_channel(
                 c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), c.metadata
             )
-        for off, cid, i in rows.tolist():
+        for _off, cid, i in rows.tolist():
             h = sc.messages[cid].header[i]
             w.add_message(
                 channel_ids[cid],

@@ -86,10 +86,7 @@ def test_every_stream_round_trips_exactly(tmp_path, compression):
 
     md = _of(recs, MarkerDetection)
     m = s.streams["markers"]
-    order = sorted(range(len(md)), key=lambda k: (md[k].host_t_ns, md[k].frame_seq))  # reader's order
     assert len(m["marker_id"]) == len(md)
-    for j, k in enumerate(order):
-        assert m["marker_id"][j] in (0, 1)
     np.testing.assert_array_equal(np.sort(m["marker_id"]), np.sort([d.marker_id for d in md]))
     for mid in (0, 1):
         mine = [d for d in md if d.marker_id == mid]
@@ -152,7 +149,7 @@ def test_file_opens_with_the_mcap_library(tmp_path):
         assert topics["/skin/superficial"] == "foxglove.RawImage"
         assert topics["/arm/tcp"] == "foxglove.PoseInFrame"
         assert topics["/ft/wrench"] == "layerskin.Wrench"
-        for schema, channel, msg in reader.iter_messages(topics=["/skin/deep"]):
+        for _schema, _channel, msg in reader.iter_messages(topics=["/skin/deep"]):
             f = frame(msg.sequence)
             assert (msg.log_time, msg.publish_time) == (f.host_t_ns, f.device_t_ns)
             img = RawImage.FromString(msg.data)
