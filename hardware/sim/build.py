@@ -6,6 +6,7 @@ from collections.abc import Callable
 
 from hardware.interfaces import DeviceError, Rig
 from hardware.sim.arm import SimArm
+from hardware.sim.camera import SimMarkerCamera
 from hardware.sim.clock import SimClock
 from hardware.sim.ft import SimForceTorque
 from hardware.sim.gripper import SimGripper
@@ -51,6 +52,8 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     else:
         rig.arm = SimArm(world, scene, rc.arm)
         rig.gripper = SimGripper(world, scene, rc.gripper)
+        rig.camera = SimMarkerCamera(world, scene, rc.camera, rc.gripper.contact_opening_mm)
+        rig.extras["camera"] = rig.camera.calibration()
         rig.extras["skin_in_tcp"] = {
             "rotation": scene_rotation_doc(),
             "translation_axis_tcp": [1.0, 0.0, 0.0],

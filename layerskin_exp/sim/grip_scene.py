@@ -71,6 +71,7 @@ class GripScene:
         self.rod_a = self.R_ref @ np.array([0.0, 0.0, 1.0])
         self._R_tcp = self.R_ref.copy()
         self._cache = None
+        self._last_yaw = math.pi / 2
 
     # ---- commands (validated against the devices' physical range) ----------------------------
     def command_arm(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
@@ -149,8 +150,8 @@ class GripScene:
 
     def indenter_pose(self) -> tuple[list[float], float]:
         """Rod in the skin frame: the axis point nearest the skin origin (x, y mm), the height of the
-        rod's surface above the undeformed cover (z mm, negative = pressed), and its yaw (rad, 0 when
-        the axis lies along skin y)."""
+        rod's surface above the undeformed cover (z mm, negative = pressed), and its yaw (rad: the
+        axis direction measured from skin x; +-pi/2 at the home pose, where it lies along skin y)."""
         if self._cache is not None:
             return self._cache
         self._R_tcp = R_tcp = self.tcp_rotation()
@@ -158,8 +159,11 @@ class GripScene:
         c_s = R_skin.T @ (self.rod_c_m - origin) * 1e3
         a_s = R_skin.T @ self.rod_a
         pt = c_s - (c_s @ a_s) * a_s
-        yaw = math.atan2(-a_s[0], a_s[1])
-        yaw = (yaw + math.pi / 2) % math.pi - math.pi / 2  # a rod has no head or tail
+        # The skin model's yaw is the axis direction from skin x; a rod has no head or tail, so
+        # keep the branch nearest the last value (continuous through +-90 deg).
+        yaw = math.atan2(a_s[1], a_s[0])
+        yaw += math.pi * round((self._last_yaw - yaw) / math.pi)
+        self._last_yaw = yaw
         self._cache = ([float(pt[0]), float(pt[1]), float(pt[2]) - self.radius_mm], yaw)
         return self._cache
 

@@ -173,7 +173,10 @@ class GripperConfig:
     rod_diameter_mm: float = 12.0
     contact_opening_mm: float = 36.0  # opening at which the skin cover touches the rod
     other_finger_clearance_mm: float = 30.0  # other finger's gap to the rod at contact (it never touches)
-    support_stiffness_n_per_mm: float | None = None  # finger/mount/rod; None = skin model's default
+    # Lumped series compliance of the printed finger adapter carrying the skin and the rod's stand.
+    # An assumption (not measured); null = rigid, which lets the Hand-E crush the skin up to its
+    # 20 N minimum grip force.
+    support_stiffness_n_per_mm: float | None = 1.0
     clock: DeviceClockConfig = field(default_factory=lambda: DeviceClockConfig(
         drift_ppm_std=50.0, timestamp_jitter_us=50.0, delay_min_ms=2.0, delay_mean_extra_ms=2.0))
 
@@ -203,12 +206,13 @@ class CameraConfig:
     """Fixed RealSense D435 colour stream looking at the two ArUco markers on the superficial layer."""
 
     fps: float = 30.0
-    width_px: int = 640
-    height_px: int = 480
-    fx_px: float = 615.0
-    fy_px: float = 615.0
-    cx_px: float = 320.0
-    cy_px: float = 240.0
+    # D435 colour stream at 1280x720 (69 deg horizontal field of view).
+    width_px: int = 1280
+    height_px: int = 720
+    fx_px: float = 920.0
+    fy_px: float = 920.0
+    cx_px: float = 640.0
+    cy_px: float = 360.0
     distance_mm: float = 120.0  # camera centre to the skin plane, along the optical axis
     marker_size_mm: float = 5.0
     marker_ids: tuple[int, int] = (0, 1)
@@ -216,7 +220,7 @@ class CameraConfig:
     # Marker centres in the skin frame (mm), on the superficial layer outside the 24 mm sensing area.
     marker_x_mm: tuple[float, float] = (-8.0, 8.0)
     marker_y_mm: tuple[float, float] = (16.0, 16.0)
-    supersample: int = 4
+    supersample: int = 2  # render at 2x and average down: sub-pixel edges
     blur_sigma_px: float = 0.6
     noise_std_gray: float = 2.0
     latency_ms: float = 75.0

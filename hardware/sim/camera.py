@@ -1,0 +1,103 @@
+"""Simulated D435 + ArUco pipeline: 30 fps images of the markers, detections out after the pipeline latency."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hardware.interfaces import MarkerCamera
+from hardware.sim.stream_device import SimStreamMixin
+from layerskin_exp.sim.camera import MarkerImager
+from layerskin_exp.sim.grip_scene import GripScene
+from layerskin_exp.sim.rig_config import CameraConfig
+from layerskin_exp.sim.world import World
+from layerskin_exp.types import MarkerDetection, Pose
+
+# Camera axes in the skin frame at the home pose: looking down the skin normal onto the cover,
+# image x along skin x, image y along -skin y.
+R_SKIN_CAMERA = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+class SimMarkerCamera(SimStreamMixin, MarkerCamera):
+    """Renders and detects each frame; a detection reaches the host latency_ms after exposure.
+
+    The camera is fixed in the base frame, placed at `distance_mm` along the skin normal from
+    the markers' midpoint with the arm at home and the jaws at contact_opening_mm.
+    """
+
+    def __init__(self, world: World, scene: GripScene, cfg: CameraConfig, contact_opening_mm: float) -> None:
+        super().__init__()
+        self.world, self.scene, self.cfg = world, scene, cfg
+        self.imager = MarkerImager(cfg)
+        self.stream = world.new_stream("camera", cfg.clock, 1.0 / cfg.fps)
+        self._img_rng = np.random.default_rng(self.stream.rng.integers(2**63))
+        o, R_s = scene.skin_pose(scene.home_p_m, scene.R_ref, contact_opening_mm)
+        centre_mm = np.array([np.mean(cfg.marker_x_mm), np.mean(cfg.marker_y_mm), cfg.distance_mm])
+        self.R_base_cam = R_s @ R_SKIN_CAMERA
+        self.t_base_cam_m = o + R_s @ centre_mm * 1e-3
+        self.marker_xy_mm = np.stack([cfg.marker_x_mm, cfg.marker_y_mm], axis=1)  # (M, 2)
+        self._latest: tuple[np.ndarray, int, int] | None = None
+        self._last_host_ns = -1
+        world.add_producer(self.stream, self._produce)
+
+    def marker_poses(self, snap: np.ndarray, state) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Marker id -> (R (3, 3), t (3,) mm): marker frames in the camera frame for one scene snapshot
+        (13+ values, see GripScene.snapshot_names) and the skin's mechanical state."""
+        p, R_tcp, opening = snap[:3], snap[3:12].reshape(3, 3), snap[12]
+        o, R_s = self.scene.skin_pose(p, R_tcp, opening)
+        # The superficial layer is shifted by u and turned by phi about the contact point a
+        # (skin model's convention): x_deep = a + u + R(phi) (x_s - a).
+        phi = float(state.surface_rotation_rad)
+        c, s = np.cos(phi), np.sin(phi)
+        Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        a = np.asarray(state.contact_xy_mm, float)
+        xy = a + np.asarray(state.surface_shift_mm, float) + (self.marker_xy_mm - a) @ Rz[:2, :2].T
+        R_cb = self.R_base_cam.T
+        R_cm = R_cb @ R_s @ Rz
+        out = {}
+        for k, mid in enumerate(self.cfg.marker_ids):
+            t_b = o + R_s @ np.array([xy[k, 0], xy[k, 1], 0.0]) * 1e-3
+            out[int(mid)] = (R_cm, R_cb @ (t_b - self.t_base_cam_m) * 1e3)
+        return out
+
+    def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
+        snaps = world.snapshots(idx)
+        states = world.states(idx)
+        seq, dev_ns, _ = self.stream.stamp(t_s)
+        cfg = self.cfg
+        lat = cfg.latency_ms * 1e6 + self._img_rng.normal(0.0, cfg.latency_jitter_ms * 1e6, len(t_s))
+        host = (world.host_start_ns + t_s * 1e9 + np.maximum(lat, 0.0)).astype(np.int64)
+        for i in range(len(t_s)):
+            h = max(int(host[i]), self._last_host_ns)  # the pipeline delivers in order
+            self._last_host_ns = h
+            img, origin = self.imager.render(self.marker_poses(snaps[i], states[i]), self._img_rng)
+            if cfg.keep_images:
+                self._latest = (self.imager.full_frame(img, origin), int(dev_ns[i]), h)
+            for d in self.imager.detect(img, origin):
+                q = Rotation.from_rotvec(d.rvec).as_quat()
+                pose = Pose(d.tvec_mm * 1e-3, q, "camera", int(dev_ns[i]), h, int(seq[i]))
+                self.stream.push(h, MarkerDetection(d.marker_id, pose, d.corners_px, int(seq[i]), int(dev_ns[i]), h))
+
+    def read_available(self) -> list[MarkerDetection]:
+        self._require_connected()
+        out = self.stream.pop_received(self.world.host_now_ns())
+        for det in out:
+            if det.frame_seq != self._last_seq:
+                self.health.observe_seq(self._last_seq, det.frame_seq)
+                self._last_seq = det.frame_seq
+        return out
+
+    def latest_image(self) -> np.ndarray | None:
+        """The most recent full grey frame (H, W) uint8, when sim.rig.camera.keep_images is set."""
+        return None if self._latest is None else self._latest[0]
+
+    def latest_image_stamped(self) -> tuple[np.ndarray, int, int] | None:
+        """(image, device_t_ns, host_t_ns) of the most recent frame, when images are kept."""
+        return self._latest
+
+    def calibration(self) -> dict:
+        """Intrinsics and the camera's pose in the arm base frame (for the session metadata)."""
+        return {"K": self.imager.K.tolist(), "dist": [0.0] * 5, "width_px": self.cfg.width_px,
+                "height_px": self.cfg.height_px, "marker_size_mm": self.cfg.marker_size_mm,
+                "marker_ids": list(self.cfg.marker_ids), "dictionary": self.cfg.dictionary,
+                "R_base_camera": self.R_base_cam.tolist(), "t_base_camera_m": self.t_base_cam_m.tolist()}
