@@ -217,7 +217,7 @@ def _decompress_all(buf: bytes, chunks, warnings) -> tuple[np.ndarray, np.ndarra
             segments = np.array([(c[3], c[4]) for c in chunks], dtype="<u8")
             frames = zstandard.BufferWithSegments(buf, segments.tobytes())
             out = zstandard.ZstdDecompressor().multi_decompress_to_buffer(
-                frames, decompressed_sizes=sizes.astype("<u8").tobytes(), threads=0
+                frames, decompressed_sizes=sizes.astype("<u8").tobytes(), threads=-1
             )
             joined = b"".join(out[i] for i in range(len(out)))
             if len(joined) == base[-1]:
