@@ -43,8 +43,11 @@ class StickSlip:
             return self.mu_s
         return self.mu_k + (self.mu_s - self.mu_k) * (1.0 - math.exp(-t_stick / self.aging_s))
 
-    def _rest_level(self, mu_break: float) -> float:
-        return max(self.mu_k - self.overshoot * (mu_break - self.mu_k), 0.0)
+    def _rest_level(self) -> float:
+        # An undamped slip of a spring-loaded block swings as far below the kinetic level as the
+        # static-kinetic gap above it; `overshoot` scales that for damping. Ending below the
+        # kinetic level is what lets the contact re-stick, age and break away again.
+        return max(self.mu_k - self.overshoot * (self.mu_s - self.mu_k), 0.0)
 
     def update(self, dt_s: float, dx_mm: float, dy_mm: float, dtheta_rad: float, fz_n: float,
                k_t_n_per_mm: float, k_r_nmm_per_rad: float, radius_mm: float) -> tuple[float, float, float]:
@@ -63,7 +66,7 @@ class StickSlip:
         f = k_t_n_per_mm * math.hypot(ux, uy)
         mu_break = self._mu_static(self.t_stick)
         if f > mu_break * fz_n:
-            scale = self._rest_level(mu_break) * fz_n / f
+            scale = self._rest_level() * fz_n / f
             nx, ny = ux * scale, uy * scale
             self.slip_x += nx - ux
             self.slip_y += ny - uy
@@ -79,7 +82,7 @@ class StickSlip:
         mu_break = self._mu_static(self.t_stick_rot)
         bound = mu_break * fz_n * radius_mm
         if tq > bound and tq > 0.0:
-            nth = th * self._rest_level(mu_break) * fz_n * radius_mm / tq
+            nth = th * self._rest_level() * fz_n * radius_mm / tq
             self.slip_rad += nth - th
             th = nth
             self.t_stick_rot = 0.0

@@ -8,7 +8,8 @@ through pressed taxels on other rows, so a pressed rectangle's fourth corner lig
 
 Nodal analysis: Y (32x32) over rows and columns; with Z = Y^-1, driving row i through g_on
 gives V_cols = Vs g_on Z[cols, i] / (1 + g_on Z[i, i]) (Sherman-Morrison on the source branch),
-so one batched inverse per frame yields all 16 row readings.
+so one batched inverse per frame yields all 16 row readings (computed by eliminating the
+column nodes first, which leaves a 16x16 inverse).
 """
 
 from __future__ import annotations
@@ -34,20 +35,22 @@ class MatrixReadout:
             # each taxel alone in series with the mux and its divider
             r_div = 1.0 / self.g_div
             return vs * r_div / (self.r_on + 1.0 / g_s + r_div)
-        m, n = g_s.shape[0], self.n
-        y = np.zeros((m, 2 * n, 2 * n))
-        idx = np.arange(n)
-        y[:, idx, idx] = g_s.sum(axis=2) + self.g_leak
-        y[:, n + idx, n + idx] = g_s.sum(axis=1) + self.g_div
-        y[:, :n, n:] = -g_s
-        y[:, n:, :n] = -np.swapaxes(g_s, 1, 2)
-        z = np.linalg.inv(y)
-        z_cols = np.swapaxes(z[:, n:, :n], 1, 2)  # [m, driven row i, column j] = Z[n + j, i]
-        z_ii = z[:, idx, idx][:, :, None]
+        # Block elimination of the column nodes (diagonal block Dc): the row-node Schur complement
+        # S = Dr - G Dc^-1 G^T gives Z_rows = S^-1 and Z[cols, rows] = Dc^-1 G^T S^-1, so only a
+        # 16x16 inverse per frame is needed.
+        d_r = g_s.sum(axis=2) + self.g_leak  # (M, rows)
+        d_c = g_s.sum(axis=1) + self.g_div  # (M, cols)
+        g_over = g_s / d_c[:, None, :]
+        s_mat = -g_over @ np.swapaxes(g_s, 1, 2)
+        idx = np.arange(self.n)
+        s_mat[:, idx, idx] += d_r
+        z_rr = np.linalg.inv(s_mat)
+        z_rc = z_rr @ g_over  # [m, driven row i, column j] = Z[n + j, i] (S is symmetric)
+        z_ii = z_rr[:, idx, idx][:, :, None]
         if self.r_on > 0:
             g_on = 1.0 / self.r_on
-            return vs * g_on * z_cols / (1.0 + g_on * z_ii)
-        return vs * z_cols / z_ii
+            return vs * g_on * z_rc / (1.0 + g_on * z_ii)
+        return vs * z_rc / z_ii
 
     def counts(self, volts: np.ndarray) -> np.ndarray:
         """Ideal ratiometric conversion (float counts, before offsets, noise and rounding)."""

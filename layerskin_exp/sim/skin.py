@@ -148,7 +148,8 @@ class SkinModel:
         self._qw = 0.5 * w  # sums to 1
         self._nq = sim.contact.quad_points
         qx, qy = np.meshgrid(self._q, self._q)  # [y, x]
-        self._lattice = hex_cell_pattern(qx, qy, sim.spacer.cell, sim.spacer.lattice_contrast)
+        self._lattice32 = hex_cell_pattern(qx, qy, sim.spacer.cell, sim.spacer.lattice_contrast).astype(np.float32)
+        self._build_lookups()
         # --- transduction and readout
         self.fsr = (FSRLayer(sim.fsr, (n, n), rng), FSRLayer(sim.fsr, (n, n), rng))
         self.readout = MatrixReadout(sim.readout, skin.adc_bits, n)
@@ -245,74 +246,109 @@ class SkinModel:
         return s.cover.thickness + s.fsr.layer_thickness_mm + s.spacer.thickness - np.clip(
             delta_mm, 0.0, 0.95 * s.spacer.thickness)
 
-    def _rows(self, table: np.ndarray, delta: np.ndarray) -> np.ndarray:
-        x = np.clip(delta / self.tab.d_delta, 0.0, table.shape[0] - 1.000001)
-        i = x.astype(int)
-        t = (x - i)[:, None]
-        return table[i] * (1 - t) + table[i + 1] * t
+    def _build_lookups(self) -> None:
+        """Resample the profile tables for nearest-bin lookups: in r^2 (hemisphere, no sqrt per
+        point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
+        far below the profile's own scale (float32, flattened with one guard column of zeros)."""
+        tab = self.tab
+        if self.kind == "hemisphere":
+            r2_max = float(tab.dist_mm[-1]) ** 2
+            step = 0.01  # mm^2
+            grid = np.arange(0.0, r2_max, step)
+            at = np.sqrt(grid)
+            self._lk_origin, self._lk_scale = 0.0, 1.0 / step
+        else:
+            step = 0.005  # mm
+            grid = np.arange(tab.dist_mm[0], tab.dist_mm[-1], step)
+            at = grid
+            self._lk_origin, self._lk_scale = float(tab.dist_mm[0]), 1.0 / step
+        self._lk_n = len(grid) + 1
 
-    def _profile(self, rows: np.ndarray, dist: np.ndarray) -> np.ndarray:
-        """Interpolate per-frame profiles rows (N, n_dist) at dist (N, ...)."""
-        d0, dd = self.tab.dist_mm[0], self.tab.d_dist
-        nd = rows.shape[1]
-        flat = dist.reshape(dist.shape[0], -1)
-        x = (flat - d0) / dd
-        inside = (x >= 0) & (x <= nd - 1)
-        x = np.clip(x, 0.0, nd - 1.000001)
-        j = x.astype(int)
-        u = x - j
-        v = np.take_along_axis(rows, j, axis=1) * (1 - u) + np.take_along_axis(rows, j + 1, axis=1) * u
-        return np.where(inside, v, 0.0).reshape(dist.shape)
+        def resample(table):
+            out = np.zeros((table.shape[0], self._lk_n), dtype=np.float32)
+            for k in range(table.shape[0]):
+                out[k, :-1] = np.interp(at, tab.dist_mm, table[k])
+            return out.ravel()
+
+        self._lk_sup = resample(tab.superficial_kpa)
+        self._lk_deep = resample(tab.deep_kpa)
+
+    def _delta_index(self, delta: np.ndarray):
+        x = np.clip(delta / self.tab.d_delta, 0.0, len(self.tab.delta_mm) - 1.000001)
+        i = x.astype(np.int64)
+        return i, (x - i)
+
+    def _lookup_profile(self, flat: np.ndarray, i: np.ndarray, t: np.ndarray, coord: np.ndarray) -> np.ndarray:
+        """Profile value at coord (N, ...) (r^2 or signed distance) for frames with delta row i + t."""
+        n = self._lk_n
+        j = ((coord - self._lk_origin) * self._lk_scale + 0.5).astype(np.int64)
+        np.clip(j, 0, n - 1, out=j)
+        np.putmask(j, j >= n - 1, n - 1)  # guard column: zero outside the table
+        shape = (-1,) + (1,) * (coord.ndim - 1)
+        idx = j + (i * n).reshape(shape)
+        tt = t.astype(np.float32).reshape(shape)
+        lo = flat.take(idx)
+        return lo + (flat.take(idx + n) - lo) * tt
+
+    def _tilt(self, i: np.ndarray, t: np.ndarray, shift: np.ndarray):
+        """Exponential-tilt rate and log-normaliser giving a deep-CoP shift (mm) at each frame."""
+        tab = self.tab
+        ds = tab.tilt_shift_mm[1] - tab.tilt_shift_mm[0]
+        x = np.clip(shift / ds, 0.0, len(tab.tilt_shift_mm) - 1.000001)
+        si = x.astype(np.int64)
+        su = x - si
+
+        def bilerp(table):
+            a = table[i, si] * (1 - su) + table[i, si + 1] * su
+            b = table[i + 1, si] * (1 - su) + table[i + 1, si + 1] * su
+            return a * (1 - t) + b * t
+
+        return bilerp(tab.tilt_gamma), bilerp(tab.tilt_logz)
 
     def _taxel_mean(self, field: np.ndarray) -> np.ndarray:
         n, q = self.skin.n_taxels, self._nq
         f = field.reshape(field.shape[0], n, q, n, q)
-        return np.einsum("aiqjr,q,r->aij", f, self._qw, self._qw, optimize=True)
+        w = self._qw.astype(np.float32)
+        return np.einsum("aiqjr,q,r->aij", f, w, w, optimize=True).astype(float)
 
     def pressure_fields(self, batch: StateBatch) -> tuple[np.ndarray, np.ndarray]:
-        """Pressure (kPa) at the quadrature points (N, n*q, n*q) of both layers, [y, x]."""
-        tab = self.tab
+        """Pressure (kPa, float32) at the quadrature points (N, n*q, n*q) of both layers, [y, x]."""
         delta = batch.indentation_mm
         fz = batch.force_n[:, 2]
         ft = batch.force_n[:, :2]
         a = batch.contact_xy_mm
         cd = a + batch.surface_shift_mm  # contact in the deep frame
-        q = self._q
+        q = self._q.astype(np.float32)
         h_eff = self.stack_height_mm(delta)
+        ft_mag = np.hypot(ft[:, 0], ft[:, 1])
         with np.errstate(invalid="ignore", divide="ignore"):
-            shift = np.where(fz > 0, np.hypot(ft[:, 0], ft[:, 1]) * h_eff / fz, 0.0)
-        sup_rows = self._rows(tab.superficial_kpa, delta)
-        deep_rows = self._rows(tab.deep_kpa, delta)
-        s_idx = np.clip(shift / (tab.tilt_shift_mm[1] - tab.tilt_shift_mm[0]), 0.0, len(tab.tilt_shift_mm) - 1.000001)
-        si = s_idx.astype(int)
-        su = s_idx - si
-        gam_rows, lz_rows = self._rows(tab.tilt_gamma, delta), self._rows(tab.tilt_logz, delta)
-        ar = np.arange(len(delta))
-        gamma = gam_rows[ar, si] * (1 - su) + gam_rows[ar, si + 1] * su
-        logz = lz_rows[ar, si] * (1 - su) + lz_rows[ar, si + 1] * su
-        dxs = q[None, :] - a[:, 0:1]  # superficial frame offsets (N, nq)
-        dys = q[None, :] - a[:, 1:2]
-        dxd = q[None, :] - cd[:, 0:1]
-        dyd = q[None, :] - cd[:, 1:2]
+            shift = np.where(fz > 0, ft_mag * h_eff / fz, 0.0)  # moment balance: F_t H = F_z shift
+        i, t = self._delta_index(delta)
+        gamma, logz = self._tilt(i, t, shift)
+        f32 = np.float32
+        dxs = q[None, :] - a[:, 0:1].astype(f32)  # superficial-frame offsets (N, nq)
+        dys = q[None, :] - a[:, 1:2].astype(f32)
+        dxd = q[None, :] - cd[:, 0:1].astype(f32)  # deep-frame offsets
+        dyd = q[None, :] - cd[:, 1:2].astype(f32)
         if self.kind == "hemisphere":
-            r_s = np.sqrt(dxs[:, None, :] ** 2 + dys[:, :, None] ** 2)
-            sup = self._profile(sup_rows, r_s)
-            r_d = np.sqrt(dxd[:, None, :] ** 2 + dyd[:, :, None] ** 2)
+            sup = self._lookup_profile(self._lk_sup, i, t, dxs[:, None, :] ** 2 + dys[:, :, None] ** 2)
             with np.errstate(invalid="ignore", divide="ignore"):
-                nrm = np.where(shift[:, None] > 0, ft / np.hypot(ft[:, 0], ft[:, 1])[:, None], 0.0)
-            xi = nrm[:, 0, None, None] * dxd[:, None, :] + nrm[:, 1, None, None] * dyd[:, :, None]
-            deep = self._profile(deep_rows, r_d) * np.exp(gamma[:, None, None] * xi - logz[:, None, None])
+                nrm = np.where(ft_mag[:, None] > 0, ft / ft_mag[:, None], 0.0).astype(f32)
+            g = (gamma[:, None] * nrm).astype(f32)  # tilt along the shear direction
+            tilt = np.exp((g[:, 0, None] * dxd - 0.5 * logz[:, None].astype(f32))[:, None, :]
+                          + (g[:, 1, None] * dyd - 0.5 * logz[:, None].astype(f32))[:, :, None])
+            deep = self._lookup_profile(self._lk_deep, i, t, dxd[:, None, :] ** 2 + dyd[:, :, None] ** 2) * tilt
         else:
-            deep, sup = self._rod_fields(batch, sup_rows, deep_rows, gamma, logz, h_eff, dxs, dys, dxd, dyd)
-        sup = np.where(fz[:, None, None] > 0, sup, 0.0)
-        deep = np.where(fz[:, None, None] > 0, deep * self._lattice[None], 0.0)
-        return sup, deep
+            sup, deep = self._rod_fields(batch, i, t, gamma, logz, h_eff, dxs, dys, dxd, dyd)
+        live = (fz > 0).astype(f32)[:, None, None]
+        return sup * live, deep * self._lattice32[None] * live
 
-    def _rod_fields(self, batch, sup_rows, deep_rows, gamma, logz, h_eff, dxs, dys, dxd, dyd):
+    def _rod_fields(self, batch, i, t, gamma, logz, h_eff, dxs, dys, dxd, dyd):
+        f32 = np.float32
         yaw = batch.indenter_yaw_rad
         yaw_s = yaw - batch.surface_rotation_rad  # rod axis in the superficial frame
-        ps = -np.sin(yaw_s)[:, None, None] * dxs[:, None, :] + np.cos(yaw_s)[:, None, None] * dys[:, :, None]
-        sup = self._profile(sup_rows, ps)
+        ps = (-np.sin(yaw_s)).astype(f32)[:, None, None] * dxs[:, None, :] + np.cos(yaw_s).astype(f32)[:, None, None] * dys[:, :, None]
+        sup = self._lookup_profile(self._lk_sup, i, t, ps)
         fz = batch.force_n[:, 2]
         cd = batch.contact_xy_mm + batch.surface_shift_mm
         chords = np.array([_chord(float(c[0]), float(c[1]), float(w), self._half) for c, w in zip(cd, yaw, strict=True)])
@@ -323,20 +359,20 @@ class SkinModel:
             # torsion: traction T s / I_s across the line; its moment shifts the deep line by T H s / (I_s q)
             twist = np.where(fz > 0, np.arctan(batch.torque_z_nmm * h_eff / (i_s * line_q)), 0.0)
         yaw_d = yaw + twist
-        ex, ey = np.cos(yaw_d), np.sin(yaw_d)
+        ex, ey = np.cos(yaw_d).astype(f32), np.sin(yaw_d).astype(f32)
         along = ex[:, None, None] * dxd[:, None, :] + ey[:, None, None] * dyd[:, :, None]
         perp = -ey[:, None, None] * dxd[:, None, :] + ex[:, None, None] * dyd[:, :, None]
         ft = batch.force_n[:, :2]
         f_perp = -ft[:, 0] * ey + ft[:, 1] * ex
         f_along = ft[:, 0] * ex + ft[:, 1] * ey
-        sign = np.sign(f_perp)[:, None, None]
-        deep = self._profile(deep_rows, perp) * np.exp(sign * gamma[:, None, None] * perp - logz[:, None, None])
-        # along-axis shear: moment balanced by a linear load gradient along the line
+        g = (np.sign(f_perp) * gamma).astype(f32)[:, None, None]
+        deep = self._lookup_profile(self._lk_deep, i, t, perp) * np.exp(g * perp - logz.astype(f32)[:, None, None])
+        # along-axis shear: its moment is balanced by a linear load gradient along the line
         mid = 0.5 * (chords[:, 0] + chords[:, 1])
         with np.errstate(invalid="ignore", divide="ignore"):
             beta = np.where(fz > 0, f_along * h_eff / (line_q * length**3 / 12.0), 0.0)
-        deep = deep * np.clip(1.0 + beta[:, None, None] * (along - mid[:, None, None]), 0.0, None)
-        return deep, sup
+        ramp = 1.0 + beta.astype(f32)[:, None, None] * (along - mid.astype(f32)[:, None, None])
+        return sup, deep * np.maximum(ramp, 0.0)
 
     def pressure_maps(self, states: list[MechState]) -> tuple[np.ndarray, np.ndarray]:
         """(N, 16, 16) mean pressure (kPa) over each taxel's electrode: superficial, deep."""
