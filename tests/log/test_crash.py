@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from log_records import HOST0_NS, PERIOD_NS, frame, records
+from log_records import HOST0_NS, frame, records
 
 from layerskin_exp.log import SessionWarning, SessionWriter, load_session
 from layerskin_exp.log.cli import main as cli_main
@@ -79,10 +79,10 @@ def test_sigkill_loses_at_most_100ms_and_recovers(tmp_path):
     np.testing.assert_array_equal(skin["deep"][n // 2], frame(n // 2).deep)
     # Loss bound by data time: frames after the last one read span under one chunk (100 ms).
     # The kill can land between a write() returning and the progress update: the last frame
-    # written is `last` or `last + 1`.
+    # written is `last` or `last + 1`. Frames n.. were in the open chunk, which spans < 100 ms.
     assert n - 1 <= last + 1
-    lost_ns = frame(last + 1).host_t_ns - frame(n - 1).host_t_ns
-    assert lost_ns <= CHUNK_SPAN_NS + PERIOD_NS, (n, last)
+    if last >= n:
+        assert frame(last).host_t_ns - frame(n).host_t_ns < CHUNK_SPAN_NS, (n, last)
     assert s.streams["events"]["message"] == ["start"]
     assert "skin" in s.clock_sync  # estimated on reading, since close() never ran
 
