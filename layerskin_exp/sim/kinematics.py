@@ -4,7 +4,8 @@ A `LimitedMotion` is one actuated point in n dimensions (a stage's three axes, a
 opening, an arm's TCP position or rotation vector). Each step it steers its velocity toward the
 target at no more than the commanded speed, slowing on the braking curve v = sqrt(2 a d), and
 changes velocity by at most a * dt. That is a trapezoidal profile for a move from rest, and it
-also handles a new target or a stop mid-move without a jump in velocity. Scalar Python floats
+also handles a new target or a stop mid-move without a jump in velocity; the braking curve is
+the discrete one, so a move ends on its target without overshoot. Scalar Python floats
 keep a step to a few microseconds.
 """
 
@@ -77,13 +78,18 @@ class LimitedMotion:
         err = [self.target[i] - pos[i] for i in range(n)]
         dist = math.sqrt(sum(e * e for e in err))
         v_now = self.speed_now()
-        if dist <= max(v_now, a_dt) * dt or dist < 1e-12:
-            # Within one step of the target at a speed the braking curve allows: arrive.
+        if dist < 1e-12 or (v_now <= a_dt * (1 + 1e-9) and dist <= 0.5 * (v_now + a_dt) * dt):
+            # One step from the target and slow enough to stop inside the acceleration limit: arrive.
             self.position = list(self.target)
             self.velocity = [0.0] * n
             self.target = None
             return
-        v_want = min(self.speed, math.sqrt(2.0 * self.accel * dist))
+        # Discrete braking curve: after this step (trapezoidal integration) the point must still be
+        # able to stop at the target, 0.5 (v + v') dt + v'^2 / (2 a) <= d.
+        a = self.accel
+        disc = a_dt * a_dt / 4.0 + 2.0 * a * dist - a * v_now * dt
+        v_brake = -0.5 * a_dt + math.sqrt(disc) if disc > 0 else 0.0
+        v_want = min(self.speed, max(v_brake, 0.0))
         dv = [err[i] / dist * v_want - vel[i] for i in range(n)]
         dv_norm = math.sqrt(sum(d * d for d in dv))
         if dv_norm > a_dt:
