@@ -1,0 +1,74 @@
+"""Look at the simulated skin: both layers' counts under a press and under a slide.
+
+    python -m layerskin_exp.sim.preview [out=PATH] [seed=N]
+
+Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of
+pressure marked (baseline-subtracted counts as weights) and the applied force in the titles.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+
+def _cop(counts: np.ndarray, base: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    p = np.clip(counts.astype(float) - base, 0.0, None)
+    tot = p.sum() + 1e-9
+    return np.array([p.sum(axis=0) @ xs / tot, p.sum(axis=1) @ xs / tot])
+
+
+def render(out: str = "skin_preview.png", seed: int = 0) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from layerskin_exp.config import SkinConfig
+    from layerskin_exp.sim.config import SimConfig
+    from layerskin_exp.sim.skin import SkinModel
+
+    sim, skin = SimConfig(seed=seed), SkinConfig()
+    m = SkinModel(sim, skin, "hemisphere", np.random.default_rng(seed))
+    xs = skin.taxel_centres_mm()
+    idle = m.frames([m.step(0.0, np.array([0.0, 0.0, 1.0]))], np.array([0.0]))
+    cases = []
+    t = 0.0
+    for k in range(400):  # press to 2.2 mm at (-3, 1.5) mm, hold
+        t = 0.001 * (k + 1)
+        st = m.step(t, np.array([-3.0, 1.5, -2.2 * min(k / 300.0, 1.0)]))
+    cases.append(("press", st, m.frames([st], np.array([t]))))
+    for k in range(1500):  # slide +x at 2 mm/s
+        t += 0.001
+        st = m.step(t, np.array([-3.0 + 0.002 * (k + 1), 1.5, -2.2]))
+    cases.append(("slide +x 3 mm", st, m.frames([st], np.array([t]))))
+
+    half = skin.n_taxels * skin.pitch_mm / 2
+    fig, axes = plt.subplots(2, 2, figsize=(9, 8.5), constrained_layout=True)
+    for row, (name, st, (sup, deep)) in enumerate(cases):
+        for col, (layer, counts, base) in enumerate((("superficial", sup[0], idle[0][0]), ("deep", deep[0], idle[1][0]))):
+            ax = axes[row, col]
+            im = ax.imshow(counts, origin="lower", extent=(-half, half, -half, half), cmap="magma", vmin=0, vmax=4095)
+            c = _cop(counts, base.astype(float), xs)
+            ax.plot(*c, "c+", ms=14, mew=2, label=f"CoP ({c[0]:.2f}, {c[1]:.2f}) mm")
+            ax.legend(loc="lower right", fontsize=8)
+            f = st.force_n
+            ax.set_title(f"{name}: {layer}\nF = ({f[0]:.2f}, {f[1]:.2f}, {f[2]:.2f}) N"
+                         f"{'  slipping' if st.slipping else ''}", fontsize=9)
+            ax.set_xlabel("x (mm)")
+            ax.set_ylabel("y (mm)")
+    fig.colorbar(im, ax=axes, shrink=0.6, label="ADC counts")
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return out
+
+
+def main(argv: list[str]) -> None:
+    opts = dict(a.split("=", 1) for a in argv if "=" in a)
+    path = render(opts.get("out", "skin_preview.png"), int(opts.get("seed", 0)))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
