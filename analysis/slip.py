@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
+from scipy.optimize import linear_sum_assignment
 from scipy.signal import butter, find_peaks, sosfiltfilt
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_bipartite_matching
@@ -22,20 +23,36 @@ def match_events(detected, truth, tolerance: float) -> tuple[int, int, int]:
     """Maximum one-to-one matching of detected to true event times within ±tolerance s.
 
     Returns (tp, fp, fn). Maximum, not greedy: a detection between two true events is given to
-    whichever leaves the most pairs matched.
+    whichever leaves the most pairs matched (scipy.optimize.linear_sum_assignment on the
+    within-tolerance pair matrix, after dropping events that have no partner in reach).
     """
     d = np.asarray(detected, np.float64).ravel()
     t = np.asarray(truth, np.float64).ravel()
     if d.size == 0 or t.size == 0:
         return 0, int(d.size), int(t.size)
     ok = np.abs(d[:, None] - t[None, :]) <= tolerance
+    ok = ok[ok.any(axis=1)][:, ok.any(axis=0)]  # events with no partner in reach cannot match
+    if ok.size == 0:
+        return 0, int(d.size), int(t.size)
     if ok.sum(axis=0).max() <= 1 and ok.sum(axis=1).max() <= 1:  # no contested pair: every edge matches
         tp = int(ok.sum())
-        return tp, int(d.size) - tp, int(t.size) - tp
-    rows, cols = np.nonzero(ok)
-    graph = csr_matrix((np.ones(rows.size), (rows, cols)), shape=(d.size, t.size))
-    tp = int((maximum_bipartite_matching(graph, perm_type="column") >= 0).sum())
+    else:  # maximum matching = assignment maximising the number of within-tolerance pairs
+        r, c = linear_sum_assignment(ok, maximize=True)
+        tp = int(ok[r, c].sum())
     return tp, int(d.size) - tp, int(t.size) - tp
+
+
+def matched_pairs(detected, truth, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (into detected, into truth) of a maximum one-to-one matching within ±tolerance."""
+    d = np.asarray(detected, np.float64).ravel()
+    t = np.asarray(truth, np.float64).ravel()
+    if d.size == 0 or t.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    rows, cols = np.nonzero(np.abs(d[:, None] - t[None, :]) <= tolerance)
+    graph = csr_matrix((np.ones(rows.size), (rows, cols)), shape=(d.size, t.size))
+    m = maximum_bipartite_matching(graph, perm_type="column")
+    di = np.flatnonzero(m >= 0)
+    return di, m[di]
 
 
 def f1_score(tp: int, fp: int, fn: int) -> float:
@@ -159,7 +176,7 @@ def evaluate_loto(trials: list[CueTrial], cfg: SlipConfig | None = None) -> dict
     table = f1_table(trials, offsets, thresholds, cfg.tolerance_s)
     groups = np.array([t.group for t in trials])
     res = {"global": [], "grip": [], "oracle": []}
-    chosen_offsets = []
+    chosen_offsets, grip_choice = [], []
     for i in range(n):
         others = np.arange(n) != i
         jg, kg = _best(table[others].mean(axis=0))
@@ -172,9 +189,11 @@ def evaluate_loto(trials: list[CueTrial], cfg: SlipConfig | None = None) -> dict
         res["grip"].append(table[i, jp, kp])
         res["oracle"].append(table[i, jp].max())
         chosen_offsets.append(offsets[jp])
+        grip_choice.append((float(offsets[jp]), float(thresholds[kp])))
     out = {k: float(np.mean(v)) for k, v in res.items()}
     out["per_trial"] = {k: [float(x) for x in v] for k, v in res.items()}
     out["median_offset_s"] = float(np.median(chosen_offsets))
+    out["grip_choice"] = grip_choice  # per held-out trial: (offset s, threshold) of the Grip setting
     out["n_trials"] = n
     out["n_truth_events"] = int(sum(t.truth_t_s.size for t in trials))
     return out

@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 
 from analysis.config import SlipConfig
-from analysis.slip import CueTrial, candidates, cue_score, evaluate_loto, f1_score, match_events, vision_slip_events
+from analysis.slip import (
+    CueTrial,
+    candidates,
+    cue_score,
+    evaluate_loto,
+    f1_score,
+    match_events,
+    vision_slip_events,
+)
 
 
 def _greedy_nearest(detected, truth, tol):
@@ -101,3 +109,12 @@ def test_loto_settings_learn_offset_and_grip_thresholds():
     assert res["median_offset_s"] == pytest.approx(0.08, abs=0.03)
     assert res["grip"] == pytest.approx(1.0)
     assert res["global"] < res["grip"] <= res["oracle"] + 1e-12
+
+
+def test_matched_pairs_agree_with_match_events():
+    from analysis.slip import matched_pairs
+
+    d, t = [1.08, 1.22, 3.0], [1.00, 1.15, 5.0]
+    di, ti = matched_pairs(d, t, 0.1)
+    assert len(di) == match_events(d, t, 0.1)[0] == 2
+    assert all(abs(d[i] - t[j]) <= 0.1 for i, j in zip(di, ti, strict=True))

@@ -1,0 +1,121 @@
+"""report.md: each table of the study with our value beside the study's ("ours (study)")."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def _f(x, nd=3) -> str:
+    return "–" if x is None else f"{x:.{nd}f}"
+
+
+def _pair(ours, theirs, nd=3) -> str:
+    return f"{_f(ours, nd)} ({_f(theirs, nd)})"
+
+
+def _get(d, *keys):
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
+
+
+def _force(r, s) -> list[str]:
+    models = list(r["force"])
+    if not models:
+        return []
+    lines = ["## Force estimation (test trials)", "", "R² and MAE (N) per axis; ours (study).", "",
+             "| axis | metric | " + " | ".join(models) + " |", "|---|---|" + "---|" * len(models)]
+    for ax in ("Fx", "Fy", "Fz"):
+        for met, label in (("r2", "R²"), ("mae", "MAE (N)")):
+            cells = [_pair(_get(r["force"], m, ax, met), _get(s["force"], m, ax, met)) for m in models]
+            lines.append(f"| {ax} | {label} | " + " | ".join(cells) + " |")
+    sp = r.get("force_split", {})
+    lines += ["", f"Split by trial: {sp.get('train_trials')}/{sp.get('val_trials')}/{sp.get('test_trials')} "
+              f"train/val/test trials, {sp.get('test_frames')} test frames (seed {sp.get('seed')}).", ""]
+    return lines
+
+
+def _characterization(r, s) -> list[str]:
+    c, sc = r.get("characterization") or {}, s["characterization"]
+    h, sh = r.get("heights") or {}, s["heights"]
+    if not c and not h:
+        return []
+    lines = ["## Characterisation", "", "| quantity | ours | study |", "|---|---|---|"]
+    u = c.get("uniformity") or {}
+    if u:
+        lines.append(f"| CV across positions at {u.get('matched_load_n')} N | {_f(u.get('cv'))} "
+                     f"[{_f(u.get('ci_low'))}–{_f(u.get('ci_high'))}], {u.get('n_positions')} positions | "
+                     f"{sc['uniformity']['cv']} [{sc['uniformity']['ci_low']}–{sc['uniformity']['ci_high']}], 100 |")
+    rp = c.get("repeatability") or {}
+    if rp:
+        lines.append(f"| median within-position CV | {_f(rp.get('median_cv'))}, {rp.get('n_positions')} positions | "
+                     f"{sc['repeatability']['median_cv']}, 88 |")
+    cs = c.get("cop_shift") or {}
+    if cs:
+        lines.append(f"| CoP shift at 1.9–2.1 N shear (mm) | {_f(cs.get('median_mm'), 2)} "
+                     f"[{_f(cs.get('p10_mm'), 2)}–{_f(cs.get('p90_mm'), 2)}], {cs.get('n_trials')} trials | "
+                     f"{sc['cop_shift']['median_mm']} [{sc['cop_shift']['p10_mm']}–{sc['cop_shift']['p90_mm']}] |")
+    if h:
+        o = h.get("overall", {})
+        lines.append(f"| h_x / h_y overall (mm) | {_f(o.get('h_x_mm'), 2)} / {_f(o.get('h_y_mm'), 2)} "
+                     f"(R² {_f(o.get('r2_x'))} / {_f(o.get('r2_y'))}) | {sh['overall']['h_x_mm']} / {sh['overall']['h_y_mm']} |")
+        lines += ["", "Effective heights per normal-load bin (study: 0.5–1.0 N: h 1.62/1.44 mm, R² 0.159/0.125; "
+                  "5.0–6.5 N: h 4.84/6.53 mm, R² 0.626/0.725):", "",
+                  "| F_z bin (N) | frames | h_x (mm) | h_y (mm) | R² x | R² y |", "|---|---|---|---|---|---|"]
+        for b in h.get("bins", []):
+            lines.append(f"| {b['fz_low_n']}–{b['fz_high_n']} | {b['n_frames']} | {_f(b.get('h_x_mm'), 2)} | "
+                         f"{_f(b.get('h_y_mm'), 2)} | {_f(b.get('r2_x'))} | {_f(b.get('r2_y'))} |")
+    return lines + [""]
+
+
+def _tracking(r, s) -> list[str]:
+    t = r.get("tracking") or {}
+    if not t:
+        return []
+    lines = ["## Contact-motion tracking (LOTO per grip depth)", "",
+             "Slope a (mean over folds), pooled out-of-fold R², MAE (mm or °); ours (study).", "",
+             "| motion | g (mm) | deep a | deep R² | deep MAE | sup. a | sup. R² | sup. MAE |", "|---|---|---|---|---|---|---|---|"]
+    for motion, layers in t.items():
+        depths = sorted({g for lay in layers.values() for g in lay}, key=float)
+        for g in depths:
+            cells = []
+            for layer in ("deep", "superficial"):
+                for k, nd in (("a", 2), ("r2", 3), ("mae", 2)):
+                    cells.append(_pair(_get(layers, layer, g, k), _get(s["tracking"], motion, layer, g, k), nd))
+            lines.append(f"| {motion} | {g} | " + " | ".join(cells) + " |")
+    pre = r.get("preload_n")
+    if pre:
+        lines += ["", "Mean normal preload from the T-s5 model (N): " + ", ".join(
+            f"g={g} mm: {_f(v, 2)} ({s['preload_n'].get(g, '–')})" for g, v in pre.items())]
+    return lines + [""]
+
+
+def _slip(r, s) -> list[str]:
+    sl = r.get("slip") or {}
+    if not sl:
+        return []
+    lines = ["## Slip-event detection (trial-macro F1, LOTO)", "", "ours (study).", "",
+             "| motion | cue | Global | Grip | Oracle | events | median offset (ms) |", "|---|---|---|---|---|---|---|"]
+    for motion, cues in sl.items():
+        for cue, v in cues.items():
+            cells = [_pair(v.get(k), _get(s["slip"], motion, cue, k)) for k in ("global", "grip", "oracle")]
+            lines.append(f"| {motion} | {cue} | " + " | ".join(cells) +
+                         f" | {v.get('n_truth_events')} | {_f(1e3 * v['median_offset_s'], 0)} |")
+    return lines + [""]
+
+
+def write_markdown(path, r: dict, figures: list[str]) -> None:
+    s = r["study"]
+    inp = r.get("inputs", {})
+    lines = ["# layerskin-exp report", "",
+             f"Sessions: `{inp.get('sessions_dir')}` — {inp.get('files')} files, {inp.get('calibration_trials')} "
+             f"calibration trials ({inp.get('press_trials')} press, {inp.get('slide_trials')} slide), "
+             f"{inp.get('grip_trials')} grip trials. Skipped files: {inp.get('skipped') or 'none'}.", ""]
+    lines += _force(r, s) + _characterization(r, s) + _tracking(r, s) + _slip(r, s)
+    if r.get("skipped"):
+        lines += ["## Skipped sections", ""] + [f"- **{k}**: {v}" for k, v in r["skipped"].items()] + [""]
+    if figures:
+        lines += ["## Figures", ""] + [f"![{f}]({f})" for f in figures] + [""]
+    Path(path).write_text("\n".join(lines))

@@ -1,0 +1,360 @@
+"""`python -m analysis.report sessions=DIR out=DIR [analysis=demo|default|paper]`
+
+Turns a folder of session files into the study's tables and figures, ours beside the study's:
+out/results.json, out/predictions.npz, out/report.md, out/*.png, out/models/*.pt.
+A missing input (no calibration campaign, no shear trials, no grip sessions, no markers) skips
+the sections that need it with the reason in results.json and report.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig
+from tqdm.auto import tqdm
+
+from analysis import study
+from analysis.characterization import (
+    PressTrial,
+    cop_shift_at_shear,
+    effective_heights,
+    repeatability,
+    uniformity,
+)
+from analysis.cnn import CnnGruForceModel
+from analysis.config import AnalysisConfig, ReportConfig
+from analysis.linear import LinearForceModel, linear_features
+from analysis.markdown import write_markdown
+from analysis.metrics import mae, r2_score, split_trials
+from analysis.preprocess import layer_scale, two_layer_features
+from analysis.sessions import Campaign, load_campaign
+from analysis.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
+from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
+from layerskin_exp.config import SkinConfig, format_config_error, validate
+
+AXES = ("Fx", "Fy", "Fz")
+CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
+
+
+def _clean(x):
+    """JSON-safe: numpy scalars/arrays to Python, NaN/inf to None."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if np.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+class Analysis:
+    """One report run. Stages fill self.results; figures and arrays go to self.out."""
+
+    def __init__(self, cfg: ReportConfig) -> None:
+        self.cfg, self.a, self.skin = cfg, cfg.analysis, cfg.skin
+        self.out = Path(cfg.out)
+        self.results: dict = {"force": {}, "heights": {}, "characterization": {}, "tracking": {}, "slip": {},
+                               "study": study.ALL, "skipped": {}, "inputs": {}, "timing_s": {}}
+        self.figures: list[str] = []
+        self.ts5: CnnGruForceModel | None = None
+        self.camp: Campaign | None = None
+        self.calib_feats: dict | None = None
+
+    def skip(self, section: str, reason: str) -> None:
+        self.results["skipped"][section] = reason
+
+    # -- stages ---------------------------------------------------------------------------
+    def load(self) -> None:
+        camp = load_campaign(self.cfg.sessions, self.a.preprocess, self.a.progress)
+        self.camp = camp
+        n_press = sum(t.labels.get("kind") == "press" for t in camp.calibration)
+        self.results["inputs"] = {"sessions_dir": str(self.cfg.sessions), "files": camp.n_files,
+                                  "calibration_trials": len(camp.calibration), "press_trials": n_press,
+                                  "slide_trials": len(camp.calibration) - n_press, "grip_trials": len(camp.grip),
+                                  "skipped": dict(camp.skipped)}
+        # Per-layer scale from the calibration campaign (else the grip sessions), applied to all.
+        src = [t.maps for t in camp.calibration] or [t.maps for t in camp.grip]
+        if not src:
+            self.scale = np.ones(2, np.float32)
+            return
+        self.scale = layer_scale(np.concatenate(src), self.a.preprocess.scale_percentile)
+        for t in [*camp.calibration, *camp.grip]:
+            t.maps *= (1.0 / self.scale)[None, :, None, None]
+        self.results["inputs"]["layer_scale_counts"] = self.scale
+
+    def _calibration_arrays(self):
+        c = self.camp.calibration
+        X = np.concatenate([t.maps for t in c])
+        y = np.concatenate([t.force_n for t in c])
+        trial = np.concatenate([np.full(len(t.t_s), i) for i, t in enumerate(c)])
+        progress = np.concatenate([np.linspace(0, 1, len(t.t_s)) for t in c])
+        return X, y, trial, progress
+
+    def force(self) -> None:
+        if not self.camp.calibration:
+            self.skip("force", "no complete force_calibration sessions")
+            return
+        X, y, trial, progress = self._calibration_arrays()
+        f = two_layer_features(X, self.skin, self.a.preprocess.eps)
+        self.calib_feats = f
+        sp = self.a.split
+        tr, va, te = split_trials(trial, (sp.train, sp.val, sp.test), sp.seed)
+        if len(te) == 0 or len(tr) == 0:
+            self.skip("force", f"{len(np.unique(trial))} calibration trial(s): too few for a 70/15/15 split")
+            return
+        m_tr, m_va, m_te = np.isin(trial, tr), np.isin(trial, va), np.isin(trial, te)
+        phi = linear_features(f["dc"], f["p_s"], f["p_d"])
+        preds = {"linear": LinearForceModel().fit(phi[m_tr], y[m_tr]).predict(phi[m_te])}
+        models_dir = self.out / "models"
+        models_dir.mkdir(parents=True, exist_ok=True)
+        history = {}
+        for name in tqdm(self.a.cnn.configurations, desc="CNN-GRU models", leave=False, disable=not self.a.progress):
+            model = CnnGruForceModel(name, self.a.cnn, progress=self.a.progress)
+            t0 = time.perf_counter()
+            model.fit(X[m_tr], y[m_tr], trial[m_tr], X[m_va], y[m_va], trial[m_va])
+            self.results["timing_s"][f"train_{name}"] = time.perf_counter() - t0
+            preds[name] = model.predict(X[m_te], trial[m_te])
+            model.save(models_dir / f"{name}.pt")
+            history[name] = model.history
+            if name == "T-s5":
+                self.ts5 = model
+        for name, p in preds.items():
+            r2, err = r2_score(y[m_te], p), mae(y[m_te], p)
+            self.results["force"][name] = {ax: {"r2": r2[i], "mae": err[i]} for i, ax in enumerate(AXES)}
+        self.results["force_split"] = {"train_trials": len(tr), "val_trials": len(va), "test_trials": len(te),
+                                       "test_frames": int(m_te.sum()), "seed": sp.seed}
+        self.results["force_training"] = {k: {"epochs": len(h), "best_val_loss": min(e["val_loss"] for e in h)}
+                                          for k, h in history.items() if h}
+        np.savez_compressed(self.out / "predictions.npz", reference=y[m_te], trial=trial[m_te],
+                            progress=progress[m_te], axes=np.array(AXES),
+                            **{f"pred_{k}": v for k, v in preds.items()})
+        if self.a.figures:
+            from analysis.figures import force_scatter
+
+            show = {k: preds[k] for k in ("linear", "T-s5") if k in preds}
+            if len(show) < 2 and len(preds) > 1:
+                show[list(preds)[1]] = preds[list(preds)[1]]
+            force_scatter(self.out / "force_pred_vs_ref.png", y[m_te], show, progress[m_te])
+            self.figures.append("force_pred_vs_ref.png")
+
+    def characterization(self) -> None:
+        c = self.camp.calibration
+        if not c:
+            self.skip("characterization", "no complete force_calibration sessions")
+            self.skip("heights", "no complete force_calibration sessions")
+            return
+        cc = self.a.characterization
+        if self.calib_feats is None:
+            self.calib_feats = two_layer_features(np.concatenate([t.maps for t in c]), self.skin, self.a.preprocess.eps)
+        f = self.calib_feats
+        bounds = np.cumsum([0] + [len(t.t_s) for t in c])
+        response = f["p_s"] * self.scale[0] + f["p_d"] * self.scale[1]  # counts above baseline, both layers
+        presses, shear, dcs = [], [], []
+        for i, t in enumerate(c):
+            sl = slice(bounds[i], bounds[i + 1])
+            if t.labels.get("kind") == "press":
+                presses.append(PressTrial(int(t.labels.get("position_index", i)), t.force_n[:, 2], response[sl]))
+            elif t.labels.get("kind") == "slide":
+                shear.append((i, sl))
+        res = {}
+        if presses:
+            res["uniformity"] = uniformity(presses, cc)
+            res["repeatability"] = repeatability(presses, cc)
+        else:
+            self.skip("characterization.uniformity", "no press trials")
+        if shear:
+            s_n = [np.linalg.norm(c[i].force_n[:, :2], axis=1) for i, _ in shear]
+            dcs = [f["dc"][sl] for _, sl in shear]
+            res["cop_shift"] = cop_shift_at_shear(s_n, dcs, cc)
+            fz = np.concatenate([c[i].force_n[:, 2] for i, _ in shear])
+            fs = np.concatenate([c[i].force_n[:, :2] for i, _ in shear])
+            self.results["heights"] = effective_heights(fz, np.concatenate(dcs), fs, cc)
+        else:
+            self.skip("characterization.cop_shift", "no slide (shear) trials")
+            self.skip("heights", "no slide (shear) trials")
+        self.results["characterization"] = res
+
+    def _grip_features(self):
+        return [two_layer_features(t.maps, self.skin, self.a.preprocess.eps) for t in self.camp.grip]
+
+    def tracking(self) -> None:
+        grip = self.camp.grip
+        if not grip:
+            self.skip("tracking", "no complete grip_depth sessions")
+            return
+        feats = self.grip_feats = self._grip_features()
+        out, self.track_preds = {}, {}
+        for motion in ("translation", "torsion"):
+            for layer, ref_key in (("deep", "arm_ref"), ("superficial", "vision_ref")):
+                key = "d" if layer == "deep" else "s"
+                for g in sorted({t.grip_depth_mm for t in grip if t.motion == motion}):
+                    idx = [i for i, t in enumerate(grip) if t.motion == motion and t.grip_depth_mm == g
+                           and np.all(np.isfinite(getattr(t, ref_key)))]
+                    if len(idx) < 2:
+                        self.skip(f"tracking.{motion}.{layer}.{g:g}",
+                                  f"{len(idx)} trial(s) with a {ref_key.split('_')[0]} reference; LOTO needs 2")
+                        continue
+                    trials = []
+                    for i in idx:
+                        fi = feats[i]
+                        if motion == "translation":
+                            rd = fi[f"cop_{key}"] - fi[f"cop_{key}"][:1]
+                        else:
+                            a = unwrap_angle(fi[f"angle_{key}"])
+                            rd = np.degrees(a - a[0])[:, None]
+                        trials.append(TrackingTrial(rd, getattr(grip[i], ref_key), grip[i].t_s))
+                    r = loto_calibration(trials)
+                    for i, p in zip(idx, r.pop("predictions"), strict=True):
+                        self.track_preds[(i, layer)] = p
+                    out.setdefault(motion, {}).setdefault(layer, {})[f"{g:g}"] = r
+        self.results["tracking"] = out
+        if self.ts5 is not None:
+            pre = {}
+            for t in grip:
+                fz = self.ts5.predict(t.maps)[:, 2]
+                pre.setdefault(f"{t.grip_depth_mm:g}", []).append(float(np.mean(fz)))
+            self.results["preload_n"] = {g: float(np.mean(v)) for g, v in sorted(pre.items(), key=lambda kv: float(kv[0]))}
+        if self.a.figures:
+            self._tracking_figures()
+
+    def _representative(self, motion: str) -> int | None:
+        idx = [i for i, t in enumerate(self.camp.grip) if t.motion == motion]
+        if not idx:
+            return None
+        depths = sorted({self.camp.grip[i].grip_depth_mm for i in idx})
+        g = 12.0 if 12.0 in depths else depths[len(depths) // 2]
+        return next(i for i in idx if self.camp.grip[i].grip_depth_mm == g)
+
+    def _tracking_figures(self) -> None:
+        from analysis.figures import tracking_trace
+
+        for motion, unit in (("translation", "displacement (mm)"), ("torsion", "angle (°)")):
+            i = self._representative(motion)
+            if i is None or (i, "deep") not in self.track_preds and (i, "superficial") not in self.track_preds:
+                continue
+            t = self.camp.grip[i]
+            nan = np.full(t.t_s.size, np.nan)
+            tracking_trace(self.out / f"tracking_{motion}.png", t.t_s, t.arm_ref, self.track_preds.get((i, "deep"), nan),
+                           t.vision_ref, self.track_preds.get((i, "superficial"), nan), unit,
+                           f"{motion}, g = {t.grip_depth_mm:g} mm ({t.name})")
+            self.figures.append(f"tracking_{motion}.png")
+
+    def _cue_signal(self, cue: str, t, f) -> np.ndarray | None:
+        if cue == "superficial":
+            return f["p_s"]
+        if cue == "interlayer":
+            return np.abs(f["p_s"] - f["p_d"])
+        if cue == "geometric":
+            if t.motion == "torsion":
+                return unwrap_angle(f["angle_s"])
+            d = f["cop_s"] - f["cop_s"][:1]
+            u = np.linalg.svd(d, full_matrices=False)[2][0] if np.any(d) else np.array([1.0, 0.0])
+            return d @ u
+        if self.ts5 is None:
+            return None
+        force = self.ts5.predict(t.maps)
+        return np.linalg.norm(force, axis=1) if cue == "f_xyz" else force[:, 2]
+
+    def slip(self) -> None:
+        grip = self.camp.grip
+        if not grip:
+            self.skip("slip", "no complete grip_depth sessions")
+            return
+        sc = self.a.slip
+        feats = getattr(self, "grip_feats", None) or self._grip_features()
+        out = {}
+        self.slip_fig_data = {}
+        for motion in ("translation", "torsion"):
+            idx = [i for i, t in enumerate(grip) if t.motion == motion and t.vision_t_s.size > 1]
+            if len(idx) < 2:
+                self.skip(f"slip.{motion}", f"{len(idx)} {motion} trial(s) with marker poses; LOTO needs 2")
+                continue
+            truths = {i: vision_slip_events(grip[i].vision_t_s, grip[i].vision_sig, sc) for i in idx}
+            for cue in sc.cues:
+                trials, traces = [], []
+                for i in idx:
+                    t = grip[i]
+                    sig = self._cue_signal(cue, t, feats[i])
+                    if sig is None:
+                        break
+                    fs = 1.0 / float(np.median(np.diff(t.t_s)))
+                    score = cue_score(sig, fs, sc)
+                    ct, cs = candidates(t.t_s, score)
+                    trials.append(CueTrial(ct, cs, truths[i], t.grip_depth_mm))
+                    traces.append((i, score))
+                if not trials:
+                    self.skip(f"slip.{motion}.{cue}", "needs the T-s5 force model (add T-s5 to analysis.cnn.configurations)")
+                    continue
+                r = evaluate_loto(trials, sc)
+                out.setdefault(motion, {})[cue] = r
+                if cue == "interlayer":
+                    self.slip_fig_data[motion] = (trials, traces, r["grip_choice"])
+        self.results["slip"] = out
+        if self.a.figures:
+            self._slip_figures()
+
+    def _slip_figures(self) -> None:
+        from analysis.figures import slip_detections
+        from analysis.slip import detect, matched_pairs
+
+        for motion, (trials, traces, choice) in self.slip_fig_data.items():
+            rep = self._representative(motion)
+            k = next((j for j, (i, _) in enumerate(traces) if i == rep), 0)
+            i, score = traces[k]
+            tr, (off, thr) = trials[k], choice[k]
+            det = detect(tr.cand_t_s, tr.cand_score, thr, off)
+            di, ti = matched_pairs(det, tr.truth_t_s, self.a.slip.tolerance_s)
+            fn = np.setdiff1d(np.arange(tr.truth_t_s.size), ti)
+            t = self.camp.grip[i]
+            slip_detections(self.out / f"slip_{motion}.png", t.t_s + off, score, tr.truth_t_s, det, di, fn, thr,
+                            f"{motion}, inter-layer difference cue, Grip threshold, g = {t.grip_depth_mm:g} mm")
+            self.figures.append(f"slip_{motion}.png")
+
+    def write(self) -> None:
+        self.results["figures"] = self.figures
+        (self.out / "results.json").write_text(json.dumps(_clean(self.results), indent=1))
+        write_markdown(self.out / "report.md", _clean(self.results), self.figures)
+
+    def run(self) -> dict:
+        self.out.mkdir(parents=True, exist_ok=True)
+        stages = [("load sessions", self.load), ("force estimation", self.force),
+                  ("characterisation", self.characterization), ("tracking", self.tracking),
+                  ("slip detection", self.slip), ("write report", self.write)]
+        bar = tqdm(stages, desc="report", disable=not self.a.progress)
+        for name, fn in bar:
+            bar.set_postfix_str(name)
+            t0 = time.perf_counter()
+            fn()
+            self.results["timing_s"][name] = time.perf_counter() - t0
+        return self.results
+
+
+def run_report(sessions, out, analysis: AnalysisConfig | None = None, skin: SkinConfig | None = None) -> dict:
+    """Library entry point: the same as the command line."""
+    return Analysis(ReportConfig(sessions=str(sessions), out=str(out), analysis=analysis or AnalysisConfig(),
+                                 skin=skin or SkinConfig())).run()
+
+
+@hydra.main(version_base=None, config_path=CONF_DIR, config_name="report")
+def main(cfg: DictConfig) -> None:
+    try:
+        rc: ReportConfig = validate(cfg)
+    except ValueError as e:
+        raise SystemExit(format_config_error(e)) from None
+    if rc.analysis.cnn.torch_threads is None:
+        rc.analysis.cnn.torch_threads = os.cpu_count()
+    res = Analysis(rc).run()
+    print(f"report written to {Path(rc.out) / 'report.md'} ({len(res['skipped'])} section(s) skipped)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,199 @@
+"""From session files to analysis arrays: discovery, per-trial preprocessing, references.
+
+Every trial is reduced as soon as it is read (smoothed and downsampled maps, references on the
+downsampled skin timeline), so a whole campaign fits in memory.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from analysis.config import PreprocessConfig
+from analysis.preprocess import preprocess_counts, smooth_downsample
+from analysis.tracking import torsion_reference_deg, translation_reference_mm
+from layerskin_exp.log import SessionFileError, SessionWarning, load_session
+
+
+@dataclass
+class CalibrationTrial:
+    """maps (K, 2, 16, 16) counts above baseline; force_n (K, 3); t_s (K,)."""
+
+    name: str
+    labels: dict
+    t_s: np.ndarray
+    maps: np.ndarray
+    force_n: np.ndarray
+
+
+@dataclass
+class GripTrial:
+    """A grip trial restricted to its motion phase, on the downsampled skin timeline.
+
+    arm_ref, vision_ref (K,): mm (translation) or ° (torsion) relative to the motion start
+    (NaN where the stream is absent). vision_t_s / vision_sig: the vision reference on the
+    camera's own timeline (for slip ground truth).
+    """
+
+    name: str
+    labels: dict
+    t_s: np.ndarray
+    maps: np.ndarray
+    arm_ref: np.ndarray
+    vision_ref: np.ndarray
+    vision_t_s: np.ndarray
+    vision_sig: np.ndarray
+
+    @property
+    def grip_depth_mm(self) -> float:
+        return float(self.labels["grip_depth_mm"])
+
+    @property
+    def motion(self) -> str:
+        return str(self.labels["motion"])
+
+
+@dataclass
+class Campaign:
+    calibration: list[CalibrationTrial] = field(default_factory=list)
+    grip: list[GripTrial] = field(default_factory=list)
+    skipped: Counter = field(default_factory=Counter)  # reason -> count
+    n_files: int = 0
+
+
+def discover(root) -> list[Path]:
+    """Every *.mcap under root, recursively, sorted."""
+    root = Path(root)
+    if not root.exists():
+        raise FileNotFoundError(f"sessions={root}: no such folder; point sessions= at a folder of .mcap files")
+    return sorted(root.rglob("*.mcap"))
+
+
+def _skin_counts(skin: dict) -> np.ndarray:
+    return np.stack([skin["superficial"], skin["deep"]], axis=1)  # (N, 2, 16, 16)
+
+
+def _interp_rows(t_new, t, v) -> np.ndarray:
+    """Linear interpolation of each column of v (N, D) at t_new."""
+    return np.column_stack([np.interp(t_new, t, v[:, i]) for i in range(v.shape[1])])
+
+
+def _motion_window(events: dict | None, t0: float, t1: float) -> tuple[float, float]:
+    """[start, end] s of the 'motion' phase (to the next phase event), else the whole trial."""
+    if not events or not len(events.get("kind", [])):
+        return t0, t1
+    t = np.asarray(events["t_ns"]) / 1e9
+    phases = [(ti, m) for ti, k, m in zip(t, events["kind"], events["message"], strict=False) if k == "phase"]
+    for i, (ti, m) in enumerate(phases):
+        if m == "motion":
+            end = phases[i + 1][0] if i + 1 < len(phases) else t1
+            return float(ti), float(end)
+    return t0, t1
+
+
+def _reference(t_s, positions, quats, motion):
+    return translation_reference_mm(positions) if motion == "translation" else torsion_reference_deg(quats)
+
+
+def _vision(markers: dict | None, window, motion) -> tuple[np.ndarray, np.ndarray, list]:
+    """Per-marker vision references in the window: (t_s of the best-seen marker, its signal, all
+    markers as (t_s, signal) pairs)."""
+    if not markers or not len(markers.get("marker_id", [])):
+        return np.zeros(0), np.zeros(0), []
+    t = np.asarray(markers["t_ns"]) / 1e9
+    ids = np.asarray(markers["marker_id"])
+    per = []
+    for mid in np.unique(ids):
+        m = (ids == mid) & (t >= window[0]) & (t <= window[1])
+        if m.sum() < 2:
+            continue
+        per.append((t[m], _reference(t[m], markers["position_m"][m], markers["orientation_xyzw"][m], motion)))
+    if not per:
+        return np.zeros(0), np.zeros(0), []
+    best = max(per, key=lambda p: p[0].size)
+    return best[0], best[1], per
+
+
+def _calibration_trial(s, name, pp: PreprocessConfig) -> CalibrationTrial | str:
+    if "wrench" not in s.streams or not len(s.streams["wrench"]["t_ns"]):
+        return "calibration trial without wrench stream"
+    skin = s.streams["skin"]
+    counts = _skin_counts(skin)
+    t_raw = skin["t_ns"].astype(np.float64) / 1e9
+    w = s.streams["wrench"]
+    force = _interp_rows(t_raw, w["t_ns"].astype(np.float64) / 1e9, np.asarray(w["force_n"], np.float64))
+    return CalibrationTrial(
+        name=name, labels=dict(s.labels),
+        t_s=smooth_downsample(t_raw, pp.ma_window, pp.downsample),
+        maps=preprocess_counts(counts, pp.ma_window, pp.downsample, pp.baseline_frames),
+        force_n=smooth_downsample(force, pp.ma_window, pp.downsample).astype(np.float32))
+
+
+def _grip_trial(s, name, pp: PreprocessConfig) -> GripTrial | str:
+    motion = s.labels.get("motion")
+    if motion not in ("translation", "torsion"):
+        return f"grip trial with unknown motion {motion!r}"
+    skin = s.streams["skin"]
+    counts = _skin_counts(skin)
+    t_raw = skin["t_ns"].astype(np.float64) / 1e9
+    t_s = smooth_downsample(t_raw, pp.ma_window, pp.downsample)
+    maps = preprocess_counts(counts, pp.ma_window, pp.downsample, pp.baseline_frames)
+    win = _motion_window(s.streams.get("events"), t_s[0], t_s[-1])
+    keep = (t_s >= win[0]) & (t_s <= win[1])
+    if keep.sum() < 10:
+        return "grip trial with fewer than 10 frames in its motion phase"
+    t_s, maps = t_s[keep], maps[keep]
+    arm = np.full(t_s.size, np.nan)
+    tcp = s.streams.get("tcp")
+    if tcp is not None and len(tcp["t_ns"]):
+        tt = tcp["t_ns"] / 1e9
+        m = (tt >= win[0]) & (tt <= win[1])
+        if m.sum() >= 2:
+            arm = np.interp(t_s, tt[m], _reference(tt[m], tcp["position_m"][m], tcp["orientation_xyzw"][m], motion))
+    vt, vsig, per = _vision(s.streams.get("markers"), win, motion)
+    vision = (np.mean([np.interp(t_s, a, b) for a, b in per], axis=0) if per else np.full(t_s.size, np.nan))
+    return GripTrial(name=name, labels=dict(s.labels), t_s=t_s, maps=maps, arm_ref=arm, vision_ref=vision,
+                     vision_t_s=vt, vision_sig=vsig)
+
+
+def load_campaign(root, pp: PreprocessConfig | None = None, progress: bool = True) -> Campaign:
+    """Read and reduce every complete session under root; count what was skipped and why."""
+    pp = pp or PreprocessConfig()
+    paths = discover(root)
+    camp = Campaign(n_files=len(paths))
+    for path in tqdm(paths, desc="sessions", leave=False, disable=not progress):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", SessionWarning)
+                s = load_session(path)
+        except SessionFileError:
+            camp.skipped["unreadable file"] += 1
+            continue
+        if s.outcome != "complete":
+            camp.skipped["outcome not complete"] += 1
+            continue
+        skin = s.streams.get("skin")
+        if skin is None or len(skin["t_ns"]) < 2 * pp.downsample + pp.ma_window:
+            camp.skipped["no or too short skin stream"] += 1
+            continue
+        proto = s.labels.get("protocol")
+        name = str(path.relative_to(root))
+        if proto == "force_calibration":
+            trial = _calibration_trial(s, name, pp)
+            target = camp.calibration
+        elif proto == "grip_depth":
+            trial = _grip_trial(s, name, pp)
+            target = camp.grip
+        else:
+            camp.skipped[f"unknown protocol {proto!r}"] += 1
+            continue
+        if isinstance(trial, str):
+            camp.skipped[trial] += 1
+        else:
+            target.append(trial)
+    return camp

@@ -1,0 +1,66 @@
+"""The report end to end on a tiny synthetic campaign (SessionWriter files, closed-form contacts)."""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.config import AnalysisConfig, CnnConfig, SlipConfig
+from analysis.report import run_report
+
+sys.path.insert(0, str(Path(__file__).parent))
+from synthetic import write_campaign  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    return write_campaign(tmp_path_factory.mktemp("sessions"), n_positions=5, grip_depths=(6, 12), trials=2)
+
+
+def _fast():
+    return AnalysisConfig(cnn=CnnConfig(configurations=["T-s5"], max_epochs=1, patience=1, torch_threads=1),
+                          slip=SlipConfig(n_thresholds=8, offset_step_s=0.05), progress=False)
+
+
+def test_report_writes_results_predictions_markdown_and_figures(campaign, tmp_path):
+    res = run_report(campaign, tmp_path, _fast())
+    data = json.loads((tmp_path / "results.json").read_text())
+    for key in ("force", "heights", "characterization", "tracking", "slip", "study"):
+        assert key in data
+    assert set(data["force"]) == {"linear", "T-s5"}
+    assert set(data["force"]["linear"]["Fz"]) == {"r2", "mae"}
+    # The linear model is exact up to noise on the closed-form moment balance.
+    assert data["force"]["linear"]["Fz"]["r2"] > 0.9
+    # Deep layer moves 0.8x the arm: the calibration slope is 1/0.8.
+    assert data["tracking"]["translation"]["deep"]["12"]["a"] == pytest.approx(1.25, rel=0.05)
+    assert set(data["slip"]["translation"]["interlayer"]) >= {"global", "grip", "oracle"}
+    pred = np.load(tmp_path / "predictions.npz")
+    ref = pred["reference"]
+    err = np.abs(pred["pred_linear"] - ref).mean(axis=0)
+    np.testing.assert_allclose(err[2], data["force"]["linear"]["Fz"]["mae"], rtol=1e-9)
+    md = (tmp_path / "report.md").read_text()
+    assert "0.914" in md and "Slip-event detection" in md
+    for f in res["figures"]:
+        assert (tmp_path / f).stat().st_size > 1000
+    assert (tmp_path / "models" / "T-s5.pt").exists()
+
+
+def test_missing_grip_sessions_are_skipped_with_a_reason(campaign, tmp_path):
+    only_cal = tmp_path / "cal"
+    shutil.copytree(campaign / "force_calibration", only_cal)
+    (only_cal / "broken.mcap").write_bytes(b"not an mcap file")
+    out = tmp_path / "out"
+    res = run_report(only_cal, out, _fast())
+    assert "grip_depth" in res["skipped"]["tracking"]
+    assert "grip_depth" in res["skipped"]["slip"]
+    assert res["inputs"]["skipped"] == {"unreadable file": 1}
+    assert "Skipped sections" in (out / "report.md").read_text()
+
+
+def test_empty_folder_gives_a_report_not_a_crash(tmp_path):
+    (tmp_path / "none").mkdir()
+    res = run_report(tmp_path / "none", tmp_path / "out", _fast())
+    assert set(res["skipped"]) >= {"force", "characterization", "tracking", "slip"}
