@@ -1,1 +1,16 @@
-"""protocols."""
+"""Scripted protocols, as Hydra apps that run unchanged on `hardware=sim|lab|loopback`.
+
+    python -m protocols.force_calibration                    # 100 positions x (5 presses + 4 slides), sim
+    python -m protocols.force_calibration positions.count=10 data_root=/data/cal
+    python -m protocols.grip_depth grip_depth=9 trajectory=torsion trial=2
+    python -m protocols.grip_depth -m grip_depth=6,9,12,15 trajectory=translation,torsion trial='range(7)'
+        [hydra/launcher=joblib | hydra/launcher=slurm]
+
+Session files: `<data_root>/force_calibration/pos042_slide2.mcap`,
+`<data_root>/grip_depth/g12_translation_t3.mcap`. Rerunning a stopped command resumes: complete
+trials are skipped, an interrupted one (left as `<name>.mcap.partial`) is run again.
+
+Modules: `calibration` and `grip` (the protocols), `runner` (trial files, resume, logging),
+`safety` (limits the framework enforces), `app` (config checks, rig life cycle, exit codes),
+`progress` (multirun progress callback), `config` (schemas).
+"""

@@ -188,8 +188,6 @@ class PlatformControl:
         if reason != "target_reached" or stop_reason_on_target:
             fz = None if self.log.last_wrench is None else float(self.log.last_wrench.force_n[2])
             self.log.stop(reason, fz_n=fz, tripped=self.log.rig.tripped)
-        if reason == FORCE_LIMIT:
-            self.log.event("safety", str(self.log.rig.tripped))
         return reason
 
 
@@ -238,8 +236,6 @@ def run_slide(ctl: PlatformControl, trial: CalibrationTrial) -> None:
     log.stop(reason, fz_n=None if last is None else float(last.force_n[2]),
              shear_n=None if last is None else float(np.hypot(*last.force_n[:2])),
              position_mm=ctl.position_mm().tolist())
-    if reason == FORCE_LIMIT:
-        log.event("safety", str(log.rig.tripped))
     ctl.lift(ctl.position_mm()[:2])
 
 

@@ -184,7 +184,7 @@ class TrajectoryConfig:
 class GripApproachConfig:
     start_opening_mm: float = 40.0  # jaws open this far before the approach
     min_opening_mm: float = 0.0  # the approach gives up (no contact) here
-    speed_mm_s: float = 5.0
+    speed_mm_s: float = 20.0  # the Hand-E moves at 20..150 mm/s
     force_pct: float = 20.0
     threshold_counts: int = 500  # sum over both layers, after baseline subtraction
     consecutive_frames: int = 5
@@ -193,7 +193,7 @@ class GripApproachConfig:
 
 @dataclass
 class GripCloseConfig:
-    speed_mm_s: float = 2.0
+    speed_mm_s: float = 20.0
     force_pct: float = 50.0
     settle_s: float = 0.5  # hold after the jaws stop, before the motion
 
@@ -201,7 +201,7 @@ class GripCloseConfig:
 @dataclass
 class GripReleaseConfig:
     opening_mm: float = 40.0
-    speed_mm_s: float = 20.0
+    speed_mm_s: float = 40.0
 
 
 @dataclass

@@ -103,6 +103,7 @@ class TrialLog:
         self.last_gripper: GripperState | None = None
         self.stop_reason: str | None = None
         self._last_image_seq: int | None = None
+        self._noted_trip: str | None = None
 
     def event(self, kind: str, message: str, **detail) -> None:
         t_ns = self.rig.clock.now_ns()
@@ -134,6 +135,9 @@ class TrialLog:
                 shear_max = float(np.hypot(force_n[:, 0], force_n[:, 1]).max())
                 self.peak_fz_n = fz_max if self.peak_fz_n is None else max(self.peak_fz_n, fz_max)
                 self.peak_shear_n = shear_max if self.peak_shear_n is None else max(self.peak_shear_n, shear_max)
+        if rig.tripped is not None and rig.tripped is not self._noted_trip:  # whenever it happened
+            self._noted_trip = rig.tripped
+            self.event("safety", rig.tripped)
         for dev in (rig.platform, rig.arm, rig.gripper):
             if dev is None:
                 continue

@@ -1,0 +1,47 @@
+"""Helpers for the protocol tests that run the apps on the simulated rig."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+
+from layerskin_exp.config import register_all, validate
+
+REPO = Path(__file__).resolve().parents[2]
+
+# Shortened study configs: a handful of trials, short holds and trajectories.
+TINY_CALIBRATION = ["positions.count=2", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05"]
+TINY_GRIP = ["trajectory.waypoints=[0.0,0.5,0.0]", "hold_s=0.1", "close.settle_s=0.1", "grip_depth=6"]
+
+
+def compose_app(config_name: str, overrides: list[str]):
+    """(DictConfig, typed config) of an app, composed as the CLI would."""
+    register_all()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        cfg = compose(config_name=config_name, overrides=overrides)
+    return cfg, validate(cfg)
+
+
+def run_cli(module: str, args: list[str], cwd: Path, **kw) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(REPO), "HYDRA_FULL_ERROR": "0"}
+    return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=240, **kw)
+
+
+def popen_cli(module: str, args: list[str], cwd: Path) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.Popen([sys.executable, "-m", module, *args], cwd=cwd, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+@pytest.fixture
+def hydra_dirs(tmp_path):
+    """Overrides that keep Hydra's run/sweep folders inside tmp_path."""
+    return [f"hydra.run.dir={tmp_path}/out", f"hydra.sweep.dir={tmp_path}/multirun"]

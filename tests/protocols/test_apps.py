@@ -1,0 +1,164 @@
+"""Both Hydra apps end to end on the simulated rig (shortened configs): the files they write,
+resume after SIGKILL, the force guard, refusal of bad configs, a basic-launcher multirun."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from hardware import build_rig
+from layerskin_exp.log import load_session
+from protocols.calibration import plan_trials, run_campaign
+from tests.protocols.conftest import TINY_CALIBRATION, TINY_GRIP, compose_app, popen_cli, run_cli
+
+LABEL_KEYS_CAL = {"protocol", "position_index", "position_mm", "kind", "repeat", "direction_rad", "z_offset_mm"}
+
+
+def _rate_hz(t_ns: np.ndarray) -> float:
+    return 1e9 / float(np.median(np.diff(t_ns)))
+
+
+def test_calibration_cli_writes_labelled_trials(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    r = run_cli("protocols.force_calibration", [*TINY_CALIBRATION, f"data_root={data}", *hydra_dirs], tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    cfg, typed = compose_app("force_calibration", [*TINY_CALIBRATION, f"data_root={data}"])
+    plan = plan_trials(typed)
+    files = sorted((data / "force_calibration").iterdir())
+    assert [f.name for f in files] == sorted(f"{t.name}.mcap" for t in plan)
+    rig_cfg = typed.sim.rig
+    for trial in plan:
+        s = load_session(data / "force_calibration" / f"{trial.name}.mcap", warn=False)
+        assert s.complete and set(s.labels) == LABEL_KEYS_CAL and s.labels == trial.labels
+        assert s.metadata["backend"] == "sim" and s.metadata["config"]["press"]["repeats"] == 1
+        assert _rate_hz(s.streams["skin"]["t_ns"]) == pytest.approx(1000 / typed.skin.frame_period_ms, rel=0.05)
+        assert _rate_hz(s.streams["wrench"]["t_ns"]) == pytest.approx(rig_cfg.ft.rate_hz, rel=0.05)
+        assert _rate_hz(s.streams["stage"]["t_ns"]) == pytest.approx(rig_cfg.platform.rate_hz, rel=0.05)
+        ev = s.streams["events"]
+        stops = [m for k, m in zip(ev["kind"], ev["message"], strict=True) if k == "stop"]
+        force = s.streams["wrench"]["force_n"]
+        if trial.kind == "press":
+            assert stops == ["target_reached"] and "contact" in ev["kind"]
+            assert force[:, 2].max() >= typed.press.target_normal_n
+        else:
+            assert stops[0] in ("shear_reached", "skin_edge", "force_limit")
+            if stops[0] == "shear_reached":
+                assert np.hypot(force[:, 0], force[:, 1]).max() >= typed.slide.shear_stop_n
+        if force[:, 2].max() > typed.safety.max_normal_force_n:  # the guard saw it and it was logged
+            assert "safety" in ev["kind"]
+
+
+def test_resume_after_sigkill_runs_each_trial_once(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05", f"data_root={data}",
+            "progress=false", *hydra_dirs]
+    folder = data / "force_calibration"
+    proc = popen_cli("protocols.force_calibration", args, tmp_path)
+    try:
+        deadline = time.monotonic() + 200
+        while len(list(folder.glob("*.mcap"))) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, "the campaign ended before it could be killed; make it longer"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    done_before = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.glob("*.mcap")}
+    assert 2 <= len(done_before) < 8
+    r = run_cli("protocols.force_calibration", args, tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    _, typed = compose_app("force_calibration", args[:-2])
+    plan = plan_trials(typed)
+    names = sorted(p.name for p in folder.iterdir())
+    assert names == sorted(f"{t.name}.mcap" for t in plan)  # each once, no .partial left
+    for name, stamp in done_before.items():  # complete trials were not run again
+        p = folder / name
+        assert (p.stat().st_ino, p.stat().st_mtime_ns) == stamp
+    for t in plan:  # the resumed run planned the same trials (directions, offsets)
+        s = load_session(folder / f"{t.name}.mcap", warn=False)
+        assert s.complete and s.labels == t.labels
+
+
+def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
+    # A fast press with a 0.1 s loop on a stiff spacer: only the per-sample guard can stop it.
+    # The stop is commanded at the first sample over the limit; from there the platform travels
+    # no further than its braking distance v^2 / (2 a) (plus one mechanical step at speed).
+    cfg, typed = compose_app("force_calibration", [
+        "positions.count=1", "press.repeats=1", "slide.repeats=0", "press.speed_mm_s=4",
+        "control_period_s=0.1", "press.target_normal_n=5.9", f"data_root={tmp_path}", "progress=false",
+        "sim.spacer.modulus=200"])
+    rig = build_rig(cfg, "platform")
+    with rig:
+        (result,) = run_campaign(typed, rig, {"config": {}, "backend": "sim"})
+    s = load_session(result.path, warn=False)
+    w, stage = s.streams["wrench"], s.streams["stage"]
+    limit, v = typed.safety.max_normal_force_n, typed.press.speed_mm_s
+    first_over = int(np.argmax(w["force_n"][:, 2] > limit))
+    assert result.stop_reason == "force_limit" and w["force_n"][first_over, 2] > limit
+    assert "safety" in s.streams["events"]["kind"]
+    p = typed.sim.rig.platform
+    z_trip = np.interp(w["t_ns"][first_over], stage["t_ns"], stage["position_mm"][:, 2])
+    braking_mm = v**2 / (2 * p.max_accel_mm_s2) + v / typed.sim.rig.mech_rate_hz + 2 * p.encoder_resolution_mm
+    assert z_trip - stage["position_mm"][:, 2].min() <= braking_mm
+
+
+@pytest.mark.parametrize("app, override, key", [
+    ("protocols.grip_depth", "grip_depth=-3", "grip_depth"),
+    ("protocols.grip_depth", "hardware=foo", "hardware"),
+    ("protocols.force_calibration", "press.speed_mm_s=-1", "press.speed_mm_s"),
+    ("protocols.force_calibration", "press.target_normal_n=7", "press.target_normal_n"),
+    ("protocols.grip_depth", "-m grip_depth=6,25", "grip_depth"),
+])
+def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
+    r = run_cli(app, [*override.split(), f"data_root={tmp_path}/data", *hydra_dirs], tmp_path)
+    assert r.returncode == 2
+    assert key in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert list(tmp_path.iterdir()) == []  # no session files, no Hydra output folders
+
+
+def test_grip_multirun_basic_launcher(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    r = run_cli("protocols.grip_depth", ["-m", "trial=0,1", *TINY_GRIP, f"data_root={data}", *hydra_dirs],
+                tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    _, typed = compose_app("grip_depth", [*TINY_GRIP])
+    for trial in (0, 1):
+        s = load_session(data / "grip_depth" / f"g6_translation_t{trial}.mcap", warn=False)
+        assert s.complete
+        assert s.labels == {"protocol": "grip_depth", "grip_depth_mm": 6.0, "motion": "translation", "trial": trial}
+        rig = typed.sim.rig
+        assert _rate_hz(s.streams["skin"]["t_ns"]) == pytest.approx(1000 / typed.skin.frame_period_ms, rel=0.05)
+        assert _rate_hz(s.streams["tcp"]["t_ns"]) == pytest.approx(rig.arm.rate_hz, rel=0.05)
+        assert _rate_hz(s.streams["gripper"]["t_ns"]) == pytest.approx(rig.gripper.rate_hz, rel=0.05)
+        frame_t = np.unique(s.streams["markers"]["t_ns"])
+        assert _rate_hz(frame_t) == pytest.approx(rig.camera.fps, rel=0.1)
+        ev = s.streams["events"]
+        phases = [m for k, m in zip(ev["kind"], ev["message"], strict=True) if k == "phase"]
+        assert phases == ["open", "approach", "close", "hold", "motion", "hold", "release"]
+        assert "contact" in ev["kind"]
+        # the arm did the trajectory: +0.5 mm along X0 and back
+        x_mm = 1000 * (s.streams["tcp"]["position_m"][:, 0] - s.streams["tcp"]["position_m"][0, 0])
+        assert x_mm.max() == pytest.approx(0.5, abs=0.01)
+        # contact: the last N frames up to the one named by the event sum above the threshold
+        contact = ev["detail"][ev["kind"].index("contact")]
+        skin = s.streams["skin"]
+        total = skin["superficial"].sum(axis=(1, 2), dtype=np.int64) + skin["deep"].sum(axis=(1, 2), dtype=np.int64)
+        n = typed.approach.consecutive_frames
+        window = (skin["seq"] > contact["frame_seq"] - n) & (skin["seq"] <= contact["frame_seq"])
+        assert window.sum() == n
+        assert (total[window] - contact["baseline_counts"] > typed.approach.threshold_counts).all()
+        assert total[skin["seq"] == contact["frame_seq"] - n] - contact["baseline_counts"] <= \
+            typed.approach.threshold_counts
+    progress = [json.loads(ln) for ln in (tmp_path / "multirun" / "sweep_progress.jsonl").read_text().splitlines()]
+    assert len(progress) == 2 and all(p["ok"] for p in progress)
+    assert "2/2" in r.stdout
+    # a second sweep finds both complete and runs nothing
+    r2 = run_cli("protocols.grip_depth", ["-m", "trial=0,1", *TINY_GRIP, f"data_root={data}",
+                                          f"hydra.sweep.dir={tmp_path}/multirun2"], tmp_path)
+    assert r2.returncode == 0 and "0 ran, 2 already complete, 0 failed" in r2.stdout
