@@ -104,7 +104,14 @@ def cop_shift_at_shear(shear_n: list[np.ndarray], dc_mm: list[np.ndarray], cfg: 
 
 
 def _height_fit(fz, dc, f_shear) -> dict:
-    """F_shear = k·(F_z·Δc) + b per axis; h = 1/k in mm."""
+    """F_shear = k·(F_z·Δc) + b per axis; h = -1/k in mm.
+
+    Sign: shear drags the load path, so the deep-layer CoP moves along the applied shear while
+    the superficial CoP (in its own taxel frame) stays with the contact; Δc = c_s - c_d therefore
+    points against the shear on the skin, and the moment balance reads F_t·h = -F_z·Δc. With that
+    sign a physical (positive) height comes out positive; a negative h flags a sign problem in
+    the force reference or the layer frames.
+    """
     out = {"n_frames": int(fz.size)}
     for i, ax in enumerate("xy"):
         u = fz * dc[:, i]
@@ -112,7 +119,7 @@ def _height_fit(fz, dc, f_shear) -> dict:
             out[f"h_{ax}_mm"], out[f"r2_{ax}"] = None, None
             continue
         fit = linregress(u, f_shear[:, i])
-        out[f"h_{ax}_mm"] = float(1.0 / fit.slope) if fit.slope != 0 else None
+        out[f"h_{ax}_mm"] = float(-1.0 / fit.slope) if fit.slope != 0 else None
         out[f"r2_{ax}"] = float(fit.rvalue ** 2)
     return out
 

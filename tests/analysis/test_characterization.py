@@ -63,7 +63,7 @@ def test_effective_heights_recover_load_dependent_h():
     fz = rng.uniform(0.5, 6.5, 5000)
     h = 1.0 + 0.6 * fz  # h grows with load
     f_shear = rng.uniform(-2, 2, (5000, 2))
-    dc = f_shear * h[:, None] / fz[:, None]  # exact moment balance
+    dc = -f_shear * h[:, None] / fz[:, None]  # exact moment balance: deep CoP moves with the shear
     res = effective_heights(fz, dc, f_shear, CFG)
     for b in res["bins"]:
         mid = 1.0 + 0.6 * (b["fz_low_n"] + b["fz_high_n"]) / 2
