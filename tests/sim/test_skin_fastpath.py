@@ -1,0 +1,119 @@
+"""The fast frame pipeline against the previous full-grid implementation (same physics).
+
+`benchmarks.skin_naive.previous_model_class()` keeps the previous vectorised pipeline verbatim
+(every frame on the full quadrature grid, one layer and one crosstalk solve at a time). Both
+models share the seed, so their gains, offsets and scan jitter are the same draws; with the
+read noise off, the pressure maps must agree to float32 round-off and the counts to the
+rounding of the last count.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks.skin_naive import previous_model_class
+from layerskin_exp.config import SkinConfig
+from layerskin_exp.sim.config import ReadoutConfig, SimConfig
+from layerskin_exp.sim.skin import SkinModel
+
+SKIN = SkinConfig()
+PERIOD_S = SKIN.frame_period_ms * 1e-3
+
+
+def _pair(kind, k_support=None, **readout):
+    sim = SimConfig(seed=5, readout=ReadoutConfig(noise_counts=0.0, **readout))
+    fast = SkinModel(sim, SKIN, kind, np.random.default_rng(5), support_stiffness_n_per_mm=k_support)
+    ref = previous_model_class()(sim, SKIN, kind, np.random.default_rng(5), support_stiffness_n_per_mm=k_support)
+    return fast, ref
+
+
+def _press(m):
+    """Approach from above, press off-centre to 2.3 mm, hold, release."""
+    out = []
+    for k in range(1400):
+        z = 0.5 - 2.8 * min(k / 500.0, 1.0) if k < 1000 else -2.3 + 0.01 * (k - 1000)
+        out.append(m.step(k * 1e-3, np.array([2.3, -4.1, z])))
+    return out
+
+
+def _slide(m):
+    """Press, then slide diagonally 8 mm (stick-slip), crossing towards the array's edge."""
+    out = [m.step(k * 1e-3, np.array([-6.0, 3.0, -2.2 * min(k / 200.0, 1.0)])) for k in range(300)]
+    for k in range(4000):
+        out.append(m.step(0.3 + k * 1e-3, np.array([-6.0 + 0.004 * k, 3.0 + 0.0022 * k, -2.2])))
+    return out
+
+
+def _rod_torsion(m):
+    """Rod across the pad, pressed through a compliant support, twisted 25 deg and back, slid."""
+    out = [m.step(k * 1e-3, np.array([0.7, -0.4, -2.3 * min(k / 300.0, 1.0)]), math.pi / 2) for k in range(400)]
+    for k in range(3000):
+        yaw = math.pi / 2 + math.radians(25.0) * math.sin(math.pi * k / 3000.0)
+        out.append(m.step(0.4 + k * 1e-3, np.array([0.7 + 0.001 * k, -0.4, -2.3]), yaw))
+    return out
+
+
+CASES = {"press": ("hemisphere", None, _press), "slide": ("hemisphere", None, _slide),
+         "rod_torsion": ("rod", 20.0, _rod_torsion)}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_pressure_maps_match_the_previous_pipeline(case):
+    kind, k_support, drive = CASES[case]
+    fast, ref = _pair(kind, k_support)
+    states = drive(fast)
+    ref_states = drive(ref)
+    for a, b in zip(states, ref_states, strict=True):  # the mechanics are shared
+        np.testing.assert_array_equal(a.force_n, b.force_n)
+    pick = states[::7]
+    for lo in range(0, len(pick), 64):
+        got = fast.pressure_maps(pick[lo:lo + 64])
+        want = ref.pressure_maps(pick[lo:lo + 64])
+        for g, w in zip(got, want, strict=True):
+            assert g.shape == w.shape == (len(pick[lo:lo + 64]), 16, 16)
+            scale = max(float(np.abs(w).max()), 1.0)
+            np.testing.assert_allclose(g, w, rtol=1e-4, atol=1e-6 * scale)
+    # the comparison covers loaded frames, not just zeros
+    assert max(float(ref.pressure_maps([s])[1].max()) for s in pick[::20]) > 50.0
+
+
+@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("crosstalk", [True, False])
+def test_frames_match_the_previous_pipeline(case, crosstalk):
+    kind, k_support, drive = CASES[case]
+    fast, ref = _pair(kind, k_support, crosstalk=crosstalk)
+    states = drive(fast)
+    pick = states[::2]  # ~ one frame per 2.36 ms scan
+    t = np.arange(len(pick)) * PERIOD_S + 1e-4
+    sizes = [1, 32, 5, 32, 32, 17, 64]  # batches as the world sends them, including singles
+    lo, got, want = 0, [], []
+    while lo < len(pick):
+        n = sizes[len(got) % len(sizes)]
+        got.append(fast.frames(pick[lo:lo + n], t[lo:lo + n]))
+        want.append(ref.frames(pick[lo:lo + n], t[lo:lo + n]))
+        lo += n
+    for layer in range(2):
+        g = np.concatenate([x[layer] for x in got]).astype(int)
+        w = np.concatenate([x[layer] for x in want]).astype(int)
+        assert g.dtype == int and g.shape == w.shape == (len(pick), 16, 16)
+        assert np.abs(g - w).max() <= 1  # only the last count's rounding may differ
+        assert np.mean(g != w) < 0.01
+        assert w.max() > 1000  # loaded frames are compared
+
+
+def test_frames_with_noise_are_deterministic_and_noise_has_its_rms():
+    sim = SimConfig(seed=2)
+    runs = []
+    for _ in range(2):
+        m = SkinModel(sim, SKIN, "hemisphere", np.random.default_rng(2))
+        idle = [m.step(k * 1e-3, np.array([0.0, 0.0, 1.0])) for k in range(600)][::2]
+        t = np.arange(len(idle)) * PERIOD_S
+        runs.append(np.concatenate([m.frames(idle[i:i + 32], t[i:i + 32])[0] for i in range(0, len(idle), 32)]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    resid = runs[0].astype(float) - runs[0].mean(axis=0)  # unloaded: offsets + noise only
+    rms = float(np.sqrt((resid**2).mean() * len(idle) / (len(idle) - 1)))
+    # rounding adds 1/12 count^2 to the configured 1.5 count rms
+    assert rms == pytest.approx(math.sqrt(sim.readout.noise_counts**2 + 1 / 12), rel=0.05)
