@@ -125,9 +125,13 @@ class PlatformControl:
         while True:
             self.clock.sleep(self.cfg.control_period_s)
             _, wrenches = self.log.drain()
-            if self.log.rig.tripped is not None and not self.safety.unloading:
+            tripped = self.log.rig.tripped
+            if tripped is not None and not self.safety.unloading:
                 self.wait_stopped()
-                return FORCE_LIMIT
+                if tripped.startswith(FORCE_LIMIT):
+                    return FORCE_LIMIT
+                self.safety.clear_trip()  # a stop condition checked per sample, not a fault
+                return tripped
             reason = stop_when(wrenches) if stop_when is not None else None
             if reason is not None:
                 self.platform.stop()
@@ -182,9 +186,30 @@ class PlatformControl:
                 self.log.event("contact", "contact", fz_n=float(fz_n.max()))
             return "target_reached" if fz_n.max() >= target_n else None
 
+        def slow_down(wrenches) -> str | None:
+            reached = check(wrenches)
+            if reached is not None:
+                return reached
+            if wrenches and max(w.force_n[2] for w in wrenches) >= min(cfg.press.slow_above_n, target_n):
+                return "loading"
+            return None
+
+        def on_target(sample) -> str | None:  # checked by the backend on every F/T sample
+            return "target_reached" if sample.force_n[2] >= target_n else None
+
         x, y = self.position_mm()[:2]
         bottom = np.array([x, y, cfg.safety.platform_min_mm[2]])
-        reason = self.move(bottom, cfg.press.speed_mm_s, check) or "depth_limit"
+        rig = self.log.rig
+        if cfg.press.stop_on_sample:
+            rig.add_guard(on_target)
+        try:
+            reason = self.move(bottom, cfg.press.speed_mm_s, slow_down)
+            if reason == "loading":
+                reason = self.move(bottom, min(cfg.press.load_speed_mm_s, cfg.press.speed_mm_s), check)
+        finally:
+            if on_target in rig.guards:
+                rig.guards.remove(on_target)
+        reason = reason or "depth_limit"
         if reason != "target_reached" or stop_reason_on_target:
             fz = None if self.log.last_wrench is None else float(self.log.last_wrench.force_n[2])
             self.log.stop(reason, fz_n=fz, tripped=self.log.rig.tripped)

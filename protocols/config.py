@@ -86,7 +86,21 @@ class PressConfig:
     repeats: int = 5
     target_normal_n: float = 5.0
     speed_mm_s: float = 2.0
+    # Above this load the press continues at load_speed_mm_s: the stack stiffens steeply as the
+    # lattice densifies, and the platform's braking distance at full speed is worth ~1 N there.
+    slow_above_n: float = 0.5
+    load_speed_mm_s: float = 0.3
+    # Stop on the F/T sample that reaches the target (a backend guard), not at the next tick.
+    stop_on_sample: bool = True
     hold_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        require(self.repeats >= 0, "press.repeats", self.repeats, "must be >= 0")
+        require(self.target_normal_n > 0, "press.target_normal_n", self.target_normal_n, "must be > 0 N")
+        require(self.speed_mm_s > 0, "press.speed_mm_s", self.speed_mm_s, "must be > 0")
+        require(self.load_speed_mm_s > 0, "press.load_speed_mm_s", self.load_speed_mm_s, "must be > 0")
+        require(self.slow_above_n >= 0, "press.slow_above_n", self.slow_above_n, "must be >= 0 N")
+        require(self.hold_s >= 0, "press.hold_s", self.hold_s, "must be >= 0 s")
 
 
 @dataclass

@@ -137,7 +137,8 @@ class TrialLog:
                 self.peak_shear_n = shear_max if self.peak_shear_n is None else max(self.peak_shear_n, shear_max)
         if rig.tripped is not None and rig.tripped is not self._noted_trip:  # whenever it happened
             self._noted_trip = rig.tripped
-            self.event("safety", rig.tripped)
+            # A limit trip is a safety event; a per-sample stop condition (press target) is not.
+            self.event("safety" if rig.tripped.startswith("force_limit") else "guard", rig.tripped)
         for dev in (rig.platform, rig.arm, rig.gripper):
             if dev is None:
                 continue

@@ -91,7 +91,7 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     # no further than its braking distance v^2 / (2 a) (plus one mechanical step at speed).
     cfg, typed = compose_app("force_calibration", [
         "positions.count=1", "press.repeats=1", "slide.repeats=0", "press.speed_mm_s=4",
-        "control_period_s=0.1", "press.target_normal_n=5.9", f"data_root={tmp_path}", "progress=false",
+        "control_period_s=0.1", "press.target_normal_n=5.9", "press.stop_on_sample=false", f"data_root={tmp_path}", "progress=false",
         "sim.spacer.modulus=200"])
     rig = build_rig(cfg, "platform")
     with rig:

@@ -63,7 +63,8 @@ def test_force_guard_stops_within_one_sample(tmp_path):
     # A coarse 0.1 s loop at 10 mm/s on a stiff 40 N/mm spring: the loop alone would overshoot by
     # 40 N; the per-sample guard must stop the platform within one F/T sample (40 N/mm x 10 um).
     k, v, ft_hz = 40.0, 10.0, 1000.0
-    cfg = _cal_cfg(tmp_path, **{"press.speed_mm_s": v, "control_period_s": 0.1, "slide.repeats": 0})
+    cfg = _cal_cfg(tmp_path, **{"press.speed_mm_s": v, "control_period_s": 0.1, "slide.repeats": 0,
+                                "press.stop_on_sample": False, "press.slow_above_n": 100.0})
     results = run_campaign(cfg, _connected(platform_rig(k_n_per_mm=k, ft_hz=ft_hz)), META)
     s = load_session(results[0].path, warn=False)
     assert results[0].stop_reason == "force_limit"
@@ -144,3 +145,17 @@ def test_grip_trial_contact_then_depth(tmp_path):
     assert g["position_mm"].min() == pytest.approx(contact["opening_mm"] - 6.0)  # the fake jaws never stall
     x_mm = 1000 * (s.streams["tcp"]["position_m"][:, 0] - 0.4)
     assert x_mm.max() == pytest.approx(1.0, abs=1e-6)
+
+
+def test_press_stops_on_the_sample_that_reaches_the_target(tmp_path):
+    # Same coarse loop and stiff spring: the press target is a per-sample stop, so the load ends
+    # within one F/T sample of the target, far below the safety limit.
+    k, v, ft_hz = 40.0, 10.0, 1000.0
+    cfg = _cal_cfg(tmp_path, **{"press.speed_mm_s": v, "control_period_s": 0.1, "slide.repeats": 0,
+                                "press.slow_above_n": 100.0, "press.target_normal_n": 4.0})
+    results = run_campaign(cfg, _connected(platform_rig(k_n_per_mm=k, ft_hz=ft_hz)), META)
+    s = load_session(results[0].path, warn=False)
+    assert results[0].stop_reason == "target_reached"
+    fz = s.streams["wrench"]["force_n"][:, 2]
+    assert 4.0 <= fz.max() <= 4.0 + k * v / ft_hz + 1e-9
+    assert "safety" not in s.streams["events"]["kind"]

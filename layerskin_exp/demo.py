@@ -1,0 +1,70 @@
+"""`make demo`: the main job on the simulated rig, end to end.
+
+1. a reduced force-calibration campaign (platform + indenter + Mini40, virtual clock),
+2. a reduced grip-depth x trajectory multirun (UR5e + Hand-E + rod + camera), in parallel with
+   Hydra's joblib launcher,
+3. the analysis report on the session files both wrote,
+then prints where everything is. Each stage is the same command a user would type, so the demo
+also shows how to run them. Re-running resumes: complete trials are not simulated again.
+
+    python -m layerskin_exp.demo [--out DIR] [--positions N] [--grip-trials N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def _run(title: str, args: list[str]) -> float:
+    cmd = [sys.executable, *args]
+    print(f"\n== {title}\n$ python {shlex.join(args)}", flush=True)
+    t0 = time.perf_counter()
+    rc = subprocess.call(cmd)
+    dt = time.perf_counter() - t0
+    if rc != 0:
+        raise SystemExit(f"demo: stage '{title}' failed with exit code {rc}; see the output above")
+    print(f"-- {title}: {dt:.1f} s", flush=True)
+    return dt
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default="demo_out", help="folder for session files and the report")
+    ap.add_argument("--positions", type=int, default=12, help="contact positions of the calibration campaign")
+    ap.add_argument("--grip-trials", type=int, default=3, help="trials per grip depth and motion")
+    ap.add_argument("--jobs", type=int, default=2, help="parallel grip trials (joblib launcher)")
+    a = ap.parse_args(argv)
+
+    out = Path(a.out).resolve()
+    data = out / "sessions"
+    report = out / "report"
+    timings = {}
+    timings["calibration"] = _run(
+        f"force-calibration campaign: {a.positions} positions x (5 presses + 4 slides)",
+        ["-m", "protocols.force_calibration", f"data_root={data}", f"positions.count={a.positions}",
+         f"hydra.run.dir={out}/hydra/force_calibration"],
+    )
+    timings["grip"] = _run(
+        f"grip-depth multirun: g = 6, 9, 12, 15 mm x translation, torsion x {a.grip_trials} trials",
+        ["-m", "protocols.grip_depth", "-m", "grip_depth=6,9,12,15", "trajectory=translation,torsion",
+         f"trial=range({a.grip_trials})", f"data_root={data}", "hydra/launcher=joblib",
+         f"hydra.launcher.n_jobs={a.jobs}", f"hydra.sweep.dir={out}/hydra/grip_depth"],
+    )
+    timings["report"] = _run(
+        "analysis report (analysis=demo preset)",
+        ["-m", "analysis.report", f"sessions={data}", f"out={report}", "analysis=demo"],
+    )
+    print("\n== done")
+    print(f"session files: {data}  (inspect one: python -m layerskin_exp.log inspect FILE)")
+    print(f"report:        {report / 'report.md'}")
+    print(f"results:       {report / 'results.json'}")
+    print("wall time:     " + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
+
+
+if __name__ == "__main__":
+    main()
