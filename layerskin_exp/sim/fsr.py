@@ -32,8 +32,7 @@ class FSRLayer:
 
     def conductance_s(self, pressure_kpa: np.ndarray) -> np.ndarray:
         """Static conductance law (siemens) for pressures (..., 16, 16), no memory."""
-        x = (np.maximum(pressure_kpa, 0.0) / self.cfg.saturation_kpa) ** self.cfg.exponent
-        return self.gain * (self.g_floor_s + self.g_sat_s * x / (1.0 + x))
+        return _conductance(pressure_kpa, self.gain, self.cfg, self.g_floor_s, self.g_sat_s)
 
     def advance(self, pressure_kpa: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
         """Run the memories over N successive frames; returns the effective pressure (N, 16, 16).
@@ -41,14 +40,62 @@ class FSRLayer:
         pressure_kpa: (N, 16, 16) at successive sampling instants; dt_s: (N,) time since the
         previous sample (the first relative to the last call).
         """
-        w, c = self.cfg.hysteresis, self.cfg.creep
-        alpha = 1.0 - np.exp(-np.maximum(dt_s, 0.0) / self.cfg.creep_s)
-        out = np.empty_like(pressure_kpa)
-        play, lag = self.play, self.lag
-        for k in range(pressure_kpa.shape[0]):
-            p = np.maximum(pressure_kpa[k], 0.0)
-            play = np.clip(play, p * (1.0 - w), p * (1.0 + w))
-            lag = lag + alpha[k] * (play - lag)
-            out[k] = (1.0 - c) * play + c * lag
-        self.play, self.lag = play, lag
-        return out
+        return advance_layers((self,), pressure_kpa[:, None], dt_s)[:, 0]
+
+
+def _conductance(pressure_kpa, gain, cfg, g_floor_s, g_sat_s):
+    """gain (G_floor + G_sat x / (1 + x)); the power law only where the pressure is positive."""
+    pos = pressure_kpa > 0.0
+    x = (pressure_kpa[pos] / cfg.saturation_kpa) ** cfg.exponent
+    sat = np.zeros(pressure_kpa.shape)
+    sat[pos] = g_sat_s * x / (1.0 + x)
+    sat += g_floor_s
+    return gain * sat
+
+
+def conductance_layers(layers, pressure_kpa: np.ndarray) -> np.ndarray:
+    """Conductance (siemens) of several layers at once: pressure (N, L, 16, 16), one FSRLayer per L."""
+    gain = np.stack([layer.gain for layer in layers])
+    first = layers[0]
+    return _conductance(pressure_kpa, gain, first.cfg, first.g_floor_s, first.g_sat_s)
+
+
+_CHUNK = 256  # frames per closed-form creep block (keeps the (chunk, chunk) matrix small)
+
+
+def advance_layers(layers, pressure_kpa: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
+    """Hysteresis and creep of several layers (same FSRConfig) over N successive frames at once.
+
+    pressure_kpa: (N, L, 16, 16), one FSRLayer per L; dt_s: (N,). Returns the effective
+    pressure (N, L, 16, 16) and updates each layer's memories. The play operator runs frame by
+    frame (two ufuncs per frame for all layers); the creep lag, a linear first-order filter, is
+    its closed form lag_k = e^{-c_k} lag_0 + sum_{j<=k} alpha_j e^{-(c_k - c_j)} play_j with
+    c = cumsum(dt) / tau, one small matrix product per block.
+    """
+    cfg = layers[0].cfg
+    w, c = cfg.hysteresis, cfg.creep
+    p = np.maximum(pressure_kpa, 0.0)
+    lo, hi = p * (1.0 - w), p * (1.0 + w)
+    plays = np.empty_like(p)
+    lags = np.empty_like(p)
+    play = np.stack([layer.play for layer in layers])
+    lag = np.stack([layer.lag for layer in layers])
+    dt = np.maximum(np.asarray(dt_s, dtype=float), 0.0) / cfg.creep_s
+    alpha = 1.0 - np.exp(-dt)
+    for k in range(p.shape[0]):
+        np.maximum(play, lo[k], out=plays[k])
+        play = np.minimum(plays[k], hi[k], out=plays[k])
+    for a in range(0, p.shape[0], _CHUNK):
+        b = min(a + _CHUNK, p.shape[0])
+        cum = np.cumsum(dt[a:b])
+        gap = cum[:, None] - cum[None, :]
+        mat = np.where(gap >= 0.0, alpha[a:b][None, :] * np.exp(-np.maximum(gap, 0.0)), 0.0)
+        mat = np.tril(mat)
+        blk = (mat @ plays[a:b].reshape(b - a, -1)).reshape(plays[a:b].shape)
+        blk += np.exp(-cum)[(slice(None),) + (None,) * lag.ndim] * lag
+        lags[a:b] = blk
+        lag = blk[-1]
+    if p.shape[0]:
+        for n, layer in enumerate(layers):
+            layer.play, layer.lag = plays[-1, n].copy(), lags[-1, n].copy()
+    return (1.0 - c) * plays + c * lags

@@ -33,11 +33,14 @@ from layerskin_exp.config import SkinConfig
 from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.contact import ContactTables, build_tables
 from layerskin_exp.sim.friction import StickSlip
-from layerskin_exp.sim.fsr import FSRLayer
+from layerskin_exp.sim.fsr import FSRLayer, advance_layers, conductance_layers
 from layerskin_exp.sim.readout import MatrixReadout
 from layerskin_exp.sim.spacer import SpacerLaw, hex_cell_pattern
 
 INDENTERS = ("hemisphere", "rod")
+# The hemisphere's fields are evaluated in a window around the contact: outside it each layer's
+# profile (times the deep layer's largest tilt factor) is below this fraction of its peak.
+WINDOW_EPS = 1e-8
 
 
 @dataclass
@@ -149,6 +152,11 @@ class SkinModel:
         self._nq = sim.contact.quad_points
         qx, qy = np.meshgrid(self._q, self._q)  # [y, x]
         self._lattice32 = hex_cell_pattern(qx, qy, sim.spacer.cell, sim.spacer.lattice_contrast).astype(np.float32)
+        self._q32 = self._q.astype(np.float32)
+        self._centres = centres
+        self._half_electrode = 0.5 * skin.electrode_mm
+        # (n, n*q) Gauss weights of each taxel's block of quadrature points (taxel means as matmuls)
+        self._taxel_weights = np.kron(np.eye(n), self._qw[None, :]).astype(np.float32)
         self._build_lookups()
         # --- transduction and readout
         self.fsr = (FSRLayer(sim.fsr, (n, n), rng), FSRLayer(sim.fsr, (n, n), rng))
@@ -249,7 +257,9 @@ class SkinModel:
     def _build_lookups(self) -> None:
         """Resample the profile tables for nearest-bin lookups: in r^2 (hemisphere, no sqrt per
         point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
-        far below the profile's own scale (float32, flattened with one guard column of zeros)."""
+        far below the profile's own scale. Stored as (value, next row - value) float32 pairs in
+        one complex64 array (one gather per point for both indentation rows), flattened with one
+        guard column of zeros. Also the reach of each pair of rows (`_window_reach`)."""
         tab = self.tab
         if self.kind == "hemisphere":
             r2_max = float(tab.dist_mm[-1]) ** 2
@@ -264,31 +274,55 @@ class SkinModel:
             self._lk_origin, self._lk_scale = float(tab.dist_mm[0]), 1.0 / step
         self._lk_n = len(grid) + 1
 
-        def resample(table):
-            out = np.zeros((table.shape[0], self._lk_n), dtype=np.float32)
+        def pairs(table):
+            fine = np.zeros((table.shape[0], self._lk_n), dtype=np.float32)
             for k in range(table.shape[0]):
-                out[k, :-1] = np.interp(at, tab.dist_mm, table[k])
-            return out.ravel()
+                fine[k, :-1] = np.interp(at, tab.dist_mm, table[k])
+            out = np.empty((table.shape[0] - 1, self._lk_n, 2), dtype=np.float32)
+            out[..., 0] = fine[:-1]
+            out[..., 1] = fine[1:] - fine[:-1]
+            return out.view(np.complex64).ravel()
 
-        self._lk_sup = resample(tab.superficial_kpa)
-        self._lk_deep = resample(tab.deep_kpa)
+        self._lk_sup = pairs(tab.superficial_kpa)
+        self._lk_deep = pairs(tab.deep_kpa)
+        # Per pair of rows (k, k+1): the larger magnitude on the coarse grid, and (hemisphere) the
+        # radius beyond which the superficial profile stays below WINDOW_EPS of its peak.
+        self._pair_max_sup = np.maximum(np.abs(tab.superficial_kpa[:-1]), np.abs(tab.superficial_kpa[1:]))
+        self._pair_max_deep = np.maximum(np.abs(tab.deep_kpa[:-1]), np.abs(tab.deep_kpa[1:]))
+        self._reach_sup = self._window_reach(self._pair_max_sup, np.ones(1))
+
+    def _window_reach(self, pair_max: np.ndarray, factor: np.ndarray) -> np.ndarray:
+        """Radius (mm) beyond which pair_max (M, n_dist) x factor (M or 1, n_dist) stays below
+        WINDOW_EPS of the row's peak; the coarse grid's next-but-one node bounds the fine table's
+        interpolation and the nearest-bin rounding."""
+        dist = self.tab.dist_mm
+        bound = pair_max * factor
+        thr = WINDOW_EPS * pair_max.max(axis=1, keepdims=True)
+        above = bound > thr
+        last = len(dist) - 1 - np.argmax(above[:, ::-1], axis=1)
+        last = np.where(above.any(axis=1), last, -2)
+        return dist[np.clip(last + 2, 0, len(dist) - 1)]
 
     def _delta_index(self, delta: np.ndarray):
         x = np.clip(delta / self.tab.d_delta, 0.0, len(self.tab.delta_mm) - 1.000001)
         i = x.astype(np.int64)
         return i, (x - i)
 
-    def _lookup_profile(self, flat: np.ndarray, i: np.ndarray, t: np.ndarray, coord: np.ndarray) -> np.ndarray:
-        """Profile value at coord (N, ...) (r^2 or signed distance) for frames with delta row i + t."""
+    def _lookup_pairs(self, flat: np.ndarray, i: np.ndarray, t32: np.ndarray, coord: np.ndarray) -> np.ndarray:
+        """Profile (float32) at coord (N, a, b), r^2 or signed distance, overwritten, for frames
+        with indentation row i + t: nearest bin, linear between the two rows."""
         n = self._lk_n
-        j = ((coord - self._lk_origin) * self._lk_scale + 0.5).astype(np.int64)
-        np.clip(j, 0, n - 1, out=j)
-        np.putmask(j, j >= n - 1, n - 1)  # guard column: zero outside the table
-        shape = (-1,) + (1,) * (coord.ndim - 1)
-        idx = j + (i * n).reshape(shape)
-        tt = t.astype(np.float32).reshape(shape)
-        lo = flat.take(idx)
-        return lo + (flat.take(idx + n) - lo) * tt
+        if self._lk_origin != 0.0:
+            coord -= self._lk_origin
+        coord *= self._lk_scale
+        coord += 0.5
+        j = coord.astype(np.int32)
+        np.clip(j, 0, n - 1, out=j)  # guard column: zero outside the table
+        j += (i * n).astype(np.int32)[:, None, None]
+        pair = flat.take(j)
+        val = pair.imag * t32[:, None, None]
+        val += pair.real
+        return val
 
     def _tilt(self, i: np.ndarray, t: np.ndarray, shift: np.ndarray):
         """Exponential-tilt rate and log-normaliser giving a deep-CoP shift (mm) at each frame."""
@@ -305,79 +339,152 @@ class SkinModel:
 
         return bilerp(tab.tilt_gamma), bilerp(tab.tilt_logz)
 
-    def _taxel_mean(self, field: np.ndarray) -> np.ndarray:
-        n, q = self.skin.n_taxels, self._nq
-        f = field.reshape(field.shape[0], n, q, n, q)
-        w = self._qw.astype(np.float32)
-        return np.einsum("aiqjr,q,r->aij", f, w, w, optimize=True).astype(float)
+    def _window(self, centre: np.ndarray, reach: np.ndarray):
+        """Taxel windows (start_y, start_x) (M,), common width, and which frames have one: every
+        taxel whose electrode comes within `reach` (M,) of `centre` (M, 2), square, inside the
+        array (shifted inward at the edges; frames whose reach misses the array have none)."""
+        n, pitch = self.skin.n_taxels, self.skin.pitch_mm
+        x0 = self._centres[0]
+        lo = np.ceil((centre - reach[:, None] - self._half_electrode - x0) / pitch)
+        hi = np.floor((centre + reach[:, None] + self._half_electrode - x0) / pitch)
+        lo = np.clip(lo, 0, n).astype(np.int64)
+        hi = np.clip(hi, -1, n - 1).astype(np.int64)
+        has = np.all(hi >= lo, axis=1)
+        width = int((hi - lo + 1)[has].max()) if has.any() else 0
+        start = np.minimum(lo, n - width)
+        return start[:, 1], start[:, 0], width, has
 
-    def pressure_fields(self, batch: StateBatch) -> tuple[np.ndarray, np.ndarray]:
-        """Pressure (kPa, float32) at the quadrature points (N, n*q, n*q) of both layers, [y, x]."""
-        delta = batch.indentation_mm
+    def _grid_axes(self, sy: np.ndarray, sx: np.ndarray, width: int):
+        """Quadrature rows/cols (M, width*q) of the windows and their coordinates (float32)."""
+        ar = np.arange(width * self._nq)
+        rows = (sy * self._nq)[:, None] + ar
+        cols = (sx * self._nq)[:, None] + ar
+        return rows, cols, self._q32[rows], self._q32[cols]
+
+    def _window_fields(self, batch: StateBatch):
+        """Pressure (kPa, float32) at the quadrature points of each layer inside a window around
+        its contact. Returns per layer (frames (M,), start_y (M,), start_x (M,), width in taxels,
+        field (M, width*q, width*q) [y, x]); outside the window and for unloaded frames it is
+        zero (or, for the hemisphere, below WINDOW_EPS of the profile's peak)."""
         fz = batch.force_n[:, 2]
-        ft = batch.force_n[:, :2]
-        a = batch.contact_xy_mm
-        cd = a + batch.surface_shift_mm  # contact in the deep frame
-        q = self._q.astype(np.float32)
+        live = np.flatnonzero(fz > 0)
+        n = self.skin.n_taxels
+        empty = (live[:0], live[:0], live[:0], 0, np.zeros((0, 0, 0), np.float32))
+        if len(live) == 0:
+            return empty, empty
+        b = StateBatch(**{k: v[live] for k, v in vars(batch).items()})
+        delta, fz, ft = b.indentation_mm, b.force_n[:, 2], b.force_n[:, :2]
+        a = b.contact_xy_mm
+        cd = a + b.surface_shift_mm  # contact in the deep frame
         h_eff = self.stack_height_mm(delta)
         ft_mag = np.hypot(ft[:, 0], ft[:, 1])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            shift = np.where(fz > 0, ft_mag * h_eff / fz, 0.0)  # moment balance: F_t H = F_z shift
+        shift = ft_mag * h_eff / fz  # moment balance: F_t H = F_z shift
         i, t = self._delta_index(delta)
+        t32 = t.astype(np.float32)
         gamma, logz = self._tilt(i, t, shift)
         f32 = np.float32
-        dxs = q[None, :] - a[:, 0:1].astype(f32)  # superficial-frame offsets (N, nq)
-        dys = q[None, :] - a[:, 1:2].astype(f32)
-        dxd = q[None, :] - cd[:, 0:1].astype(f32)  # deep-frame offsets
-        dyd = q[None, :] - cd[:, 1:2].astype(f32)
-        if self.kind == "hemisphere":
-            sup = self._lookup_profile(self._lk_sup, i, t, dxs[:, None, :] ** 2 + dys[:, :, None] ** 2)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                nrm = np.where(ft_mag[:, None] > 0, ft / ft_mag[:, None], 0.0).astype(f32)
-            g = (gamma[:, None] * nrm).astype(f32)  # tilt along the shear direction
-            tilt = np.exp((g[:, 0, None] * dxd - 0.5 * logz[:, None].astype(f32))[:, None, :]
-                          + (g[:, 1, None] * dyd - 0.5 * logz[:, None].astype(f32))[:, :, None])
-            deep = self._lookup_profile(self._lk_deep, i, t, dxd[:, None, :] ** 2 + dyd[:, :, None] ** 2) * tilt
-        else:
-            sup, deep = self._rod_fields(batch, i, t, gamma, logz, h_eff, dxs, dys, dxd, dyd)
-        live = (fz > 0).astype(f32)[:, None, None]
-        return sup * live, deep * self._lattice32[None] * live
+        if self.kind == "rod":
+            full = (np.zeros(len(live), np.int64),) * 2
+            rows, cols, qy, qx = self._grid_axes(*full, n)
+            sup, deep = self._rod_fields(b, i, t32, gamma, logz, h_eff, qx - a[:, 0:1].astype(f32),
+                                         qy - a[:, 1:2].astype(f32), qx - cd[:, 0:1].astype(f32),
+                                         qy - cd[:, 1:2].astype(f32))
+            return (live, *full, n, sup), (live, *full, n, deep * self._lattice32[None])
+        # superficial: radial profile around the contact, in the superficial frame
+        sy, sx, width, has = self._window(a, self._reach_sup[i])
+        k = np.flatnonzero(has)
+        rows, cols, qy, qx = self._grid_axes(sy[k], sx[k], width)
+        dx = qx - a[k, 0:1].astype(f32)
+        dy = qy - a[k, 1:2].astype(f32)
+        r2 = (dx * dx)[:, None, :] + (dy * dy)[:, :, None]
+        sup = (live[k], sy[k], sx[k], width, self._lookup_pairs(self._lk_sup, i[k], t32[k], r2))
+        # deep: spread profile tilted along the shear, times the lattice pattern; its window
+        # bounds the profile times the largest tilt factor exp(|gamma| r - logz)
+        tilt_max = np.exp(np.abs(gamma)[:, None] * self.tab.dist_mm[None, :] - logz[:, None])
+        sy, sx, width, has = self._window(cd, self._window_reach(self._pair_max_deep[i], tilt_max))
+        k = np.flatnonzero(has)
+        rows, cols, qy, qx = self._grid_axes(sy[k], sx[k], width)
+        dx = qx - cd[k, 0:1].astype(f32)
+        dy = qy - cd[k, 1:2].astype(f32)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            nrm = np.where(ft_mag[k, None] > 0, ft[k] / ft_mag[k, None], 0.0).astype(f32)
+        g = (gamma[k, None] * nrm).astype(f32)  # tilt along the shear direction
+        half_logz = 0.5 * logz[k, None].astype(f32)
+        ex = np.exp(g[:, 0, None] * dx - half_logz)
+        ey = np.exp(g[:, 1, None] * dy - half_logz)
+        field = self._lookup_pairs(self._lk_deep, i[k], t32[k], (dx * dx)[:, None, :] + (dy * dy)[:, :, None])
+        field *= ey[:, :, None] * ex[:, None, :]
+        field *= self._lattice32[rows[:, :, None], cols[:, None, :]]
+        return sup, (live[k], sy[k], sx[k], width, field)
 
-    def _rod_fields(self, batch, i, t, gamma, logz, h_eff, dxs, dys, dxd, dyd):
+    def _rod_fields(self, b, i, t32, gamma, logz, h_eff, dxs, dys, dxd, dyd):
+        """Rod line load on the full grid (live frames only), both layers [y, x], float32."""
         f32 = np.float32
-        yaw = batch.indenter_yaw_rad
-        yaw_s = yaw - batch.surface_rotation_rad  # rod axis in the superficial frame
-        ps = (-np.sin(yaw_s)).astype(f32)[:, None, None] * dxs[:, None, :] + np.cos(yaw_s).astype(f32)[:, None, None] * dys[:, :, None]
-        sup = self._lookup_profile(self._lk_sup, i, t, ps)
-        fz = batch.force_n[:, 2]
-        cd = batch.contact_xy_mm + batch.surface_shift_mm
+        yaw = b.indenter_yaw_rad
+        yaw_s = yaw - b.surface_rotation_rad  # rod axis in the superficial frame
+        ps = ((-np.sin(yaw_s)).astype(f32)[:, None] * dxs)[:, None, :] + (np.cos(yaw_s).astype(f32)[:, None] * dys)[:, :, None]
+        sup = self._lookup_pairs(self._lk_sup, i, t32, ps)
+        fz = b.force_n[:, 2]
+        cd = b.contact_xy_mm + b.surface_shift_mm
         chords = np.array([_chord(float(c[0]), float(c[1]), float(w), self._half) for c, w in zip(cd, yaw, strict=True)])
         length = np.maximum(chords[:, 1] - chords[:, 0], 1e-9)
         line_q = fz / length  # N/mm
         i_s = (chords[:, 1] ** 3 - chords[:, 0] ** 3) / 3.0
         with np.errstate(invalid="ignore", divide="ignore"):
             # torsion: traction T s / I_s across the line; its moment shifts the deep line by T H s / (I_s q)
-            twist = np.where(fz > 0, np.arctan(batch.torque_z_nmm * h_eff / (i_s * line_q)), 0.0)
+            twist = np.arctan(b.torque_z_nmm * h_eff / (i_s * line_q))
         yaw_d = yaw + twist
-        ex, ey = np.cos(yaw_d).astype(f32), np.sin(yaw_d).astype(f32)
-        along = ex[:, None, None] * dxd[:, None, :] + ey[:, None, None] * dyd[:, :, None]
-        perp = -ey[:, None, None] * dxd[:, None, :] + ex[:, None, None] * dyd[:, :, None]
-        ft = batch.force_n[:, :2]
-        f_perp = -ft[:, 0] * ey + ft[:, 1] * ex
-        f_along = ft[:, 0] * ex + ft[:, 1] * ey
-        g = (np.sign(f_perp) * gamma).astype(f32)[:, None, None]
-        deep = self._lookup_profile(self._lk_deep, i, t, perp) * np.exp(g * perp - logz.astype(f32)[:, None, None])
+        ex, ey = np.cos(yaw_d).astype(f32)[:, None], np.sin(yaw_d).astype(f32)[:, None]
+        px, py = -ey * dxd, ex * dyd  # perp = px + py, along = ax + ay
+        ax, ay = ex * dxd, ey * dyd
+        ft = b.force_n[:, :2]
+        f_perp = -ft[:, 0] * ey[:, 0] + ft[:, 1] * ex[:, 0]
+        f_along = ft[:, 0] * ex[:, 0] + ft[:, 1] * ey[:, 0]
+        g = (np.sign(f_perp) * gamma).astype(f32)[:, None]
+        deep = self._lookup_pairs(self._lk_deep, i, t32, px[:, None, :] + py[:, :, None])
+        tx = np.exp(g * px - logz.astype(f32)[:, None])
+        ty = np.exp(g * py)
+        deep *= ty[:, :, None] * tx[:, None, :]
         # along-axis shear: its moment is balanced by a linear load gradient along the line
         mid = 0.5 * (chords[:, 0] + chords[:, 1])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            beta = np.where(fz > 0, f_along * h_eff / (line_q * length**3 / 12.0), 0.0)
-        ramp = 1.0 + beta.astype(f32)[:, None, None] * (along - mid.astype(f32)[:, None, None])
-        return sup, deep * np.maximum(ramp, 0.0)
+        beta = (f_along * h_eff / (line_q * length**3 / 12.0)).astype(f32)[:, None]
+        ramp = (1.0 + beta * (ax - mid.astype(f32)[:, None]))[:, None, :] + (beta * ay)[:, :, None]
+        np.maximum(ramp, 0.0, out=ramp)
+        deep *= ramp
+        return sup, deep
+
+    def _taxel_sums(self, n: int, layer) -> np.ndarray:
+        """(n, 16, 16) float64 taxel means of one layer's windowed fields (zeros elsewhere)."""
+        frames_idx, sy, sx, width, field = layer
+        out = np.zeros((n, self.skin.n_taxels, self.skin.n_taxels))
+        if len(frames_idx) == 0:
+            return out
+        wq = width * self._nq
+        wm = self._taxel_weights[:width, :wq]  # (width, wq): block rows of the Gauss weights
+        # stacked small products (one large GEMM would wake OpenBLAS's thread pool)
+        tax = np.matmul(wm, np.matmul(field, wm.T))  # (M, width, width)
+        ar = np.arange(width)
+        out[frames_idx[:, None, None], (sy[:, None] + ar)[:, :, None], (sx[:, None] + ar)[:, None, :]] = tax
+        return out
+
+    def pressure_fields(self, batch: StateBatch) -> tuple[np.ndarray, np.ndarray]:
+        """Pressure (kPa, float32) at the quadrature points (N, n*q, n*q) of both layers, [y, x]."""
+        n_all = len(batch.t_s)
+        nq = self.skin.n_taxels * self._nq
+        out = []
+        for frames_idx, sy, sx, width, field in self._window_fields(batch):
+            full = np.zeros((n_all, nq, nq), np.float32)
+            ar = np.arange(width * self._nq)
+            rows = (sy * self._nq)[:, None] + ar
+            cols = (sx * self._nq)[:, None] + ar
+            full[frames_idx[:, None, None], rows[:, :, None], cols[:, None, :]] = field
+            out.append(full)
+        return out[0], out[1]
 
     def pressure_maps(self, states: list[MechState]) -> tuple[np.ndarray, np.ndarray]:
         """(N, 16, 16) mean pressure (kPa) over each taxel's electrode: superficial, deep."""
-        sup, deep = self.pressure_fields(stack_states(states))
-        return self._taxel_mean(sup), self._taxel_mean(deep)
+        sup, deep = self._window_fields(stack_states(states))
+        return self._taxel_sums(len(states), sup), self._taxel_sums(len(states), deep)
 
     # ------------------------------------------------------------------ frames
     def _row_times(self, t_s: np.ndarray) -> np.ndarray:
@@ -396,6 +503,7 @@ class SkinModel:
         t_s = np.asarray(t_s, dtype=float).reshape(-1)
         if len(states) != len(t_s):
             raise ValueError(f"frames: {len(states)} states for {len(t_s)} frame times; pass one state per frame")
+        n = self.skin.n_taxels
         sup, deep = self.pressure_maps(states)
         maps = np.stack([sup, deep], axis=1)  # (N, 2, n, n)
         prev_maps = np.concatenate([maps[:1] if self._last_maps is None else self._last_maps[None], maps[:-1]])
@@ -407,13 +515,10 @@ class SkinModel:
         sampled = maps * (1 - w_prev) + prev_maps * w_prev  # each row at its own instant
         self._last_maps, self._last_t = maps[-1], float(t_s[-1])
         dt = np.diff(np.concatenate([[prev_t[0]], t_s]))
-        counts = []
-        for layer in range(2):
-            eff = self.fsr[layer].advance(sampled[:, layer], dt)
-            g = self.fsr[layer].conductance_s(eff)
-            c = self.readout.counts(self.readout.column_volts(g)) + self.baseline_counts[layer]
-            counts.append(c)
-        out = np.stack(counts, axis=0)
+        eff = advance_layers(self.fsr, sampled, dt)  # both layers at once (N, 2, n, n)
+        g = conductance_layers(self.fsr, eff)
+        volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
+        out = (self.readout.counts(volts) + self.baseline_counts[None]).transpose(1, 0, 2, 3)  # (2, N, n, n)
         noise = self.sim.readout.noise_counts
         if noise > 0:
             out = out + self.rng.normal(0.0, noise, size=out.shape)
