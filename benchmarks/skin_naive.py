@@ -6,13 +6,19 @@ plain Python (scalar table interpolation, tilt, lattice factor), then the FSR me
 taxel, and the passive matrix solved as a full 32-node system once per driven row. Hemisphere
 only (the rig's press/slide benchmark). Its noise draws differ from the vectorised path.
 
-`run()` times both on a press-and-slide and returns the per-frame costs.
+`previous_model_class()` is the previous vectorised pipeline (full quadrature grid per frame),
+kept as the reference for the fast path's equivalence tests and as the "before" figure.
+
+`run()` times the fast pipeline against the previous one on a hemisphere press-and-slide and a
+rod press-and-twist (frames in batches of 32, as the world sends them), the tracemalloc peak of
+producing 60 s of frames, and the naive per-taxel pipeline on a few frames.
 """
 
 from __future__ import annotations
 
 import math
 import time
+import tracemalloc
 
 import numpy as np
 
@@ -365,36 +371,78 @@ def _press_and_slide(model, n_steps=1000):
     return states
 
 
+def _rod_twist(model, n_steps=1000):
+    """Rod across the pad pressed through the gripper's series compliance, then twisted 25 deg."""
+    states = []
+    for k in range(n_steps):
+        z = -2.3 * min(k / 300.0, 1.0)
+        yaw = math.pi / 2 + math.radians(25.0) * max(k - 300, 0) / 700.0
+        states.append(model.step(k * 1e-3, np.array([0.5, 0.0, z]), yaw))
+    return states
+
+
+def _frame_cost_us(model, states, repeats=3):
+    """Best-of-repeats wall time per frame pair, ~424 frames per simulated second, batches of 32."""
+    picked = states[::2][:424]
+    t = np.array([s.t_s for s in picked])
+    best = math.inf
+    for r in range(repeats):
+        t0 = time.perf_counter()
+        for lo in range(0, len(picked), 32):  # batches as the world sends them
+            model.frames(picked[lo:lo + 32], t[lo:lo + 32] + r * 10.0)
+        best = min(best, (time.perf_counter() - t0) / len(picked) * 1e6)
+    return best
+
+
+def _trial_peak_mb(model, states, seconds=60.0):
+    """tracemalloc peak (MB) while producing `seconds` of frames (424 Hz, batches of 32), kept."""
+    picked = states[::2][:424]
+    n = int(seconds * 424)
+    kept = []
+    tracemalloc.start()
+    for lo in range(0, n, 32):
+        idx = np.arange(lo, min(lo + 32, n))
+        kept.append(model.frames([picked[i % len(picked)] for i in idx], idx * 2.36e-3 + 100.0))
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak / 1e6
+
+
 def run() -> dict:
     from layerskin_exp.config import SkinConfig
     from layerskin_exp.sim.config import SimConfig
     from layerskin_exp.sim.skin import SkinModel
 
     sim, skin = SimConfig(), SkinConfig()
-    fast = SkinModel(sim, skin, "hemisphere", np.random.default_rng(0))
-    t0 = time.perf_counter()
-    states = _press_and_slide(fast)
-    step_us = (time.perf_counter() - t0) / len(states) * 1e6
-    frame_idx = np.arange(0, len(states), 2)[:424]  # ~424 frames per simulated second
-    picked = [states[i] for i in frame_idx]
-    t_frames = np.array([s.t_s for s in picked])
-    t0 = time.perf_counter()
-    for lo in range(0, len(picked), 32):  # batches as the world sends them
-        fast.frames(picked[lo:lo + 32], t_frames[lo:lo + 32])
-    frame_us = (time.perf_counter() - t0) / len(picked) * 1e6
-    slow = SkinModel(sim, skin, "hemisphere", np.random.default_rng(0))
-    _press_and_slide(slow)
-    few = picked[300:306]
-    t0 = time.perf_counter()
-    naive_frames(slow, few, t_frames[300:306])
-    naive_us = (time.perf_counter() - t0) / len(few) * 1e6
-    return {
-        "step_us": step_us,
-        "frames_us_per_frame_pair": frame_us,
-        "baseline_naive_us_per_frame_pair": naive_us,
-        "speedup_vs_naive": naive_us / frame_us,
-        "sim_seconds_per_wall_second": 1.0 / (1000 * step_us * 1e-6 + 424 * frame_us * 1e-6),
-    }
+    previous = previous_model_class()
+    out = {}
+    for kind, drive in (("hemisphere", _press_and_slide), ("rod", _rod_twist)):
+        fast = SkinModel(sim, skin, kind, np.random.default_rng(0))
+        t0 = time.perf_counter()
+        states = drive(fast)
+        step_us = (time.perf_counter() - t0) / len(states) * 1e6
+        ref = previous(sim, skin, kind, np.random.default_rng(0))
+        frame_us = _frame_cost_us(fast, states)
+        prev_us = _frame_cost_us(ref, states)
+        out[f"{kind}_step_us"] = step_us
+        out[f"{kind}_frames_us_per_frame_pair"] = frame_us
+        out[f"{kind}_baseline_previous_us_per_frame_pair"] = prev_us
+        out[f"{kind}_speedup_vs_previous"] = prev_us / frame_us
+        # one simulated second: ~1000 mechanics steps and ~424 frame pairs
+        out[f"{kind}_x_realtime"] = 1.0 / (1000 * step_us * 1e-6 + 424 * frame_us * 1e-6)
+        out[f"{kind}_baseline_previous_x_realtime"] = 1.0 / (1000 * step_us * 1e-6 + 424 * prev_us * 1e-6)
+        if kind == "hemisphere":
+            out["frames_60s_peak_mb"] = _trial_peak_mb(SkinModel(sim, skin, kind, np.random.default_rng(0)), states)
+            out["baseline_previous_frames_60s_peak_mb"] = _trial_peak_mb(
+                previous(sim, skin, kind, np.random.default_rng(0)), states)
+            slow = SkinModel(sim, skin, kind, np.random.default_rng(0))
+            few = _press_and_slide(slow)[::2][300:306]
+            t0 = time.perf_counter()
+            naive_frames(slow, few, np.array([s.t_s for s in few]))
+            naive_us = (time.perf_counter() - t0) / len(few) * 1e6
+            out["baseline_naive_us_per_frame_pair"] = naive_us
+            out["speedup_vs_naive"] = naive_us / frame_us
+    return out
 
 
 if __name__ == "__main__":

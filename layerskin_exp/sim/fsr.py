@@ -61,6 +61,15 @@ def conductance_layers(layers, pressure_kpa: np.ndarray) -> np.ndarray:
 
 
 _CHUNK = 256  # frames per closed-form creep block (keeps the (chunk, chunk) matrix small)
+_GEMM_SERIAL = 262144  # m*n*k up to which OpenBLAS stays on one thread (threads stall on a busy host)
+
+
+def _product(mat: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """mat (n, n) @ x (n, m) as column blocks small enough for single-threaded GEMMs."""
+    cols = max(_GEMM_SERIAL // max(mat.shape[0] * mat.shape[1], 1), 1)
+    if x.shape[1] <= cols:
+        return mat @ x
+    return np.concatenate([mat @ x[:, c:c + cols] for c in range(0, x.shape[1], cols)], axis=1)
 
 
 def advance_layers(layers, pressure_kpa: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
@@ -82,16 +91,16 @@ def advance_layers(layers, pressure_kpa: np.ndarray, dt_s: np.ndarray) -> np.nda
     lag = np.stack([layer.lag for layer in layers])
     dt = np.maximum(np.asarray(dt_s, dtype=float), 0.0) / cfg.creep_s
     alpha = 1.0 - np.exp(-dt)
-    for k in range(p.shape[0]):
-        np.maximum(play, lo[k], out=plays[k])
-        play = np.minimum(plays[k], hi[k], out=plays[k])
+    for lo_k, hi_k, out_k in zip(lo, hi, plays, strict=True):  # views: no indexing per frame
+        np.maximum(play, lo_k, out=out_k)
+        play = np.minimum(out_k, hi_k, out=out_k)
     for a in range(0, p.shape[0], _CHUNK):
         b = min(a + _CHUNK, p.shape[0])
         cum = np.cumsum(dt[a:b])
         gap = cum[:, None] - cum[None, :]
         mat = np.where(gap >= 0.0, alpha[a:b][None, :] * np.exp(-np.maximum(gap, 0.0)), 0.0)
         mat = np.tril(mat)
-        blk = (mat @ plays[a:b].reshape(b - a, -1)).reshape(plays[a:b].shape)
+        blk = _product(mat, plays[a:b].reshape(b - a, -1)).reshape(plays[a:b].shape)
         blk += np.exp(-cum)[(slice(None),) + (None,) * lag.ndim] * lag
         lags[a:b] = blk
         lag = blk[-1]

@@ -414,7 +414,8 @@ class SkinModel:
         ey = np.exp(g[:, 1, None] * dy - half_logz)
         field = self._lookup_pairs(self._lk_deep, i[k], t32[k], (dx * dx)[:, None, :] + (dy * dy)[:, :, None])
         field *= ey[:, :, None] * ex[:, None, :]
-        field *= self._lattice32[rows[:, :, None], cols[:, None, :]]
+        blocks = np.lib.stride_tricks.sliding_window_view(self._lattice32, (width * self._nq,) * 2)
+        field *= blocks[sy[k] * self._nq, sx[k] * self._nq]  # the lattice pattern under each window
         return sup, (live[k], sy[k], sx[k], width, field)
 
     def _rod_fields(self, b, i, t32, gamma, logz, h_eff, dxs, dys, dxd, dyd):
