@@ -169,7 +169,7 @@ def test_reader_falls_back_to_protobuf_when_layout_differs(tmp_path):
             msg = RawImage(
                 width=16, height=16, encoding="mono16", step=32, data=arr.tobytes(), frame_id="skin"
             )
-            w._mcap.add_message(channel, f1.host_t_ns, msg.SerializeToString(), f1.device_t_ns, 1)
+            w._add(channel, f1.host_t_ns, f1.device_t_ns, 1, msg.SerializeToString())
     skin = load_session(path).streams["skin"]
     np.testing.assert_array_equal(skin["superficial"], np.stack([f0.superficial, f1.superficial]))
     np.testing.assert_array_equal(skin["deep"], np.stack([f0.deep, f1.deep]))
