@@ -138,6 +138,16 @@ SKIN_DATA_BYTES = 2 * _PIXELS
 
 
 def _varint(value: int) -> bytes:
+    """Protobuf base-128 varint of a non-negative int (unrolled up to 4 bytes: nanoseconds and
+    small seconds take this path once per skin message)."""
+    if value < 0x80:
+        return bytes((value,))
+    if value < 0x4000:
+        return bytes((value & 0x7F | 0x80, value >> 7))
+    if value < 0x200000:
+        return bytes((value & 0x7F | 0x80, value >> 7 & 0x7F | 0x80, value >> 14))
+    if value < 0x10000000:
+        return bytes((value & 0x7F | 0x80, value >> 7 & 0x7F | 0x80, value >> 14 & 0x7F | 0x80, value >> 21))
     out = bytearray()
     while True:
         bits = value & 0x7F
@@ -166,7 +176,8 @@ SKIN_TAIL = _skin_tail()
 """Bytes that precede the 512 pixel bytes at the end of every skin RawImage payload."""
 
 
-_last_sec: list = [None, b""]  # one-entry cache: consecutive frames share their second
+_last_sec: list = [None, b"", ()]  # one-entry cache: consecutive frames share their second
+_HEAD_START = [b"\x0a" + bytes((n,)) for n in range(128)]  # field 1 tag + submessage length
 
 
 def skin_head(device_t_ns: int) -> bytes:
@@ -178,15 +189,17 @@ def skin_head(device_t_ns: int) -> bytes:
     message, which the reader relies on (and checks).
     """
     sec, nsec = divmod(device_t_ns, 1_000_000_000)
-    if sec == _last_sec[0]:
-        ts = _last_sec[1]
-    else:
+    if sec != _last_sec[0]:
         ts = b"\x08" + _varint(sec) if sec else b""
-        _last_sec[0], _last_sec[1] = sec, ts
+        # Per nanosecond-varint length k (1..5): message start, seconds, nanos tag.
+        starts = tuple(_HEAD_START[len(ts) + 1 + k] + ts + b"\x10" for k in range(6))
+        _last_sec[0], _last_sec[1], _last_sec[2] = sec, ts, starts
     if nsec:
-        ts = ts + b"\x10" + _varint(nsec)
+        v = _varint(nsec)
+        return _last_sec[2][len(v)] + v + SKIN_TAIL
     # The timestamp submessage is always present (even empty), as protobuf writes a set field.
-    return b"\x0a" + bytes((len(ts),)) + ts + SKIN_TAIL
+    ts = _last_sec[1]
+    return _HEAD_START[len(ts)] + ts + SKIN_TAIL
 
 
 def skin_payload(device_t_ns: int, pixels: bytes) -> bytes:

@@ -127,7 +127,12 @@ def test_other_pose_topics_become_their_own_stream(tmp_path):
 
 def test_skin_payload_is_the_protobuf_encoding(tmp_path):
     """The hand-built RawImage bytes equal protobuf's own serialisation, and decode back."""
-    for dev in (0, 999, 1_000_000_000, 5_123_456_789, 2**40 + 17):
+    # Every varint length of the seconds and nanoseconds fields, consecutive calls within one
+    # second (the writer caches the seconds part) and across seconds.
+    nanos = (0, 1, 127, 128, 16_383, 16_384, 2_097_151, 2_097_152, 268_435_455, 268_435_456, 999_999_999)
+    secs = (0, 1, 127, 128, 5, 2**21, 2**28, 2**35 + 17)  # protobuf Timestamp ends in year 9999
+    devs = [999, 1_000_000_000, 5_123_456_789] + [s * 1_000_000_000 + n for s in secs for n in nanos]
+    for dev in devs:
         f = frame(dev % 97)
         expected = RawImage(width=16, height=16, encoding="mono16", step=32, data=f.superficial.tobytes())
         expected.timestamp.FromNanoseconds(dev)
