@@ -152,6 +152,24 @@ def _decode_streams(sc: McapScan, msgs: list[str]) -> dict[str, dict]:
     return streams
 
 
+def _gather_rows(data: np.ndarray, start: np.ndarray, nbytes: int) -> np.ndarray:
+    """(N, nbytes) uint8: data[start[i] : start[i] + nbytes] for each i, copied as 8-byte words.
+
+    Rows start at arbitrary byte offsets. Grouped by offset mod 8, each group is a fancy index
+    into a sliding window over the data viewed as <u8 (a copy of 8-byte items, several times
+    faster than gathering single bytes). nbytes must be a multiple of 8.
+    """
+    words = nbytes // 8
+    out = np.empty((start.size, words), "<u8")
+    phase = start % 8
+    for k in range(8):
+        sel = np.flatnonzero(phase == k)
+        if sel.size:
+            aligned = data[k : k + (data.size - k) // 8 * 8].view("<u8")
+            out[sel] = sliding_window_view(aligned, words)[(start[sel] - k) // 8]
+    return out.view(np.uint8)
+
+
 def _skin_pixels(sc: McapScan, m: ChannelMessages, msgs: list[str]) -> np.ndarray:
     """(N, 16, 16) uint16 from the last 512 bytes of each RawImage payload, checked vectorised;
     messages that do not have that layout are decoded with protobuf."""
@@ -162,11 +180,15 @@ def _skin_pixels(sc: McapScan, m: ChannelMessages, msgs: list[str]) -> np.ndarra
     lead = len(tail)
     start = m.payload_start
     fits = (end - start) >= nbytes + lead
-    pix = np.empty((n, nbytes), np.uint8)
     if n and fits.all():
         prefix = sliding_window_view(sc.data, lead)[end - nbytes - lead]
         fits = np.all(prefix == np.frombuffer(tail, np.uint8), axis=1)
-        pix[fits] = sliding_window_view(sc.data, nbytes)[(end - nbytes)[fits]]
+    if n and fits.all():
+        pix = _gather_rows(sc.data, end - nbytes, nbytes)
+    else:
+        pix = np.empty((n, nbytes), np.uint8)
+        if fits.any():
+            pix[fits] = _gather_rows(sc.data, (end - nbytes)[fits], nbytes)
     bad = np.flatnonzero(~fits)
     if bad.size:
         from foxglove_schemas_protobuf.RawImage_pb2 import RawImage

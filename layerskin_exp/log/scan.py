@@ -10,8 +10,11 @@ A file cut off mid-record is read up to the last whole chunk, with a warning, ne
 
 from __future__ import annotations
 
+import mmap
+import os
 import struct
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from io import BytesIO
 
@@ -38,6 +41,8 @@ MESSAGE_HEADER = np.dtype(
     ]
 )
 HEADER_BYTES = MESSAGE_HEADER.itemsize  # 31
+_THREADS = max(1, min(4, os.cpu_count() or 1))  # for chunk decompression
+_BYTES_PER_THREAD = 4 << 20  # smaller files decompress in the calling thread
 
 
 class SessionFileError(Exception):
@@ -80,9 +85,9 @@ class McapScan:
     n_chunks: int = 0
 
     def payloads(self, msgs: ChannelMessages) -> list[bytes]:
-        raw = self.data.base if isinstance(self.data.base, bytes) else self.data.tobytes()
+        raw = memoryview(self.data)
         starts, ends = msgs.payload_start.tolist(), msgs.payload_end.tolist()
-        return [raw[s:e] for s, e in zip(starts, ends, strict=True)]
+        return [raw[s:e].tobytes() for s, e in zip(starts, ends, strict=True)]
 
 
 def _read_record(cls, body: bytes):
@@ -98,20 +103,19 @@ def _parse_chunk_header(buf: bytes, body: int):
     return compression, usize, crc, p + 8, rlen
 
 
-def _decompress(compression: str, blob, usize: int) -> bytes:
-    if compression == "zstd":
-        return zstandard.ZstdDecompressor().decompress(blob, max_output_size=usize)
-    if compression == "lz4":
-        return lz4.frame.decompress(blob)
-    if compression == "":
-        return bytes(blob)
-    raise SessionFileError(f"chunk compression {compression!r} is not supported (zstd, lz4 or none)")
-
-
 def scan(path) -> McapScan:
     """Scan an MCAP file. Raises SessionFileError if it is empty or not MCAP at all."""
     with open(path, "rb") as f:
-        buf = f.read()
+        size = os.fstat(f.fileno()).st_size
+        if not size:
+            return _scan(path, b"")
+        # Mapped, not read: chunks decompress straight from the page cache into McapScan.data.
+        # Everything kept is copied out of the map, which is closed before returning.
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+            return _scan(path, buf)
+
+
+def _scan(path, buf) -> McapScan:
     if not buf:
         raise SessionFileError(f"{path}: the file is empty (0 bytes); no session was recorded in it")
     if len(buf) < 8 and MAGIC.startswith(buf):
@@ -205,39 +209,71 @@ def scan(path) -> McapScan:
     )
 
 
-def _decompress_all(buf: bytes, chunks, warnings) -> tuple[np.ndarray, np.ndarray, int]:
-    """Decompress every chunk into one buffer. Returns (data uint8, base offsets (C+1,), n good)."""
+def _decompress_all(buf, chunks, warnings) -> tuple[np.ndarray, np.ndarray, int]:
+    """Decompress every chunk straight into its slice of one preallocated buffer, chunk ranges
+    split over a few threads (zstd, lz4 and zlib.crc32 release the GIL).
+
+    Returns (data uint8, base offsets (good+1,), number of good chunks). Reading stops before the
+    first chunk that fails to decompress or fails its size/CRC check.
+    """
     sizes = np.array([c[1] for c in chunks], dtype=np.int64)
     base = np.zeros(len(chunks) + 1, dtype=np.int64)
     np.cumsum(sizes, out=base[1:])
+    data = np.empty(int(base[-1]), np.uint8)
     if not chunks:
-        return np.zeros(0, np.uint8), base, 0
-    if all(c[0] == "zstd" for c in chunks):
-        try:
-            segments = np.array([(c[3], c[4]) for c in chunks], dtype="<u8")
-            frames = zstandard.BufferWithSegments(buf, segments.tobytes())
-            out = zstandard.ZstdDecompressor().multi_decompress_to_buffer(
-                frames, decompressed_sizes=sizes.astype("<u8").tobytes(), threads=-1
-            )
-            joined = b"".join(out[i] for i in range(len(out)))
-            if len(joined) == base[-1]:
-                return np.frombuffer(joined, np.uint8), base, len(chunks)
-        except zstandard.ZstdError:
-            pass  # a damaged chunk somewhere: find it one chunk at a time below
-    parts = []
-    mv = memoryview(buf)
-    for i, (compression, usize, crc, start, length) in enumerate(chunks):
-        try:
-            raw = _decompress(compression, mv[start : start + length], usize)
-        except (zstandard.ZstdError, RuntimeError, ValueError) as exc:
-            warnings.append(f"chunk {i} cannot be decompressed ({exc}); reading stops before it")
+        return data, base, 0
+    src, dst = memoryview(buf), memoryview(data)
+    bounds = base.tolist()
+
+    def work(first: int, stop: int) -> tuple[int, str]:
+        """Decompress chunks first..stop-1; returns (index of the first bad chunk or stop, why)."""
+        zstd = zstandard.ZstdDecompressor()
+        for i in range(first, stop):
+            compression, usize, crc, start, length = chunks[i]
+            out = dst[bounds[i] : bounds[i + 1]]
+            try:
+                _decompress_into(compression, src[start : start + length], out, zstd)
+            except (zstandard.ZstdError, RuntimeError, ValueError) as exc:
+                return i, f"chunk {i} cannot be decompressed ({exc}); reading stops before it"
+            if crc and zlib.crc32(out) != crc:
+                return i, f"chunk {i} fails its CRC check; reading stops before it"
+        return stop, ""
+
+    n_threads = min(_THREADS, len(chunks), max(1, int(base[-1]) // _BYTES_PER_THREAD))
+    edges = np.linspace(0, len(chunks), n_threads + 1).astype(int).tolist()
+    if n_threads == 1:
+        results = [work(0, len(chunks))]
+    else:
+        with ThreadPoolExecutor(n_threads) as pool:
+            results = list(pool.map(work, edges[:-1], edges[1:]))
+    good, why = len(chunks), ""
+    for (stop, msg), end in zip(results, edges[1:], strict=True):
+        if stop < end:
+            good, why = stop, msg
             break
-        if len(raw) != usize or (crc and zlib.crc32(raw) != crc):
-            warnings.append(f"chunk {i} fails its size/CRC check; reading stops before it")
-            break
-        parts.append(raw)
-    good = len(parts)
-    return np.frombuffer(b"".join(parts), np.uint8), base[: good + 1], good
+    if why:
+        warnings.append(why)
+    return data[: bounds[good]], base[: good + 1], good
+
+
+def _decompress_into(compression: str, blob: memoryview, out: memoryview, zstd) -> None:
+    """Decompress one chunk's records into `out`, which must be exactly their size."""
+    if compression == "zstd":
+        declared = zstandard.frame_content_size(blob)
+        if declared not in (-1, len(out)):
+            raise ValueError(f"zstd frame holds {declared} bytes, chunk header says {len(out)}")
+        got = zstd.stream_reader(blob).readinto(out)
+        if got != len(out):
+            raise ValueError(f"zstd frame gave {got} bytes, chunk header says {len(out)}")
+    elif compression == "lz4":
+        raw = lz4.frame.decompress(blob)
+        if len(raw) != len(out):
+            raise ValueError(f"lz4 frame gave {len(raw)} bytes, chunk header says {len(out)}")
+        out[:] = raw
+    elif compression == "":
+        out[:] = blob
+    else:
+        raise SessionFileError(f"chunk compression {compression!r} is not supported (zstd, lz4 or none)")
 
 
 def _walk_chunk(data: np.ndarray, start: int, stop: int, chunk: int, warnings, channels=None, schemas=None):

@@ -220,3 +220,15 @@ def test_int_arrays_are_accepted_as_counts(tmp_path):
     skin = load_session(tmp_path / "i.mcap").streams["skin"]
     np.testing.assert_array_equal(skin["superficial"][0], f.superficial)
     np.testing.assert_array_equal(skin["deep"][0], f.deep)
+
+
+def test_gather_rows_matches_slicing_at_every_alignment():
+    from layerskin_exp.log.reader import _gather_rows
+
+    rng = np.random.default_rng(5)
+    data = rng.integers(0, 256, 20_000, dtype=np.uint8)
+    start = np.concatenate([np.arange(16), rng.integers(0, data.size - 512, 300), [data.size - 512]])
+    rows = _gather_rows(data, start, 512)
+    assert rows.shape == (start.size, 512) and rows.dtype == np.uint8
+    for i, s in enumerate(start.tolist()):
+        np.testing.assert_array_equal(rows[i], data[s : s + 512])
