@@ -51,9 +51,12 @@ def _decode_meta(values: dict) -> dict:
     return out
 
 
-def load_session(path, *, warn: bool = True) -> Session:
+def load_session(path, *, streams=None, warn: bool = True) -> Session:
     """Read a session file. Never raises on a damaged or truncated tail: reads up to the damage,
     reports it in Session.warnings (and as a SessionWarning unless warn=False).
+
+    streams: names of the streams to decode (e.g. {"skin", "wrench"}); None decodes all. Streams
+    not asked for are left out of Session.streams (names absent from the file are too).
 
     Raises SessionFileError for an empty file, a non-MCAP file, or an MCAP file that is not a
     layerskin session.
@@ -81,7 +84,8 @@ def load_session(path, *, warn: bool = True) -> Session:
         if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC):
             metadata[name] = values
     outcome = records.get(S.META_OUTCOME, {}).get("outcome")
-    streams = _decode_streams(sc, msgs)
+    wanted = None if streams is None else ({streams} if isinstance(streams, str) else set(streams))
+    streams = _decode_streams(sc, msgs, wanted)
     stored = records.get(S.META_CLOCK_SYNC, {})
     clock_sync = {}
     for name, arrays in streams.items():
@@ -126,7 +130,7 @@ def _times(m: ChannelMessages) -> dict:
     }
 
 
-def _decode_streams(sc: McapScan, msgs: list[str]) -> dict[str, dict]:
+def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None = None) -> dict[str, dict]:
     groups: dict[str, list[ChannelMessages]] = {}
     for cid, m in sc.messages.items():
         if m.channel is None:
@@ -136,7 +140,8 @@ def _decode_streams(sc: McapScan, msgs: list[str]) -> dict[str, dict]:
         if stream is None:
             msgs.append(f"topic {m.channel.topic} is not a layerskin stream; skipped")
             continue
-        groups.setdefault(stream, []).append(m)
+        if wanted is None or stream in wanted:
+            groups.setdefault(stream, []).append(m)
     streams = {}
     for stream, chans in groups.items():
         if stream == "skin":

@@ -232,3 +232,17 @@ def test_gather_rows_matches_slicing_at_every_alignment():
     assert rows.shape == (start.size, 512) and rows.dtype == np.uint8
     for i, s in enumerate(start.tolist()):
         np.testing.assert_array_equal(rows[i], data[s : s + 512])
+
+
+def test_streams_argument_decodes_only_those(tmp_path):
+    recs = records(200)
+    path = tmp_path / "s.mcap"
+    _write(path, recs)
+    full = load_session(path)
+    part = load_session(path, streams={"skin", "wrench", "not_in_file"})
+    assert set(full.streams) > {"skin", "wrench"} and set(part.streams) == {"skin", "wrench"}
+    for name in ("skin", "wrench"):
+        for key, value in full.streams[name].items():
+            np.testing.assert_array_equal(part.streams[name][key], value)
+    assert set(load_session(path, streams="events").streams) == {"events"}
+    assert part.labels == full.labels and part.outcome == "complete"
