@@ -29,6 +29,14 @@ from layerskin_exp.types import (
     Wrench,
 )
 
+# Chunk compression default, from benchmarks/log_write.py and log_read.py (10 min of noisy 12-bit
+# frames at 424 Hz, 2-core machine): lz4 writes ~290x real time, reads ~540 k pairs/s, 266 MB;
+# zstd (the mcap Writer's fixed level 3) ~200x, ~400 k/s, 191 MB; none ~400x, ~680 k/s, 304 MB.
+# Noise leaves the frames hard to compress, and zstd-3 alone costs ~1.5 s of the 3 s budget for
+# 200x real time. lz4 keeps writing and reading fast at +39 % size over zstd (~27 MB per minute
+# of skin data; a 900-trial campaign of 30 s trials ~12 GB): the trade taken. Pass
+# compression="zstd" where disk matters more than speed; the reader handles all three.
+DEFAULT_COMPRESSION = "lz4"
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _U32_MAX = 2**32 - 1
 _U64_MAX = 2**64 - 1
@@ -132,7 +140,7 @@ class SessionWriter:
     metadata: {"config": dict, "backend": str, "calibration": dict, ...}; dict values become
         their own MCAP metadata records, other values go into the "session" record.
     labels: trial labels (position index, direction, grip depth, motion, trial index, ...).
-    compression: "zstd" (default), "lz4" or "none", per chunk.
+    compression: "lz4" (default, see DEFAULT_COMPRESSION), "zstd" or "none", per chunk.
     chunk_span_ns / chunk_bytes: a chunk is closed and handed to the OS as soon as it spans
         chunk_span_ns of log (host) time or holds chunk_bytes, so a kill loses at most that
         much data. Protocol events are flushed at once.
@@ -147,7 +155,7 @@ class SessionWriter:
         metadata: dict | None = None,
         labels: dict | None = None,
         *,
-        compression: str = "zstd",
+        compression: str = DEFAULT_COMPRESSION,
         chunk_span_ns: int = 100_000_000,
         chunk_bytes: int = 1 << 20,
         overwrite: bool = False,
