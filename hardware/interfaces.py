@@ -221,6 +221,14 @@ class Rig:
     # a reason; on the first reason the backend stops all motion at once and sets `tripped`.
     guards: list[Callable[[Wrench], str | None]] = field(default_factory=list)
     tripped: str | None = None
+    # Called with each trial's labels before it starts (Rig.begin_trial). The simulated backend
+    # draws the trial's noise and bench variation there; real devices need nothing.
+    trial_hooks: list[Callable[[dict], None]] = field(default_factory=list)
+
+    def begin_trial(self, labels: dict) -> None:
+        """A trial with these labels is about to start (protocols call this before each trial)."""
+        for hook in self.trial_hooks:
+            hook(dict(labels))
 
     def add_guard(self, guard: Callable[[Wrench], str | None]) -> None:
         self.guards.append(guard)

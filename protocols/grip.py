@@ -84,11 +84,16 @@ class GripControl:
             frames += self.tick()[0]
         return frames
 
-    def gripper_opening_mm(self) -> float:
+    def gripper_opening_mm(self, first_state_timeout_s: float = 0.5) -> float:
+        """The last reported jaw opening; waits (ticking) for the gripper's first state report."""
         if self.log.last_gripper is None:
             self.log.drain()
+        deadline_ns = self.clock.now_ns() + int(first_state_timeout_s * 1e9)
+        while self.log.last_gripper is None and self.clock.now_ns() < deadline_ns:
+            self.tick()
         if self.log.last_gripper is None:
-            raise RuntimeError("gripper: no state received yet; is the gripper streaming?")
+            raise RuntimeError(f"gripper: no state received within {first_state_timeout_s} s; is the gripper "
+                               "streaming?")
         return float(self.log.last_gripper.position_mm)
 
     def move_gripper(self, opening_mm: float, speed_mm_s: float, force_pct: float, min_opening_mm: float) -> None:

@@ -196,6 +196,7 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         return TrialResult(name, labels, str(path), "complete", skipped=True)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + PARTIAL_SUFFIX)
+    rig.begin_trial(labels)
     t0_ns = rig.clock.now_ns()
     writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True)
     log = TrialLog(writer, rig, save_images)

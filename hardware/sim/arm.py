@@ -20,6 +20,10 @@ class SimArm(SimStreamMixin, Arm):
         self.stream = world.new_stream("arm", cfg.clock, 1.0 / cfg.rate_hz)
         self._noise_rng = np.random.default_rng(self.stream.rng.integers(2**63))
         world.add_producer(self.stream, self._produce)
+        world.on_trial(self._reseed)
+
+    def _reseed(self, world: World) -> None:
+        self._noise_rng = world.rng("arm.noise")
 
     def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
         snap = world.snapshots(idx)

@@ -46,6 +46,7 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     clock = SimClock(world)
     skin = SimSkinReader(world, rc.skin)
     rig = Rig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup})
+    rig.trial_hooks.append(world.begin_trial)
     if setup == "platform":
         rig.ft = SimForceTorque(world, rc.ft, device_rng(sim_cfg.seed, "ft"), on_sample=rig.check_guards)
         rig.platform = SimPlatform(world, scene, rc.platform)

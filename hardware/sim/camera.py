@@ -39,6 +39,10 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         self._latest: tuple[np.ndarray, int, int] | None = None
         self._last_host_ns = -1
         world.add_producer(self.stream, self._produce)
+        world.on_trial(self._reseed)
+
+    def _reseed(self, world: World) -> None:
+        self._img_rng = world.rng("camera.image")
 
     def marker_poses(self, snap: np.ndarray, state) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Marker id -> (R (3, 3), t (3,) mm): marker frames in the camera frame for one scene snapshot

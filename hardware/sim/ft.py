@@ -32,6 +32,7 @@ class SimForceTorque(SimStreamMixin, ForceTorqueSensor):
         self._recent_raw: deque = deque(maxlen=32)
         self.stream = world.new_stream("ft", cfg.clock, 1.0 / cfg.rate_hz)
         world.add_per_tick(self._per_tick)
+        world.on_trial(lambda w: self.synth.reseed(w.rng("ft.noise")))
 
     def _per_tick(self, world: World, t_from_s: float, t_to_s: float) -> None:
         t_s = self.stream.due_times(t_to_s)

@@ -33,6 +33,10 @@ class DeviceClock:
         self._rng = rng
         self._last_host_ns = -1
 
+    def reseed(self, rng: np.random.Generator) -> None:
+        """New jitter and delay draws from rng; the oscillator (offset, drift) stays."""
+        self._rng = rng
+
     def device_ns(self, t_s: np.ndarray) -> np.ndarray:
         """(N,) device timestamps (int64 ns) of events at true times t_s (N,)."""
         t_s = np.asarray(t_s, dtype=float)

@@ -21,11 +21,18 @@ class StickSlip:
     """Friction state of one contact: spacer shear, rotation and cumulative slip."""
 
     def __init__(self, mu_static: float, mu_kinetic: float, aging_s: float, overshoot: float):
-        self.mu_s = mu_static
-        self.mu_k = mu_kinetic
+        self.mu_s = self.mu_s_nominal = mu_static
+        self.mu_k = self.mu_k_nominal = mu_kinetic
         self.aging_s = aging_s
         self.overshoot = overshoot
         self.reset()
+
+    def set_surface_factor(self, factor: float) -> None:
+        """Scale both coefficients from their nominal values (the surface state of one trial)."""
+        if not (math.isfinite(factor) and factor > 0.0):
+            raise ValueError(f"friction surface factor {factor!r} must be a finite number > 0")
+        self.mu_s = self.mu_s_nominal * factor
+        self.mu_k = self.mu_k_nominal * factor
 
     def reset(self) -> None:
         self.ux = 0.0  # superficial-layer shift relative to the deep layer, mm

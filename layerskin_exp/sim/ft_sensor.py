@@ -28,6 +28,12 @@ class FTSynth:
         self._noise_block = np.empty((0, 6))
         self._k = 0
 
+    def reseed(self, rng: np.random.Generator) -> None:
+        """New noise and bias-drift draws from rng; the bias reached so far stays."""
+        self.rng = rng
+        self._noise_block = np.empty((0, 6))
+        self._k = 0
+
     def _noise(self) -> np.ndarray:
         if self._k >= len(self._noise_block):  # draw in blocks: one generator call per 1024 samples
             self._noise_block = self.rng.standard_normal((1024, 6)) * self.noise_std

@@ -66,12 +66,26 @@ class GripScene:
         self.stalled = False
         self.radius_mm = grip.rod_diameter_mm / 2.0
         # The rod, fixed in base (m): axis point and unit direction.
-        c_tcp = np.array([0.0, -grip.contact_opening_mm / 2.0 + self.radius_mm, 0.0]) * 1e-3
-        self.rod_c_m = self.home_p_m + self.R_ref @ c_tcp
-        self.rod_a = self.R_ref @ np.array([0.0, 0.0, 1.0])
+        self.R_home = self.R_ref.copy()
+        self.place_rod(0.0, 0.0)
         self._R_tcp = self.R_ref.copy()
         self._cache = None
         self._last_yaw = math.pi / 2
+
+    def place_rod(self, offset_mm: float, yaw_deg: float) -> None:
+        """Clamp the rod `offset_mm` along skin x from its nominal place, turned by `yaw_deg` about
+        the skin normal (both 0: the nominal placement described in the module docstring)."""
+        c_tcp = np.array([offset_mm, -self.grip_cfg.contact_opening_mm / 2.0 + self.radius_mm, 0.0]) * 1e-3
+        th = math.radians(yaw_deg)
+        self.rod_c_m = self.home_p_m + self.R_home @ c_tcp
+        # skin normal = TCP y: turn the axis (TCP z at home) about it
+        self.rod_a = self.R_home @ np.array([math.sin(th), 0.0, math.cos(th)])
+        self._cache = None
+
+    def begin_trial(self, rng: np.random.Generator, variation) -> None:
+        """The rod is re-clamped between trials: draw its placement (variation: TrialVariationConfig)."""
+        self.place_rod(float(rng.normal(0.0, variation.rod_offset_sd_mm)),
+                       float(rng.normal(0.0, variation.rod_yaw_sd_deg)))
 
     # ---- commands (validated against the devices' physical range) ----------------------------
     def command_arm(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,

@@ -250,6 +250,28 @@ class CameraConfig:
 
 
 @dataclass
+class TrialVariationConfig:
+    """What differs from one trial to the next on a real bench, drawn per trial.
+
+    Each trial's draw (and its sensor noise, clock jitter and link delays) follows from the world
+    seed and the trial's labels, so repeated trials are distinct realisations and any trial replays
+    identically however the campaign ran. The sensor itself (taxel gains, baselines, device clock
+    offsets and drifts) is fixed by the seed: the same skin is used throughout.
+    Stated guesses, not measurements: set them to 0 for identical repeats.
+    """
+
+    friction_cv: float = 0.05  # relative spread of the cover's friction (surface state, dust, humidity)
+    rod_offset_sd_mm: float = 0.3  # where the rod sits across the skin (re-clamped between grip trials)
+    rod_yaw_sd_deg: float = 1.0  # the rod's angle on the skin
+
+    def __post_init__(self) -> None:
+        k = "sim.rig.variation"
+        require(0 <= self.friction_cv < 0.5, f"{k}.friction_cv", self.friction_cv, "must be 0..0.5")
+        require(0 <= self.rod_offset_sd_mm <= 3, f"{k}.rod_offset_sd_mm", self.rod_offset_sd_mm, "must be 0..3 mm")
+        require(0 <= self.rod_yaw_sd_deg <= 10, f"{k}.rod_yaw_sd_deg", self.rod_yaw_sd_deg, "must be 0..10 deg")
+
+
+@dataclass
 class RigConfig:
     """The simulated rig: world stepping plus every device's twin."""
 
@@ -261,6 +283,7 @@ class RigConfig:
     arm: ArmConfig = field(default_factory=ArmConfig)
     gripper: GripperConfig = field(default_factory=GripperConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    variation: TrialVariationConfig = field(default_factory=TrialVariationConfig)
 
     def __post_init__(self) -> None:
         require(100 <= self.mech_rate_hz <= 10000, "sim.rig.mech_rate_hz", self.mech_rate_hz,

@@ -497,6 +497,11 @@ class SkinModel:
         return self._taxel_sums(len(states), sup), self._taxel_sums(len(states), deep)
 
     # ------------------------------------------------------------------ frames
+    def reseed(self, rng: np.random.Generator) -> None:
+        """New scan-jitter and readout-noise draws from rng (a new trial); the sheet's gains and
+        baselines stay."""
+        self.rng = rng
+
     def _row_times(self, t_s: np.ndarray) -> np.ndarray:
         """(N, 2, n) sampling instants: t_s[k] ends the frame; rows sampled in sequence before it."""
         n = self.skin.n_taxels

@@ -10,6 +10,8 @@ step at or before each sample (zero-order hold).
 
 from __future__ import annotations
 
+import json
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -43,6 +45,8 @@ class World:
         self.streams: dict[str, Stream] = {}
         self._producers: list[tuple[Stream, Producer]] = []
         self._per_tick: list[Callable] = []
+        self._trial_hooks: list[Callable[[World], None]] = []
+        self.trial_key = ""  # labels of the current trial (canonical JSON); "" before the first
         # Step records of the current advance; element 0 is the last step before it.
         xyz, yaw = scene.indenter_pose()
         self.state = skin_model.step(0.0, np.asarray(xyz, float), yaw)
@@ -61,6 +65,38 @@ class World:
         s = Stream(name, clock, period_s, device_rng(self.seed, name + ".stream"), period_jitter_s, self.t_s)
         self.streams[name] = s
         return s
+
+    # ---- trials ------------------------------------------------------------------------------
+    def rng(self, name: str) -> np.random.Generator:
+        """A generator for one named part of the world in the current trial (seed + trial labels)."""
+        return device_rng(self.seed, f"{name}|{self.trial_key}" if self.trial_key else name)
+
+    def on_trial(self, hook: Callable[[World], None]) -> None:
+        """Register hook(world), called at each begin_trial after the world's own re-draws
+        (devices re-seed their noise from world.rng(name) there)."""
+        self._trial_hooks.append(hook)
+
+    def begin_trial(self, labels: dict) -> None:
+        """Start a new trial: new noise, jitter and delay draws, and the bench's trial-to-trial
+        variation (cover friction; the rod's placement on the grip rig), all from the seed and the
+        labels only. Sensor properties drawn at construction (taxel gains, baselines, clock
+        offsets and drifts, F/T bias) stay: the same devices are used throughout."""
+        self.trial_key = json.dumps(labels, sort_keys=True, default=str)
+        for name, stream in self.streams.items():
+            stream.rng = self.rng(name + ".stream")
+            stream.clock.reseed(self.rng(name + ".clock"))
+        if hasattr(self.skin_model, "reseed"):
+            self.skin_model.reseed(self.rng("skin_model.noise"))
+        var = self.rig.variation
+        rng = self.rng("variation")
+        sigma = math.sqrt(math.log1p(var.friction_cv ** 2))
+        factor = float(np.exp(rng.normal(-0.5 * sigma ** 2, sigma))) if sigma > 0 else 1.0
+        if hasattr(self.skin_model, "friction"):
+            self.skin_model.friction.set_surface_factor(factor)
+        if hasattr(self.scene, "begin_trial"):
+            self.scene.begin_trial(rng, var)
+        for hook in self._trial_hooks:
+            hook(self)
 
     def add_producer(self, stream: Stream, produce: Producer) -> None:
         """Register a batched stream: produce(world, t_s, idx) is called once per advance."""
