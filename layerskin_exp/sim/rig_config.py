@@ -220,7 +220,7 @@ class CameraConfig:
     # Marker centres in the skin frame (mm), on the superficial layer outside the 24 mm sensing area.
     marker_x_mm: tuple[float, float] = (-8.0, 8.0)
     marker_y_mm: tuple[float, float] = (16.0, 16.0)
-    supersample: int = 2  # render at 2x and average down: sub-pixel edges
+    supersample: int = 4  # render at 4x and average down: edges placed to ~0.005 px (2x: ~0.015 px, ~0.4 deg of tilt)
     blur_sigma_px: float = 0.6
     noise_std_gray: float = 2.0
     latency_ms: float = 75.0
