@@ -9,7 +9,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
-from scipy.optimize import linear_sum_assignment
 from scipy.signal import butter, find_peaks, sosfiltfilt
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_bipartite_matching
@@ -19,27 +18,33 @@ from analysis.config import SlipConfig
 MAD_TO_SIGMA = 1.4826
 
 
+def _sorted_finite(x) -> np.ndarray:
+    a = np.asarray(x, np.float64).ravel()
+    return np.sort(a[~np.isnan(a)])
+
+
 def match_events(detected, truth, tolerance: float) -> tuple[int, int, int]:
     """Maximum one-to-one matching of detected to true event times within ±tolerance s.
 
-    Returns (tp, fp, fn). Maximum, not greedy: a detection between two true events is given to
-    whichever leaves the most pairs matched (scipy.optimize.linear_sum_assignment on the
-    within-tolerance pair matrix, after dropping events that have no partner in reach).
+    Returns (tp, fp, fn). Maximum, not greedy-nearest: a detection between two true events is
+    given to whichever leaves the most pairs matched. Events on a line with a symmetric window
+    form a convex bipartite graph (each detection reaches a contiguous run of the sorted truths,
+    and both ends of that run move forward with the detection), where one sweep in time order is
+    a maximum matching: the earliest detection takes the earliest true event in its reach, and
+    an event out of reach of the current detection is out of reach of every later one on that
+    side. tests/analysis/test_slip.py checks it against scipy's linear_sum_assignment.
     """
-    d = np.asarray(detected, np.float64).ravel()
-    t = np.asarray(truth, np.float64).ravel()
-    if d.size == 0 or t.size == 0:
-        return 0, int(d.size), int(t.size)
-    ok = np.abs(d[:, None] - t[None, :]) <= tolerance
-    ok = ok[ok.any(axis=1)][:, ok.any(axis=0)]  # events with no partner in reach cannot match
-    if ok.size == 0:
-        return 0, int(d.size), int(t.size)
-    if ok.sum(axis=0).max() <= 1 and ok.sum(axis=1).max() <= 1:  # no contested pair: every edge matches
-        tp = int(ok.sum())
-    else:  # maximum matching = assignment maximising the number of within-tolerance pairs
-        r, c = linear_sum_assignment(ok, maximize=True)
-        tp = int(ok[r, c].sum())
-    return tp, int(d.size) - tp, int(t.size) - tp
+    d, t = _sorted_finite(detected), _sorted_finite(truth)
+    n_d, n_t = int(np.asarray(detected).size), int(np.asarray(truth).size)
+    tp = i = j = 0
+    while i < d.size and j < t.size:
+        if d[i] - t[j] > tolerance:  # truth j is before every remaining detection's window
+            j += 1
+        elif t[j] - d[i] > tolerance:  # detection i reaches no remaining truth
+            i += 1
+        else:
+            tp, i, j = tp + 1, i + 1, j + 1
+    return tp, n_d - tp, n_t - tp
 
 
 def matched_pairs(detected, truth, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
@@ -133,13 +138,67 @@ class CueTrial:
 
 def f1_table(trials: list[CueTrial], offsets_s: np.ndarray, thresholds: np.ndarray,
              tolerance_s: float) -> np.ndarray:
-    """F1[trial, offset, threshold] of detections cand_t + offset for cand_score >= threshold."""
-    out = np.zeros((len(trials), len(offsets_s), len(thresholds)))
-    for i, tr in enumerate(trials):
-        for k, th in enumerate(thresholds):
-            det = tr.cand_t_s[tr.cand_score >= th]
-            for j, off in enumerate(offsets_s):
-                out[i, j, k] = f1_score(*match_events(det + off, tr.truth_t_s, tolerance_s))
+    """F1[trial, offset, threshold] of detections cand_t + offset for cand_score >= threshold.
+
+    Equal to f1_score(*match_events(...)) cell by cell: the same time-ordered sweep as
+    match_events, run for every (trial, offset, threshold) cell at once with numpy. Candidates of
+    all trials are concatenated in time order; per threshold, a next-candidate table skips those
+    below it. Every step moves each live cell's detection or truth pointer forward, so the loop
+    runs at most (candidates + truths) of the longest trial times.
+    """
+    offsets_s = np.asarray(offsets_s, np.float64).ravel()
+    thresholds = np.asarray(thresholds, np.float64).ravel()
+    n_tr, n_off, n_th = len(trials), offsets_s.size, thresholds.size
+    out = np.zeros((n_tr, n_off, n_th))
+    if out.size == 0:
+        return out
+    cand_t, cand_s, c_lo, truth, e_lo = [], [], [0], [], [0]
+    for tr in trials:
+        ct = np.asarray(tr.cand_t_s, np.float64).ravel()
+        order = np.argsort(ct, kind="stable")
+        cand_t.append(ct[order])
+        cand_s.append(np.asarray(tr.cand_score, np.float64).ravel()[order])
+        c_lo.append(c_lo[-1] + ct.size)
+        truth.append(_sorted_finite(tr.truth_t_s))
+        e_lo.append(e_lo[-1] + truth[-1].size)
+    c_t, c_s, e_t = np.concatenate(cand_t), np.concatenate(cand_s), np.concatenate(truth)
+    c_lo, e_lo = np.asarray(c_lo), np.asarray(e_lo)
+    n_c = c_t.size
+    sel = c_s[None, :] >= thresholds[:, None]  # (K, C) detections per threshold
+    cum = np.c_[np.zeros((n_th, 1), np.int64), np.cumsum(sel, axis=1)]
+    n_det = cum[:, c_lo[1:]] - cum[:, c_lo[:-1]]  # (K, trials) detections per threshold and trial
+    n_truth = np.diff(e_lo)
+    # nxt[k, c]: the first candidate at or after c that is a detection at threshold k (NaN times
+    # never match, so they are skipped too but still counted as detections), else past the end.
+    usable = sel & ~np.isnan(c_t)[None, :]
+    pos = np.where(usable, np.arange(n_c)[None, :], n_c)
+    nxt = np.c_[np.minimum.accumulate(pos[:, ::-1], axis=1)[:, ::-1], np.full((n_th, 1), n_c)].ravel()
+    # One cell per (trial, offset, threshold): pointers into the concatenated candidates/truths.
+    tri, off, thr = (a.ravel() for a in np.meshgrid(np.arange(n_tr), np.arange(n_off), np.arange(n_th),
+                                                    indexing="ij"))
+    c_end, e_end = c_lo[1:][tri], e_lo[1:][tri]
+    row = thr * (n_c + 1)
+    i = np.minimum(nxt[row + c_lo[:-1][tri]], c_end)
+    j = e_lo[:-1][tri].copy()
+    tp = np.zeros(tri.size, np.int64)
+    live = np.flatnonzero((i < c_end) & (j < e_end))
+    while live.size:
+        il, jl = i[live], j[live]
+        d = c_t[il] + offsets_s[off[live]]  # the same float sum as cand_t + offset
+        t = e_t[jl]
+        skip_t = d - t > tolerance_s
+        skip_d = ~skip_t & (t - d > tolerance_s)
+        hit = ~skip_t & ~skip_d
+        adv_d = ~skip_t
+        i[live[adv_d]] = np.minimum(nxt[row[live[adv_d]] + il[adv_d] + 1], c_end[live[adv_d]])
+        j[live[~skip_d]] = jl[~skip_d] + 1
+        tp[live[hit]] += 1
+        live = live[(i[live] < c_end[live]) & (j[live] < e_end[live])]
+    fp = n_det[thr, tri] - tp
+    fn = n_truth[tri] - tp
+    den = 2 * tp + fp + fn
+    f1 = np.where(den == 0, 1.0, 2.0 * tp / np.maximum(den, 1))
+    out[:] = f1.reshape(n_tr, n_off, n_th)
     return out
 
 

@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from analysis.config import SlipConfig
 from analysis.slip import (
@@ -10,6 +12,7 @@ from analysis.slip import (
     cue_score,
     evaluate_loto,
     f1_score,
+    f1_table,
     match_events,
     vision_slip_events,
 )
@@ -118,3 +121,64 @@ def test_matched_pairs_agree_with_match_events():
     di, ti = matched_pairs(d, t, 0.1)
     assert len(di) == match_events(d, t, 0.1)[0] == 2
     assert all(abs(d[i] - t[j]) <= 0.1 for i, j in zip(di, ti, strict=True))
+
+
+def _hungarian_tp(d, t, tol):
+    """Independent maximum matching: linear_sum_assignment on the within-tolerance pair matrix."""
+    from scipy.optimize import linear_sum_assignment
+
+    d, t = np.asarray(d, np.float64), np.asarray(t, np.float64)
+    if d.size == 0 or t.size == 0:
+        return 0
+    ok = np.abs(d[:, None] - t[None, :]) <= tol
+    r, c = linear_sum_assignment(ok, maximize=True)
+    return int(ok[r, c].sum())
+
+
+# Times on a 1/64 s grid make differences exact, so many pairs sit exactly at ±tol, where the
+# sweep's one-sided tests must agree with |d - t| <= tol; arbitrary floats cover the rest.
+_times = st.one_of(st.lists(st.integers(0, 40).map(lambda k: k / 64), max_size=12),
+                   st.lists(st.floats(0, 2, allow_nan=False), max_size=14))
+
+
+@settings(max_examples=500, deadline=None, derandomize=True)
+@given(_times, _times, st.sampled_from([1 / 16, 0.1, 0.125, 0.3]))
+def test_sweep_matching_is_maximum(detected, truth, tol):
+    tp, fp, fn = match_events(detected, truth, tol)
+    assert tp == _hungarian_tp(detected, truth, tol)
+    assert (fp, fn) == (len(detected) - tp, len(truth) - tp)
+
+
+def test_f1_table_equals_cell_by_cell_hungarian():
+    rng = np.random.default_rng(3)
+    for rep in range(6):
+        offsets = np.arange(-0.2, 0.2 + 1e-9, 0.01) if rep % 2 == 0 else np.arange(-12, 13) / 64
+        trials = []
+        for _ in range(rng.integers(1, 5)):
+            m, e = rng.integers(0, 25), rng.integers(0, 8)
+            ct = rng.uniform(0, 3, m)  # unsorted, as a caller may give them
+            tt = rng.uniform(0, 3, e)
+            if rep % 2:  # on a 1/64 s grid (like the offsets): exact ties at ±tolerance, equal scores
+                ct, tt = np.round(ct * 64) / 64, np.round(tt * 64) / 64
+            trials.append(CueTrial(ct, rng.normal(size=m).round(1), tt, 0))
+        scores = np.concatenate([t.cand_score for t in trials] + [np.zeros(1)])
+        thresholds = np.unique(np.quantile(scores, np.linspace(0, 1, 12)))
+        tol = 0.1 if rep % 2 == 0 else 0.125
+        table = f1_table(trials, offsets, thresholds, tol)
+        for i, tr in enumerate(trials):
+            for k, th in enumerate(thresholds):
+                det = tr.cand_t_s[tr.cand_score >= th]
+                for j, off in enumerate(offsets):
+                    tp = _hungarian_tp(det + off, tr.truth_t_s, tol)
+                    ref = f1_score(tp, det.size - tp, tr.truth_t_s.size - tp)
+                    assert table[i, j, k] == ref
+
+
+def test_f1_table_empty_trials():
+    trials = [CueTrial(np.zeros(0), np.zeros(0), np.array([1.0]), 0), CueTrial(np.array([1.0]), np.ones(1),
+                                                                             np.zeros(0), 0),
+              CueTrial(np.zeros(0), np.zeros(0), np.zeros(0), 0)]
+    table = f1_table(trials, np.array([0.0]), np.array([0.0, 2.0]), 0.1)
+    assert table[0].tolist() == [[0.0, 0.0]]  # nothing detected, one missed
+    assert table[1].tolist() == [[0.0, 1.0]]  # a false alarm, unless the threshold removes it
+    assert table[2].tolist() == [[1.0, 1.0]]
