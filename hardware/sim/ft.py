@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from collections import deque
 from collections.abc import Callable
 
@@ -17,6 +18,8 @@ from layerskin_exp.types import Wrench
 
 class SimForceTorque(SimStreamMixin, ForceTorqueSensor):
     """Samples are generated step by step (not batched) so a guard acts at the sample's time.
+    Their schedule and timestamps (device time, host receive time) are drawn once per world
+    advance; each mechanical step then reads the samples that fall under it.
 
     on_sample: called with every acquired Wrench at its acquisition time (the rig's check_guards).
     """
@@ -31,23 +34,41 @@ class SimForceTorque(SimStreamMixin, ForceTorqueSensor):
         self.tare_offset = np.zeros(6)
         self._recent_raw: deque = deque(maxlen=32)
         self.stream = world.new_stream("ft", cfg.clock, 1.0 / cfg.rate_hz)
-        world.add_per_tick(self._per_tick)
+        # This advance's samples: true times, seq, device and host ns (lists), next index.
+        self._sched: tuple[list, list, list, list] = ([], [], [], [])
+        self._next = 0
+        world.add_per_tick(self._per_tick, prepare=self._prepare)
         world.on_trial(lambda w: self.synth.reseed(w.rng("ft.noise")))
 
-    def _per_tick(self, world: World, t_from_s: float, t_to_s: float) -> None:
-        t_s = self.stream.due_times(t_to_s)
+    def _prepare(self, world: World, t_end_s: float) -> None:
+        t_s = self.stream.due_times(t_end_s)
+        self._next = 0
         if len(t_s) == 0 or not self.stream.enabled:
+            self._sched = ([], [], [], [])
             return
-        st = world.state
         seq, dev_ns, host_ns = self.stream.stamp(t_s)
-        for i in range(len(t_s)):
-            raw = self.synth.reading(st.force_n, st.torque_z_nmm, st.contact_xy_mm)
-            self._recent_raw.append(raw)
-            w = raw - self.tare_offset
-            sample = Wrench(w[:3], w[3:], int(seq[i]), int(dev_ns[i]), int(host_ns[i]))
-            self.stream.push(int(host_ns[i]), sample)
-            if self.on_sample is not None:
-                self.on_sample(sample)
+        self._sched = (t_s.tolist(), seq.tolist(), dev_ns.tolist(), host_ns.tolist())
+
+    def _per_tick(self, world: World, t_from_s: float, t_to_s: float) -> None:
+        times, seq, dev_ns, host_ns = self._sched
+        k0 = self._next
+        if k0 >= len(times) or times[k0] > t_to_s:
+            return
+        k1 = bisect_right(times, t_to_s, lo=k0)
+        self._next = k1
+        st = world.state
+        synth = self.synth
+        load = synth.load(st.force_n, st.torque_z_nmm, st.contact_xy_mm)  # the state holds for these
+        push, on_sample, recent, tare = self.stream.push, self.on_sample, self._recent_raw, self.tare_offset
+        for i in range(k0, k1):
+            raw = synth.reading_of_load(load)
+            recent.append(raw)
+            w = raw - tare
+            h = host_ns[i]
+            sample = Wrench(w[:3], w[3:], seq[i], dev_ns[i], h)
+            push(h, sample)
+            if on_sample is not None:
+                on_sample(sample)
 
     def read_available(self) -> list[Wrench]:
         return self._drain()

@@ -58,4 +58,9 @@ class FTSynth:
 
     def reading(self, force_n: np.ndarray, torque_z_nmm: float, contact_xy_mm: np.ndarray) -> np.ndarray:
         """(6,) one raw sample: load + bias + noise."""
-        return self.load(force_n, torque_z_nmm, contact_xy_mm) + self.bias + self._noise()
+        return self.reading_of_load(self.load(force_n, torque_z_nmm, contact_xy_mm))
+
+    def reading_of_load(self, load: np.ndarray) -> np.ndarray:
+        """(6,) one raw sample of a noiseless wrench `load` (6,): load + bias + noise (the bias
+        before this sample's drift step)."""
+        return load + self.bias + self._noise()

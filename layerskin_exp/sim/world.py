@@ -45,6 +45,7 @@ class World:
         self.streams: dict[str, Stream] = {}
         self._producers: list[tuple[Stream, Producer]] = []
         self._per_tick: list[Callable] = []
+        self._prepare: list[Callable] = []
         self._trial_hooks: list[Callable[[World], None]] = []
         self.trial_key = ""  # labels of the current trial (canonical JSON); "" before the first
         # Step records of the current advance; element 0 is the last step before it.
@@ -102,9 +103,15 @@ class World:
         """Register a batched stream: produce(world, t_s, idx) is called once per advance."""
         self._producers.append((stream, produce))
 
-    def add_per_tick(self, fn: Callable[[World, float, float], None]) -> None:
-        """Register fn(world, t_from_s, t_to_s), called after each step for samples in [from, to)."""
+    def add_per_tick(self, fn: Callable[[World, float, float], None],
+                     prepare: Callable[[World, float], None] | None = None) -> None:
+        """Register fn(world, t_from_s, t_to_s), called after each step for the samples after
+        t_from_s up to and including t_to_s (the last step's state holds for them).
+        prepare(world, t_end_s), if given, runs once at the start of each advance (a device can
+        schedule and stamp all of its samples of the advance at once there)."""
         self._per_tick.append(fn)
+        if prepare is not None:
+            self._prepare.append(prepare)
 
     # ---- stepping ----------------------------------------------------------------------------
     def advance(self, dt_s: float) -> None:
@@ -115,6 +122,8 @@ class World:
         dt = self.mech_dt_s
         scene, model, per_tick = self.scene, self.skin_model, self._per_tick
         rec_t, rec_states, rec_snap = self._rec_t, self._rec_states, self._rec_snap
+        for prepare in self._prepare:
+            prepare(self, t_end)
         # Per-tick samples between the previous step and the next one still belong to the last state.
         if per_tick:
             next_tick_t = (self._tick + 1) * dt
