@@ -68,6 +68,7 @@ class Analysis:
         self.ts5: CnnGruForceModel | None = None
         self.camp: Campaign | None = None
         self.calib_feats: dict | None = None
+        self._grip_force: dict[int, np.ndarray] = {}  # grip trial index -> T-s5 force (K, 3) N
 
     def skip(self, section: str, reason: str) -> None:
         self.results["skipped"][section] = reason
@@ -183,6 +184,12 @@ class Analysis:
             self.skip("heights", "no slide (shear) trials")
         self.results["characterization"] = res
 
+    def grip_force(self, i: int) -> np.ndarray:
+        """T-s5 force (K, 3) N of grip trial i, predicted once and shared by the preload and slip cues."""
+        if i not in self._grip_force:
+            self._grip_force[i] = self.ts5.predict(self.camp.grip[i].maps)
+        return self._grip_force[i]
+
     def _grip_features(self):
         return [two_layer_features(t.maps, self.skin, self.a.preprocess.eps) for t in self.camp.grip]
 
@@ -219,8 +226,8 @@ class Analysis:
         self.results["tracking"] = out
         if self.ts5 is not None:
             pre = {}
-            for t in grip:
-                fz = self.ts5.predict(t.maps)[:, 2]
+            for i, t in enumerate(grip):
+                fz = self.grip_force(i)[:, 2]
                 pre.setdefault(f"{t.grip_depth_mm:g}", []).append(float(np.mean(fz)))
             self.results["preload_n"] = {g: float(np.mean(v)) for g, v in sorted(pre.items(), key=lambda kv: float(kv[0]))}
         if self.a.figures:
@@ -248,7 +255,8 @@ class Analysis:
                            f"{motion}, g = {t.grip_depth_mm:g} mm ({t.name})")
             self.figures.append(f"tracking_{motion}.png")
 
-    def _cue_signal(self, cue: str, t, f) -> np.ndarray | None:
+    def _cue_signal(self, cue: str, i: int, f) -> np.ndarray | None:
+        t = self.camp.grip[i]
         if cue == "superficial":
             return f["p_s"]
         if cue == "interlayer":
@@ -261,7 +269,7 @@ class Analysis:
             return d @ u
         if self.ts5 is None:
             return None
-        force = self.ts5.predict(t.maps)
+        force = self.grip_force(i)
         return np.linalg.norm(force, axis=1) if cue == "f_xyz" else force[:, 2]
 
     def slip(self) -> None:
@@ -283,7 +291,7 @@ class Analysis:
                 trials, traces = [], []
                 for i in idx:
                     t = grip[i]
-                    sig = self._cue_signal(cue, t, feats[i])
+                    sig = self._cue_signal(cue, i, feats[i])
                     if sig is None:
                         break
                     fs = 1.0 / float(np.median(np.diff(t.t_s)))
