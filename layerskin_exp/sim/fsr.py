@@ -45,6 +45,14 @@ class FSRLayer:
 
 def _conductance(pressure_kpa, gain, cfg, g_floor_s, g_sat_s):
     """gain (G_floor + G_sat x / (1 + x)); the power law only where the pressure is positive."""
+    if cfg.exponent > 0 and pressure_kpa.size and pressure_kpa.min() >= 0.0:
+        # no negative pressures: x(0) = 0 gives the floor exactly, no masking needed
+        x = pressure_kpa / cfg.saturation_kpa
+        x **= cfg.exponent
+        sat = x * g_sat_s
+        sat /= 1.0 + x
+        sat += g_floor_s
+        return gain * sat
     pos = pressure_kpa > 0.0
     x = (pressure_kpa[pos] / cfg.saturation_kpa) ** cfg.exponent
     sat = np.zeros(pressure_kpa.shape)
@@ -53,9 +61,11 @@ def _conductance(pressure_kpa, gain, cfg, g_floor_s, g_sat_s):
     return gain * sat
 
 
-def conductance_layers(layers, pressure_kpa: np.ndarray) -> np.ndarray:
-    """Conductance (siemens) of several layers at once: pressure (N, L, 16, 16), one FSRLayer per L."""
-    gain = np.stack([layer.gain for layer in layers])
+def conductance_layers(layers, pressure_kpa: np.ndarray, gain: np.ndarray | None = None) -> np.ndarray:
+    """Conductance (siemens) of several layers at once: pressure (N, L, 16, 16), one FSRLayer per L.
+    gain: the layers' gains stacked (L, 16, 16), if the caller keeps them."""
+    if gain is None:
+        gain = np.stack([layer.gain for layer in layers])
     first = layers[0]
     return _conductance(pressure_kpa, gain, first.cfg, first.g_floor_s, first.g_sat_s)
 
@@ -98,13 +108,14 @@ def advance_layers(layers, pressure_kpa: np.ndarray, dt_s: np.ndarray) -> np.nda
         b = min(a + _CHUNK, p.shape[0])
         cum = np.cumsum(dt[a:b])
         gap = cum[:, None] - cum[None, :]
+        # lower triangle; above it gap < 0, or gap = 0 with dt = 0 so alpha_j = 0: exact zeros
         mat = np.where(gap >= 0.0, alpha[a:b][None, :] * np.exp(-np.maximum(gap, 0.0)), 0.0)
-        mat = np.tril(mat)
         blk = _product(mat, plays[a:b].reshape(b - a, -1)).reshape(plays[a:b].shape)
         blk += np.exp(-cum)[(slice(None),) + (None,) * lag.ndim] * lag
         lags[a:b] = blk
         lag = blk[-1]
     if p.shape[0]:
+        play_all, lag_all = plays[-1].copy(), lags[-1].copy()  # (L, ...): each layer keeps a view
         for n, layer in enumerate(layers):
-            layer.play, layer.lag = plays[-1, n].copy(), lags[-1, n].copy()
+            layer.play, layer.lag = play_all[n], lag_all[n]
     return (1.0 - c) * plays + c * lags

@@ -42,11 +42,11 @@ class MatrixReadout:
         d_c = g_s.sum(axis=1) + self.g_div  # (M, cols)
         g_over = g_s / d_c[:, None, :]
         s_mat = -g_over @ np.swapaxes(g_s, 1, 2)
-        idx = np.arange(self.n)
-        s_mat[:, idx, idx] += d_r
+        n = self.n
+        s_mat.reshape(len(s_mat), n * n)[:, ::n + 1] += d_r  # the diagonal, as a strided view
         z_rr = np.linalg.inv(s_mat)
         z_rc = z_rr @ g_over  # [m, driven row i, column j] = Z[n + j, i] (S is symmetric)
-        z_ii = z_rr[:, idx, idx][:, :, None]
+        z_ii = z_rr.reshape(len(z_rr), n * n)[:, ::n + 1][:, :, None]
         if self.r_on > 0:
             g_on = 1.0 / self.r_on
             return vs * g_on * z_rc / (1.0 + g_on * z_ii)

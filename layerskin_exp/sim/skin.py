@@ -170,6 +170,10 @@ class SkinModel:
         r = sim.readout
         self.baseline_counts = np.clip(rng.normal(r.baseline_counts, r.baseline_sd_counts, size=(2, n, n)), 0, None)
         self._last_maps: np.ndarray | None = None  # (2, n, n) pressure at the last frame
+        period = skin.frame_period_ms * 1e-3
+        slot = np.arange(2 * n).reshape(2, n)
+        self._row_offsets_s = (2 * n - 1 - slot)[None] * period / (2 * n)  # (1, 2, n) before frame end
+        self._gains = np.stack([layer.gain for layer in self.fsr])  # (2, n, n), fixed per sheet
         self._last_t: float | None = None
 
     # ------------------------------------------------------------------ mechanics
@@ -296,6 +300,8 @@ class SkinModel:
         self._pair_max_sup = np.maximum(np.abs(tab.superficial_kpa[:-1]), np.abs(tab.superficial_kpa[1:]))
         self._pair_max_deep = np.maximum(np.abs(tab.deep_kpa[:-1]), np.abs(tab.deep_kpa[1:]))
         self._reach_sup = self._window_reach(self._pair_max_sup, np.ones(1))
+        self._tilt_table = np.stack([tab.tilt_gamma, tab.tilt_logz], axis=-1)
+        self._dist_row = tab.dist_mm[None, :]
 
     def _window_reach(self, pair_max: np.ndarray, factor: np.ndarray) -> np.ndarray:
         """Radius (mm) beyond which pair_max (M, n_dist) x factor (M or 1, n_dist) stays below
@@ -338,12 +344,13 @@ class SkinModel:
         si = x.astype(np.int64)
         su = x - si
 
-        def bilerp(table):
-            a = table[i, si] * (1 - su) + table[i, si + 1] * su
-            b = table[i + 1, si] * (1 - su) + table[i + 1, si + 1] * su
-            return a * (1 - t) + b * t
-
-        return bilerp(tab.tilt_gamma), bilerp(tab.tilt_logz)
+        # both tables at once: (n_delta, n_shift, 2) [gamma, logz]
+        table = self._tilt_table
+        su, t = su[:, None], t[:, None]
+        a = table[i, si] * (1 - su) + table[i, si + 1] * su
+        b = table[i + 1, si] * (1 - su) + table[i + 1, si + 1] * su
+        gl = a * (1 - t) + b * t
+        return gl[:, 0], gl[:, 1]
 
     def _window(self, centre: np.ndarray, reach: np.ndarray):
         """Taxel windows (start_y, start_x) (M,), common width, and which frames have one: every
@@ -378,7 +385,7 @@ class SkinModel:
         empty = (live[:0], live[:0], live[:0], 0, np.zeros((0, 0, 0), np.float32))
         if len(live) == 0:
             return empty, empty
-        b = StateBatch(**{k: v[live] for k, v in vars(batch).items()})
+        b = batch if len(live) == len(fz) else StateBatch(**{k: v[live] for k, v in vars(batch).items()})
         delta, fz, ft = b.indentation_mm, b.force_n[:, 2], b.force_n[:, :2]
         a = b.contact_xy_mm
         cd = a + b.surface_shift_mm  # contact in the deep frame
@@ -406,7 +413,7 @@ class SkinModel:
         sup = (live[k], sy[k], sx[k], width, self._lookup_pairs(self._lk_sup, i[k], t32[k], r2))
         # deep: spread profile tilted along the shear, times the lattice pattern; its window
         # bounds the profile times the largest tilt factor exp(|gamma| r - logz)
-        tilt_max = np.exp(np.abs(gamma)[:, None] * self.tab.dist_mm[None, :] - logz[:, None])
+        tilt_max = np.exp(np.abs(gamma)[:, None] * self._dist_row - logz[:, None])
         sy, sx, width, has = self._window(cd, self._window_reach(self._pair_max_deep[i], tilt_max))
         k = np.flatnonzero(has)
         rows, cols, qy, qx = self._grid_axes(sy[k], sx[k], width)
@@ -463,10 +470,10 @@ class SkinModel:
         deep *= ramp
         return sup, deep
 
-    def _taxel_sums(self, n: int, layer) -> np.ndarray:
-        """(n, 16, 16) float64 taxel means of one layer's windowed fields (zeros elsewhere)."""
+    def _taxel_sums(self, out: np.ndarray, layer) -> np.ndarray:
+        """Writes the taxel means (float64) of one layer's windowed fields into out (N, 16, 16)
+        (left as it is outside the windows: pass zeros)."""
         frames_idx, sy, sx, width, field = layer
-        out = np.zeros((n, self.skin.n_taxels, self.skin.n_taxels))
         if len(frames_idx) == 0:
             return out
         wq = width * self._nq
@@ -493,8 +500,17 @@ class SkinModel:
 
     def pressure_maps(self, states: list[MechState]) -> tuple[np.ndarray, np.ndarray]:
         """(N, 16, 16) mean pressure (kPa) over each taxel's electrode: superficial, deep."""
+        maps = self._maps(states)
+        return maps[:, 0], maps[:, 1]
+
+    def _maps(self, states: list[MechState]) -> np.ndarray:
+        """(N, 2, 16, 16) mean pressure (kPa) over each taxel's electrode, [superficial, deep]."""
+        n = self.skin.n_taxels
+        maps = np.zeros((len(states), 2, n, n))
         sup, deep = self._window_fields(stack_states(states))
-        return self._taxel_sums(len(states), sup), self._taxel_sums(len(states), deep)
+        self._taxel_sums(maps[:, 0], sup)
+        self._taxel_sums(maps[:, 1], deep)
+        return maps
 
     # ------------------------------------------------------------------ frames
     def reseed(self, rng: np.random.Generator) -> None:
@@ -504,10 +520,7 @@ class SkinModel:
 
     def _row_times(self, t_s: np.ndarray) -> np.ndarray:
         """(N, 2, n) sampling instants: t_s[k] ends the frame; rows sampled in sequence before it."""
-        n = self.skin.n_taxels
-        period = self.skin.frame_period_ms * 1e-3
-        slot = np.arange(2 * n).reshape(2, n)
-        t = t_s[:, None, None] - (2 * n - 1 - slot)[None] * period / (2 * n)
+        t = t_s[:, None, None] - self._row_offsets_s
         jit = self.sim.readout.scan_jitter_ms * 1e-3
         if jit > 0:
             t = t + self.rng.normal(0.0, jit, size=t.shape)
@@ -518,27 +531,33 @@ class SkinModel:
         t_s = np.asarray(t_s, dtype=float).reshape(-1)
         if len(states) != len(t_s):
             raise ValueError(f"frames: {len(states)} states for {len(t_s)} frame times; pass one state per frame")
+        if len(t_s) == 0:
+            empty = np.zeros((0, self.skin.n_taxels, self.skin.n_taxels), np.uint16)
+            return empty, empty.copy()
         n = self.skin.n_taxels
-        sup, deep = self.pressure_maps(states)
-        maps = np.stack([sup, deep], axis=1)  # (N, 2, n, n)
-        prev_maps = np.concatenate([maps[:1] if self._last_maps is None else self._last_maps[None], maps[:-1]])
-        prev_t = np.concatenate([[t_s[0] - self.skin.frame_period_ms * 1e-3 if self._last_t is None
-                                  else self._last_t], t_s[:-1]])
-        span = np.maximum(t_s - prev_t, 1e-9)
+        maps = self._maps(states)  # (N, 2, n, n)
+        prev_maps = np.empty_like(maps)
+        prev_maps[0] = maps[0] if self._last_maps is None else self._last_maps
+        prev_maps[1:] = maps[:-1]
+        prev_t = np.empty_like(t_s)
+        prev_t[0] = t_s[0] - self.skin.frame_period_ms * 1e-3 if self._last_t is None else self._last_t
+        prev_t[1:] = t_s[:-1]
+        dt = t_s - prev_t  # time since the previous frame
+        span = np.maximum(dt, 1e-9)
         rows_t = self._row_times(t_s)
         w_prev = _clip((t_s[:, None, None] - rows_t) / span[:, None, None], 0.0, 1.0)[..., None]
         sampled = maps * (1 - w_prev) + prev_maps * w_prev  # each row at its own instant
         self._last_maps, self._last_t = maps[-1], float(t_s[-1])
-        dt = np.diff(np.concatenate([[prev_t[0]], t_s]))
         eff = advance_layers(self.fsr, sampled, dt)  # both layers at once (N, 2, n, n)
-        g = conductance_layers(self.fsr, eff)
+        g = conductance_layers(self.fsr, eff, self._gains)
         volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
         out = (self.readout.counts(volts) + self.baseline_counts[None]).transpose(1, 0, 2, 3)  # (2, N, n, n)
         noise = self.sim.readout.noise_counts
         if noise > 0:
-            out = out + self.rng.normal(0.0, noise, size=out.shape)
-        out = _clip(np.rint(out), 0, self.readout.full_scale).astype(np.uint16)
-        return out[0], out[1]
+            out += self.rng.normal(0.0, noise, size=out.shape)
+        np.rint(out, out=out)
+        counts = _clip(out, 0, self.readout.full_scale, out=out).astype(np.uint16)
+        return counts[0], counts[1]
 
     # ------------------------------------------------------------------ board description
     def calibration(self) -> dict:
