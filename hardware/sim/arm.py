@@ -19,6 +19,7 @@ class SimArm(SimStreamMixin, Arm):
         self.world, self.scene, self.cfg = world, scene, cfg
         self.stream = world.new_stream("arm", cfg.clock, 1.0 / cfg.rate_hz)
         self._noise_rng = np.random.default_rng(self.stream.rng.integers(2**63))
+        self._last_rot: tuple[np.ndarray, np.ndarray] | None = None  # (rotation (9,), its quaternion (4,))
         world.add_producer(self.stream, self._produce)
         world.on_trial(self._reseed)
 
@@ -28,10 +29,20 @@ class SimArm(SimStreamMixin, Arm):
     def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
         snap = world.snapshots(idx)
         p = snap[:, :3] + self._noise_rng.normal(0.0, self.cfg.position_noise_m, (len(t_s), 3))
-        q = Rotation.from_matrix(snap[:, 3:12].reshape(-1, 3, 3)).as_quat()  # x, y, z, w
+        q = self._quats(snap[:, 3:12])
         seq, dev_ns, host_ns = self.stream.stamp(t_s)
         for i in range(len(t_s)):
             self.stream.push(int(host_ns[i]), Pose(p[i], q[i], "tcp", int(dev_ns[i]), int(host_ns[i]), int(seq[i])))
+
+    def _quats(self, rot9: np.ndarray) -> np.ndarray:
+        """(N, 4) quaternions x, y, z, w of row-major rotation matrices (N, 9). The tool mostly
+        keeps its orientation: when every matrix equals the last one converted, reuse its result."""
+        last = self._last_rot
+        if last is not None and (rot9 == last[0]).all():
+            return np.repeat(last[1][None], len(rot9), axis=0)
+        q = Rotation.from_matrix(rot9.reshape(-1, 3, 3)).as_quat()
+        self._last_rot = (rot9[-1].copy(), q[-1].copy())
+        return q
 
     def move_linear(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
                     angular_speed_rad_s: float | None = None) -> None:

@@ -69,6 +69,7 @@ class GripScene:
         self.R_home = self.R_ref.copy()
         self.place_rod(0.0, 0.0)
         self._R_tcp = self.R_ref.copy()
+        self._rot_cache: tuple | None = None
         self._cache = None
         self._last_yaw = math.pi / 2
 
@@ -151,7 +152,16 @@ class GripScene:
             self._cache = None
 
     def tcp_rotation(self) -> np.ndarray:
-        return self.R_ref @ rotvec_to_matrix(self.rot.position)
+        """TCP rotation (3, 3) in base; reused while R_ref and the rotation vector are unchanged
+        (do not modify the returned array)."""
+        rv = self.rot.position
+        key = (rv[0], rv[1], rv[2])
+        cached = self._rot_cache
+        if cached is not None and cached[0] is self.R_ref and cached[1] == key:
+            return cached[2]
+        R = self.R_ref @ rotvec_to_matrix(rv)
+        self._rot_cache = (self.R_ref, key, R)
+        return R
 
     @property
     def opening_mm(self) -> float:

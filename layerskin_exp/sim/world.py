@@ -46,6 +46,7 @@ class World:
         self._producers: list[tuple[Stream, Producer]] = []
         self._per_tick: list[Callable] = []
         self._prepare: list[Callable] = []
+        self._snap_array: np.ndarray | None = None
         self._trial_hooks: list[Callable[[World], None]] = []
         self.trial_key = ""  # labels of the current trial (canonical JSON); "" before the first
         # Step records of the current advance; element 0 is the last step before it.
@@ -149,6 +150,7 @@ class World:
 
     def _run_producers(self, t_end: float) -> None:
         times = np.asarray(self._rec_t)
+        self._snap_array = None
         for stream, produce in self._producers:
             t_s = stream.due_times(t_end)
             if len(t_s) == 0 or not stream.enabled:
@@ -157,10 +159,13 @@ class World:
             produce(self, t_s, np.maximum(idx, 0))
         # Keep only the last step as the hold value for the next advance.
         del self._rec_t[:-1], self._rec_states[:-1], self._rec_snap[:-1]
+        self._snap_array = None
 
     def snapshots(self, idx: np.ndarray) -> np.ndarray:
         """(N, K) scene snapshots (actuator positions) at the given step indices of this advance."""
-        return np.asarray(self._rec_snap, dtype=float)[idx]
+        if self._snap_array is None:  # once per advance, shared by the producers
+            self._snap_array = np.asarray(self._rec_snap, dtype=float)
+        return self._snap_array[idx]
 
     def states(self, idx: np.ndarray) -> list:
         return [self._rec_states[i] for i in idx]
