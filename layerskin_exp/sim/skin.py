@@ -174,6 +174,10 @@ class SkinModel:
         slot = np.arange(2 * n).reshape(2, n)
         self._row_offsets_s = (2 * n - 1 - slot)[None] * period / (2 * n)  # (1, 2, n) before frame end
         self._gains = np.stack([layer.gain for layer in self.fsr])  # (2, n, n), fixed per sheet
+        # Idle sheet: no pressure at the last frame and both FSR memories exactly zero. Unloaded
+        # frames then leave it so and read the floor conductance: constant counts plus noise.
+        self._idle = True
+        self._idle_counts: np.ndarray | None = None  # (2, n, n) float counts before noise
         self._last_t: float | None = None
 
     # ------------------------------------------------------------------ mechanics
@@ -535,6 +539,8 @@ class SkinModel:
             empty = np.zeros((0, self.skin.n_taxels, self.skin.n_taxels), np.uint16)
             return empty, empty.copy()
         n = self.skin.n_taxels
+        if self._idle and not any(s.force_n[2] > 0.0 for s in states):
+            return self._idle_frames(t_s)
         maps = self._maps(states)  # (N, 2, n, n)
         prev_maps = np.empty_like(maps)
         prev_maps[0] = maps[0] if self._last_maps is None else self._last_maps
@@ -549,6 +555,7 @@ class SkinModel:
         sampled = maps * (1 - w_prev) + prev_maps * w_prev  # each row at its own instant
         self._last_maps, self._last_t = maps[-1], float(t_s[-1])
         eff = advance_layers(self.fsr, sampled, dt)  # both layers at once (N, 2, n, n)
+        self._idle = not (maps[-1].any() or any(f.play.any() or f.lag.any() for f in self.fsr))
         g = conductance_layers(self.fsr, eff, self._gains)
         volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
         out = (self.readout.counts(volts) + self.baseline_counts[None]).transpose(1, 0, 2, 3)  # (2, N, n, n)
@@ -557,6 +564,24 @@ class SkinModel:
             out += self.rng.normal(0.0, noise, size=out.shape)
         np.rint(out, out=out)
         counts = _clip(out, 0, self.readout.full_scale, out=out).astype(np.uint16)
+        return counts[0], counts[1]
+
+    def _idle_frames(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """frames() for unloaded states on an idle sheet: the full pipeline's result (zero
+        pressure, floor conductance, constant column voltages), with the same draws from rng."""
+        n = self.skin.n_taxels
+        if self._idle_counts is None:
+            g = conductance_layers(self.fsr, np.zeros((1, 2, n, n)), self._gains)
+            volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
+            self._idle_counts = (self.readout.counts(volts) + self.baseline_counts[None])[0]
+        self._row_times(t_s)  # the scan jitter draws (they do not matter at zero pressure)
+        out = np.repeat(self._idle_counts[:, None], len(t_s), axis=1)  # (2, N, n, n)
+        noise = self.sim.readout.noise_counts
+        if noise > 0:
+            out += self.rng.normal(0.0, noise, size=out.shape)
+        np.rint(out, out=out)
+        counts = _clip(out, 0, self.readout.full_scale, out=out).astype(np.uint16)
+        self._last_maps, self._last_t = np.zeros((2, n, n)), float(t_s[-1])
         return counts[0], counts[1]
 
     # ------------------------------------------------------------------ board description

@@ -117,3 +117,37 @@ def test_frames_with_noise_are_deterministic_and_noise_has_its_rms():
     rms = float(np.sqrt((resid**2).mean() * len(idle) / (len(idle) - 1)))
     # rounding adds 1/12 count^2 to the configured 1.5 count rms
     assert rms == pytest.approx(math.sqrt(sim.readout.noise_counts**2 + 1 / 12), rel=0.05)
+
+
+class _AlwaysFull(SkinModel):
+    """The same model with the idle-sheet shortcut switched off (every frame the full pipeline)."""
+
+    def frames(self, states, t_s):
+        self._idle = False
+        return super().frames(states, t_s)
+
+
+def test_idle_sheet_shortcut_is_the_full_pipeline():
+    """Unloaded frames before the first contact take a shortcut (constant counts + noise); with
+    the read noise and scan jitter on, every count and the rng stream must match the full path,
+    through the first press and the release after it (creep memory: no shortcut any more)."""
+    sim = SimConfig(seed=4)
+    fast = SkinModel(sim, SKIN, "hemisphere", np.random.default_rng(4))
+    full = _AlwaysFull(sim, SKIN, "hemisphere", np.random.default_rng(4))
+    for m in (fast, full):
+        m.reseed(np.random.default_rng(11))
+    shortcut = []
+    inner = fast._idle_frames
+    fast._idle_frames = lambda t: shortcut.append(len(t)) or inner(t)
+    got, want = [], []
+    for k in range(0, 3000, 7):
+        z = 0.6 - 0.002 * k if k < 1400 else -2.2 + 0.004 * (k - 1400)
+        batch = [fast.step(k * 1e-3 + j * 1e-3, np.array([1.0, -0.5, z])) for j in range(7)]
+        batch_full = [full.step(k * 1e-3 + j * 1e-3, np.array([1.0, -0.5, z])) for j in range(7)]
+        t = np.array([s.t_s for s in batch]) + 2e-4
+        got.append(np.stack(fast.frames(batch, t)))
+        want.append(np.stack(full.frames(batch_full, t)))
+    np.testing.assert_array_equal(np.concatenate(got, axis=1), np.concatenate(want, axis=1))
+    assert sum(shortcut) > 100  # the approach took the shortcut
+    assert not fast._idle  # after a press the creep memory stays: no shortcut
+    assert np.concatenate(got, axis=1).max() > 1000  # loaded frames are compared too
