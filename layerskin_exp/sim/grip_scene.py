@@ -70,6 +70,7 @@ class GripScene:
         self.place_rod(0.0, 0.0)
         self._R_tcp = self.R_ref.copy()
         self._rot_cache: tuple | None = None
+        self._geo: tuple | None = None
         self._cache = None
         self._last_yaw = math.pi / 2
 
@@ -179,9 +180,16 @@ class GripScene:
         if self._cache is not None:
             return self._cache
         self._R_tcp = R_tcp = self.tcp_rotation()
-        origin, R_skin = self.skin_pose(np.asarray(self.pos.position), R_tcp, self.opening_mm)
-        c_s = R_skin.T @ (self.rod_c_m - origin) * 1e3
-        a_s = R_skin.T @ self.rod_a
+        opening = self.opening_mm
+        geo = self._geo
+        if geo is None or geo[0] is not R_tcp or geo[1] != opening or geo[2] is not self.rod_a:
+            # what only the orientation, the opening and the rod give (same operations as skin_pose)
+            R_skin = R_tcp @ R_TCP_SKIN
+            geo = self._geo = (R_tcp, opening, self.rod_a, R_tcp @ np.array([0.0, -opening / 2.0 * 1e-3, 0.0]),
+                               R_skin.T, R_skin.T @ self.rod_a)
+        _, _, _, jaw_offset, R_skin_T, a_s = geo
+        origin = np.asarray(self.pos.position) + jaw_offset
+        c_s = R_skin_T @ (self.rod_c_m - origin) * 1e3
         pt = c_s - (c_s @ a_s) * a_s
         # The skin model's yaw is the axis direction from skin x; a rod has no head or tail, so
         # keep the branch nearest the last value (continuous through +-90 deg).
