@@ -41,6 +41,7 @@ INDENTERS = ("hemisphere", "rod")
 # The hemisphere's fields are evaluated in a window around the contact: outside it each layer's
 # profile (times the deep layer's largest tilt factor) is below this fraction of its peak.
 WINDOW_EPS = 1e-8
+_TINY = np.finfo(float).tiny
 
 
 @dataclass
@@ -423,8 +424,8 @@ class SkinModel:
         rows, cols, qy, qx = self._grid_axes(sy[k], sx[k], width)
         dx = qx - cd[k, 0:1].astype(f32)
         dy = qy - cd[k, 1:2].astype(f32)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            nrm = np.where(ft_mag[k, None] > 0, ft[k] / ft_mag[k, None], 0.0).astype(f32)
+        # shear direction (0 without shear: ft is 0 there, so no 0/0)
+        nrm = (ft[k] / np.maximum(ft_mag[k, None], _TINY)).astype(f32)
         g = (gamma[k, None] * nrm).astype(f32)  # tilt along the shear direction
         half_logz = 0.5 * logz[k, None].astype(f32)
         ex = np.exp(g[:, 0, None] * dx - half_logz)
