@@ -76,13 +76,19 @@ def subtract_baseline(maps: np.ndarray, baseline: np.ndarray, scale: np.ndarray 
     return maps
 
 
-def layer_scale(maps: np.ndarray, percentile: float) -> np.ndarray:
+def layer_scale(maps, percentile: float) -> np.ndarray:
     """Per-layer normalisation: the given percentile of frame totals, (K, L, 16, 16) -> (L,).
+
+    maps may also be a list of per-trial (K_i, L, 16, 16) arrays (the same result as their
+    concatenation, without building it).
 
     After dividing by it, a strongly loaded frame has a total of about 1 in every layer, which puts
     the weaker deep layer on the superficial layer's scale (needed for |p_s − p_d|).
     """
-    totals = maps.sum(axis=(-2, -1))  # (K, L)
+    if isinstance(maps, np.ndarray):
+        totals = maps.sum(axis=(-2, -1))  # (K, L)
+    else:
+        totals = np.concatenate([m.sum(axis=(-2, -1)) for m in maps])
     s = np.percentile(totals, percentile, axis=0)
     return np.where(s > 0, s, 1.0).astype(np.float32)
 

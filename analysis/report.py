@@ -87,9 +87,10 @@ class Analysis:
         if not src:
             self.scale = np.ones(2, np.float32)
             return
-        self.scale = layer_scale(np.concatenate(src), self.a.preprocess.scale_percentile)
+        self.scale = layer_scale(src, self.a.preprocess.scale_percentile)
+        inv = (1.0 / self.scale)[None, :, None, None]
         for t in [*camp.calibration, *camp.grip]:
-            t.maps *= (1.0 / self.scale)[None, :, None, None]
+            t.maps *= inv
         self.results["inputs"]["layer_scale_counts"] = self.scale
 
     def _calibration_arrays(self):
