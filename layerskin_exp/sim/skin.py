@@ -142,6 +142,8 @@ class SkinModel:
         self._torsion = self.tab.torsion_extra.tolist()
         self._fric_r = self.tab.friction_radius_mm.tolist()
         self._dd = self.tab.d_delta
+        self._last = len(self._delta) - 1
+        self._width2 = sim.spacer.width**2
         half = sim.spacer.width / 2
         self._half = half
         k0 = float(self.law.shear_stiffness_kpa_per_mm(0.0)) * 1e-3  # N/mm per mm^2
@@ -229,17 +231,31 @@ class SkinModel:
             s1 = s2 = 0.0
             length = 1.0
         delta = self._realised_indentation(-z, length) if length > 0 else 0.0
-        fz = max(length * self._lookup(self._load, delta), 0.0) if delta > 0 else 0.0
-        j_pad = self._j_pad + self.sim.spacer.width**2 * (x * x + y * y)
+        # every table shares the indentation grid: one bracket for all lookups (same formula as _lookup)
+        xg = delta / self._dd
+        i = int(xg)
+        if 0 <= i < self._last:
+            tg = xg - i
+            ld, sh = self._load, self._shear
+            load = ld[i] + tg * (ld[i + 1] - ld[i])
+            shear = sh[i] + tg * (sh[i + 1] - sh[i])
+            if self.kind != "rod":
+                tq, fr_r = self._torsion, self._fric_r
+                torsion = tq[i] + tg * (tq[i + 1] - tq[i])
+                radius = fr_r[i] + tg * (fr_r[i + 1] - fr_r[i])
+        else:
+            load, shear = self._lookup(self._load, delta), self._lookup(self._shear, delta)
+            if self.kind != "rod":
+                torsion, radius = self._lookup(self._torsion, delta), self._lookup(self._fric_r, delta)
+        fz = max(length * load, 0.0) if delta > 0 else 0.0
+        j_pad = self._j_pad + self._width2 * (x * x + y * y)
         if self.kind == "rod":
-            shear_line = self._lookup(self._shear, delta)
-            k_t = self._k0_area + length * shear_line
-            k_r = self._k0 * j_pad + shear_line * (s2**3 - s1**3) / 3.0
+            k_t = self._k0_area + length * shear
+            k_r = self._k0 * j_pad + shear * (s2**3 - s1**3) / 3.0
             radius = (s1 * s1 + s2 * s2) / (2.0 * length) if length > 0 else 0.0
         else:
-            k_t = self._k0_area + self._lookup(self._shear, delta)
-            k_r = self._k0 * j_pad + self._lookup(self._torsion, delta)
-            radius = self._lookup(self._fric_r, delta)
+            k_t = self._k0_area + shear
+            k_r = self._k0 * j_pad + torsion
         if self._prev is None:
             dt, dx, dy, dyaw = 0.0, 0.0, 0.0, 0.0
         else:
@@ -248,17 +264,19 @@ class SkinModel:
         self._prev = (t_s, x, y, yaw)
         fr = self.friction
         fx, fy, tq = fr.update(dt, dx, dy, dyaw, fz, k_t, k_r, radius)
+        # the state's vectors are views of one array (one allocation per step)
+        v = np.array((fx, fy, fz, x - fr.ux, y - fr.uy, fr.ux, fr.uy, fr.slip_x, fr.slip_y))
         return MechState(
             t_s=float(t_s),
-            force_n=np.array((fx, fy, fz)),
+            force_n=v[0:3],
             torque_z_nmm=tq,
             indentation_mm=delta,
-            contact_xy_mm=np.array((x - fr.ux, y - fr.uy)),
+            contact_xy_mm=v[3:5],
             indenter_yaw_rad=yaw,
-            surface_shift_mm=np.array((fr.ux, fr.uy)),
+            surface_shift_mm=v[5:7],
             surface_rotation_rad=fr.theta,
             slipping=fr.slipping,
-            slip_mm=np.array((fr.slip_x, fr.slip_y)),
+            slip_mm=v[7:9],
             slip_rad=fr.slip_rad,
         )
 
