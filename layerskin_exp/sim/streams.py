@@ -33,17 +33,23 @@ class Stream:
         self.enabled = False
         self.seq = 0
         self._queue: deque = deque()
+        self._offsets = np.zeros(1)  # cached running sum of the nominal period (no-jitter schedule)
 
     def due_times(self, t_end_s: float) -> np.ndarray:
         """(N,) true times of the samples up to and including t_end_s; advances the schedule."""
         if self.next_t_s > t_end_s:
             return np.empty(0)
         n = int((t_end_s - self.next_t_s) / self.period_true_s) + 2
-        steps = np.full(n, self.period_true_s)
         if self.period_jitter_s > 0:
             # Interval jitter, clipped so the scan never runs backwards.
+            steps = np.full(n, self.period_true_s)
             steps = np.maximum(steps + self.rng.normal(0.0, self.period_jitter_s, n), 0.2 * self.period_true_s)
-        times = self.next_t_s + np.concatenate(([0.0], np.cumsum(steps[:-1])))
+            times = self.next_t_s + np.concatenate(([0.0], np.cumsum(steps[:-1])))
+        else:
+            # [0, cumsum of n - 1 equal periods]: a prefix of one cached running sum (same values)
+            if len(self._offsets) < n:
+                self._offsets = np.concatenate(([0.0], np.cumsum(np.full(2 * n, self.period_true_s))))
+            times = self.next_t_s + self._offsets[:n]
         while times[-1] <= t_end_s:  # jitter made the intervals short: extend
             more = times[-1] + np.cumsum(np.full(n, self.period_true_s))
             times = np.concatenate((times, more))
