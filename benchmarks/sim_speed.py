@@ -3,6 +3,7 @@
 - calibration press/slide on the platform (10 ms control ticks, every stream drained each tick);
 - grip trial with camera rendering: approach, close 12 mm, 0 -> +5 -> 0 -> -5 -> 0 mm at 2 mm/s;
 - peak Python heap (tracemalloc) of a 60 s grip trial that keeps every record it reads.
+Shares of wall time: skin frames (SkinModel.frames) in both trials, camera render + detect in the grip.
 Each speed is simulated seconds per wall second. Baseline, same run: the same trial with the
 naive per-taxel frame pipeline (benchmarks/skin_naive.py) in place of SkinModel.frames. The
 naive pipeline is hemisphere-only and very slow, so its cost per frame pair is timed on a short
@@ -37,6 +38,24 @@ class _TimedFrames:
         self.wall_s += time.perf_counter() - t0
         self.n += len(states)
         return out
+
+
+class _TimedCamera:
+    """Wraps a camera imager's render and detect to sum the wall time spent in them."""
+
+    def __init__(self, imager) -> None:
+        self.wall_s = 0.0
+        for name in ("render", "detect"):
+            setattr(imager, name, self._timed(getattr(imager, name)))
+
+    def _timed(self, fn):
+        def call(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.wall_s += time.perf_counter() - t0
+        return call
 
 
 def _drain(rig, keep=None):
@@ -74,6 +93,7 @@ def grip_trial(seed: int = 0, keep=None, repeats: int = 1):
     rig.connect()
     world = rig.extras["world"]
     timed = _TimedFrames(world.skin_model)
+    timed.camera = _TimedCamera(rig.camera.imager)
     t0 = time.perf_counter()
     sim_s = 0.0
     rig.gripper.move(40.0, 20.0, 0.0)
@@ -129,6 +149,7 @@ def run() -> dict:
         "grip_sim_s": grip_sim,
         "grip_x_realtime": grip_sim / grip_wall,
         "grip_frames_share_of_wall": grip_frames.wall_s / grip_wall,
+        "grip_camera_share_of_wall": grip_frames.camera.wall_s / grip_wall,  # render + detect
         "grip_camera_detections": n_det,
         "grip_baseline_naive_x_realtime": baseline(grip_sim, grip_wall, grip_frames),
         "naive_frame_pair_ms": naive_s * 1e3,
