@@ -24,6 +24,7 @@ passive-matrix readout with crosstalk, offsets, noise and quantisation.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -59,6 +60,9 @@ class MechState:
     slipping: bool
     slip_mm: np.ndarray  # (2,) cumulative slip of the cover relative to the indenter
     slip_rad: float
+    # (model, n): states with the same key have the same loading configuration (indentation,
+    # forces, torque, contact, yaw, shear shift and rotation), hence the same pressure maps
+    config_key: tuple | None = None
 
 
 @dataclass
@@ -89,6 +93,7 @@ def stack_states(states: list[MechState]) -> StateBatch:
 
 
 _TABLE_CACHE: dict[str, ContactTables] = {}
+_MODEL_IDS = itertools.count()
 
 
 def tables_for(sim: SimConfig, kind: str) -> ContactTables:
@@ -152,6 +157,10 @@ class SkinModel:
         self._j_pad = sim.spacer.width**4 / 6.0
         self.friction = StickSlip(sim.cover.friction, sim.cover.kinetic, sim.cover.aging_s, sim.cover.overshoot)
         self._prev = None  # (t, x, y, yaw)
+        self._model_id = next(_MODEL_IDS)
+        self._config: tuple | None = None  # loading configuration of the last step
+        self._config_key = (self._model_id, 0)
+        self._maps_cache: tuple | None = None  # (config_key, (2, n, n) maps) of the last frame computed
         # --- quadrature over each taxel's electrode
         g, w = np.polynomial.legendre.leggauss(sim.contact.quad_points)
         centres = skin.taxel_centres_mm()
@@ -264,6 +273,10 @@ class SkinModel:
         self._prev = (t_s, x, y, yaw)
         fr = self.friction
         fx, fy, tq = fr.update(dt, dx, dy, dyaw, fz, k_t, k_r, radius)
+        config = (delta, fx, fy, fz, tq, x, y, yaw, fr.ux, fr.uy, fr.theta)
+        if config != self._config:  # a new loading configuration (a hold repeats the last one)
+            self._config = config
+            self._config_key = (self._model_id, self._config_key[1] + 1)
         # the state's vectors are views of one array (one allocation per step)
         v = np.array((fx, fy, fz, x - fr.ux, y - fr.uy, fr.ux, fr.uy, fr.slip_x, fr.slip_y))
         return MechState(
@@ -278,6 +291,7 @@ class SkinModel:
             slipping=fr.slipping,
             slip_mm=v[7:9],
             slip_rad=fr.slip_rad,
+            config_key=self._config_key,
         )
 
     # ------------------------------------------------------------------ pressure maps
@@ -529,10 +543,18 @@ class SkinModel:
     def _maps(self, states: list[MechState]) -> np.ndarray:
         """(N, 2, 16, 16) mean pressure (kPa) over each taxel's electrode, [superficial, deep]."""
         n = self.skin.n_taxels
+        cached = self._maps_cache
+        if cached is not None and all(s.config_key == cached[0] for s in states):
+            # a hold: the same loading configuration as the last frame computed, the same maps
+            maps = np.empty((len(states), 2, n, n))
+            maps[:] = cached[1]
+            return maps
         maps = np.zeros((len(states), 2, n, n))
         sup, deep = self._window_fields(stack_states(states))
         self._taxel_sums(maps[:, 0], sup)
         self._taxel_sums(maps[:, 1], deep)
+        key = states[-1].config_key if states else None
+        self._maps_cache = None if key is None else (key, maps[-1].copy())
         return maps
 
     # ------------------------------------------------------------------ frames

@@ -151,3 +151,44 @@ def test_idle_sheet_shortcut_is_the_full_pipeline():
     assert sum(shortcut) > 100  # the approach took the shortcut
     assert not fast._idle  # after a press the creep memory stays: no shortcut
     assert np.concatenate(got, axis=1).max() > 1000  # loaded frames are compared too
+
+
+class _NoMapsCache(SkinModel):
+    """The same model recomputing every frame's pressure maps (no reuse during holds)."""
+
+    def _maps(self, states):
+        self._maps_cache = None
+        return super()._maps(states)
+
+
+@pytest.mark.parametrize("kind", ["hemisphere", "rod"])
+def test_hold_reuses_maps_exactly(kind):
+    """While the indenter holds still the loading configuration repeats and the maps are reused:
+    counts (noise on) must equal recomputing every frame, through press, hold, slide, hold."""
+    sim = SimConfig(seed=6)
+    k_support = 20.0 if kind == "rod" else None
+    fast = SkinModel(sim, SKIN, kind, np.random.default_rng(6), support_stiffness_n_per_mm=k_support)
+    full = _NoMapsCache(sim, SKIN, kind, np.random.default_rng(6), support_stiffness_n_per_mm=k_support)
+    reused = []
+    inner = fast._window_fields
+    fast._window_fields = lambda b: reused.append(len(b.t_s)) or inner(b)
+
+    def pose(k):
+        if k < 400:  # press
+            return [0.5, -0.3, 0.4 - 2.4 * k / 400]
+        if k < 900:  # hold
+            return [0.5, -0.3, -2.0]
+        if k < 1700:  # slide 2 mm (stick-slip)
+            return [0.5 + 2.0 * (k - 900) / 800, -0.3, -2.0]
+        return [2.5, -0.3, -2.0]  # hold
+
+    got, want = [], []
+    for k0 in range(0, 2400, 5):
+        for m, out in ((fast, got), (full, want)):
+            batch = [m.step((k0 + j) * 1e-3, np.array(pose(k0 + j)), math.pi / 2) for j in range(5)]
+            out.append(np.stack(m.frames(batch[::2], np.array([s.t_s for s in batch[::2]]))))
+    np.testing.assert_array_equal(np.concatenate(got, axis=1), np.concatenate(want, axis=1))
+    computed = sum(reused)
+    total = sum(x.shape[1] for x in got)
+    assert computed < 0.8 * total  # the holds reused the maps
+    assert np.concatenate(got, axis=1).max() > 500  # loaded frames
