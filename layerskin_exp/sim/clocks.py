@@ -8,6 +8,7 @@ in first out (a serial line or a TCP stream never reorders).
 
 from __future__ import annotations
 
+import math
 import zlib
 
 import numpy as np
@@ -18,6 +19,14 @@ from layerskin_exp.sim.rig_config import DeviceClockConfig
 def device_rng(seed: int, name: str) -> np.random.Generator:
     """A generator for one named part of the world, reproducible from the world seed alone."""
     return np.random.default_rng([int(seed) & 0xFFFFFFFF, zlib.crc32(name.encode())])
+
+
+def lognormal_unit_mean(rng: np.random.Generator, cv: float, size=None):
+    """Mean-one lognormal draw(s) with coefficient of variation cv (exactly 1 where cv is 0)."""
+    if cv <= 0:
+        return 1.0 if size is None else np.ones(size)
+    sigma = math.sqrt(math.log1p(cv * cv))
+    return np.exp(rng.normal(-0.5 * sigma * sigma, sigma, size=size))
 
 
 class DeviceClock:

@@ -9,7 +9,6 @@ is `-m sim.spacer.modulus=20,35,60`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from hydra.core.config_store import ConfigStore
@@ -162,11 +161,6 @@ class FSRConfig:
         _fraction(self.creep, "sim.fsr.creep")
         _positive(self.creep_s, "sim.fsr.creep_s", "creep time constant must be > 0 s")
         _positive(self.layer_thickness_mm, "sim.fsr.layer_thickness_mm")
-
-    @property
-    def gain_sigma(self) -> float:
-        """Lognormal sigma giving the configured coefficient of variation."""
-        return math.sqrt(math.log1p(self.gain_cv**2))
 
 
 @dataclass

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from layerskin_exp.sim.clocks import lognormal_unit_mean
 from layerskin_exp.sim.config import FSRConfig
 
 
@@ -22,9 +23,7 @@ class FSRLayer:
 
     def __init__(self, cfg: FSRConfig, shape: tuple[int, int], rng: np.random.Generator):
         self.cfg = cfg
-        sigma = cfg.gain_sigma
-        # mean-one lognormal gains
-        self.gain = np.exp(rng.normal(-0.5 * sigma**2, sigma, size=shape)) if sigma > 0 else np.ones(shape)
+        self.gain = lognormal_unit_mean(rng, cfg.gain_cv, shape)
         self.g_sat_s = 1.0 / (cfg.saturated_kohm * 1e3)
         self.g_floor_s = 1.0 / (cfg.floor_mohm * 1e6)
         self.play = np.zeros(shape)

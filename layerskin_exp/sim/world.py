@@ -11,13 +11,12 @@ step at or before each sample (zero-order hold).
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Callable
 
 import numpy as np
 
 from layerskin_exp.config import SkinConfig
-from layerskin_exp.sim.clocks import DeviceClock, device_rng
+from layerskin_exp.sim.clocks import DeviceClock, device_rng, lognormal_unit_mean
 from layerskin_exp.sim.rig_config import DeviceClockConfig, RigConfig
 from layerskin_exp.sim.streams import Stream
 
@@ -91,8 +90,7 @@ class World:
             self.skin_model.reseed(self.rng("skin_model.noise"))
         var = self.rig.variation
         rng = self.rng("variation")
-        sigma = math.sqrt(math.log1p(var.friction_cv ** 2))
-        factor = float(np.exp(rng.normal(-0.5 * sigma ** 2, sigma))) if sigma > 0 else 1.0
+        factor = float(lognormal_unit_mean(rng, var.friction_cv))
         if hasattr(self.skin_model, "friction"):
             self.skin_model.friction.set_surface_factor(factor)
         if hasattr(self.scene, "begin_trial"):
