@@ -218,7 +218,8 @@ class Rig:
     extras: dict = field(default_factory=dict)
     # Safety guards: called by the backend for every F/T sample as it is acquired (the sim
     # world at the sample's time, a lab driver in its receive thread). A guard returns None or
-    # a reason; on the first reason the backend stops all motion at once and sets `tripped`.
+    # a reason and must not act themselves; on the first reason the backend stops all motion at
+    # once and sets `tripped`.
     guards: list[Callable[[Wrench], str | None]] = field(default_factory=list)
     tripped: str | None = None
     # Called with each trial's labels before it starts (Rig.begin_trial). The simulated backend
@@ -233,17 +234,26 @@ class Rig:
     def add_guard(self, guard: Callable[[Wrench], str | None]) -> None:
         self.guards.append(guard)
 
+    def guard_reason(self, sample: Wrench) -> str | None:
+        """What check_guards would trip on for this sample (None if nothing, or if already
+        tripped), without acting. Guards are pure functions of the sample."""
+        if self.tripped is not None:
+            return None
+        for g in self.guards:
+            reason = g(sample)
+            if reason:
+                return reason
+        return None
+
     def check_guards(self, sample: Wrench) -> str | None:
         """Run the guards on one sample; stop motion on the first trip. Backends call this."""
         if self.tripped is not None:
             return self.tripped
-        for g in self.guards:
-            reason = g(sample)
-            if reason:
-                self.tripped = reason
-                self.stop_motion()
-                return reason
-        return None
+        reason = self.guard_reason(sample)
+        if reason:
+            self.tripped = reason
+            self.stop_motion()
+        return reason
 
     def devices(self) -> list[Device]:
         return [d for d in (self.skin, self.ft, self.platform, self.arm, self.gripper, self.camera)

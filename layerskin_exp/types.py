@@ -121,6 +121,18 @@ class StreamHealth:
     corrupt: int = 0  # bytes or packets rejected by a parser (after resync)
     reconnects: int = 0
 
+    def observe_seqs(self, last_seq: int | None, seqs: list[int]) -> int | None:
+        """observe_seq for each of seqs in order; returns the last sequence number seen."""
+        n = len(seqs)
+        if n and last_seq is not None and seqs[0] == last_seq + 1 and seqs[-1] == last_seq + n \
+                and seqs == list(range(last_seq + 1, last_seq + n + 1)):
+            self.received += n  # the common case: no gap, no repeat
+            return seqs[-1]
+        for seq in seqs:
+            self.observe_seq(last_seq, seq)
+            last_seq = seq
+        return last_seq
+
     def observe_seq(self, last_seq: int | None, seq: int) -> None:
         """Update the counters from one sequence number, given the previous one."""
         self.received += 1

@@ -48,7 +48,8 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     rig = Rig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup})
     rig.trial_hooks.append(world.begin_trial)
     if setup == "platform":
-        rig.ft = SimForceTorque(world, rc.ft, device_rng(sim_cfg.seed, "ft"), on_sample=rig.check_guards)
+        rig.ft = SimForceTorque(world, rc.ft, device_rng(sim_cfg.seed, "ft"), on_sample=rig.check_guards,
+                                 probe=rig.guard_reason)
         rig.platform = SimPlatform(world, scene, rc.platform)
     else:
         rig.arm = SimArm(world, scene, rc.arm)

@@ -24,10 +24,9 @@ class SimPlatform(SimStreamMixin, Platform):
         res = self.cfg.encoder_resolution_mm
         if res > 0:
             pos = np.round(pos / res) * res
-        seq, dev_ns, host_ns = self.stream.stamp(t_s)
-        for i in range(len(t_s)):
-            self.stream.push(int(host_ns[i]), StagePosition(pos[i].copy(), int(seq[i]), int(dev_ns[i]),
-                                                            int(host_ns[i])))
+        seq, dev_ns, host_ns = (a.tolist() for a in self.stream.stamp(t_s))
+        pos = pos.copy()  # records own their data (snapshots are views of the world's buffer)
+        self.stream.push_many(host_ns, [StagePosition(*rec) for rec in zip(pos, seq, dev_ns, host_ns, strict=True)])
 
     def move_to(self, target_mm: np.ndarray, speed_mm_s: float) -> None:
         self._require_connected()

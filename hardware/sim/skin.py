@@ -24,10 +24,8 @@ class SimSkinReader(SimStreamMixin, SkinReader):
 
     def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
         sup, deep = world.skin_model.frames(world.states(idx), t_s)
-        seq, dev_ns, host_ns = self.stream.stamp(t_s)
-        push = self.stream.push
-        for i in range(len(t_s)):
-            push(int(host_ns[i]), TwoLayerFrame(sup[i], deep[i], int(seq[i]), int(dev_ns[i]), int(host_ns[i])))
+        seq, dev_ns, host_ns = (a.tolist() for a in self.stream.stamp(t_s))
+        self.stream.push_many(host_ns, [TwoLayerFrame(*rec) for rec in zip(sup, deep, seq, dev_ns, host_ns, strict=True)])
 
     def read_available(self) -> list[TwoLayerFrame]:
         return self._drain()

@@ -25,7 +25,6 @@ class SimStreamMixin:
         """Everything the host has received since the last call, oldest first; counts health."""
         self._require_connected()
         out = self.stream.pop_received(self.world.host_now_ns())
-        for rec in out:
-            self.health.observe_seq(self._last_seq, rec.seq)
-            self._last_seq = rec.seq
+        if out:
+            self._last_seq = self.health.observe_seqs(self._last_seq, [rec.seq for rec in out])
         return out

@@ -29,6 +29,32 @@ def lognormal_unit_mean(rng: np.random.Generator, cv: float, size=None):
     return np.exp(rng.normal(-0.5 * sigma * sigma, sigma, size=size))
 
 
+class BlockDraws:
+    """Standard normal and exponential draws for many small requests, taken from blocks
+    (one generator call per block instead of one per request; reproducible from the generator)."""
+
+    BLOCK = 4096
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self._normal, self._exp = np.empty(0), np.empty(0)
+        self._i = self._j = 0
+
+    def normal(self, n: int) -> np.ndarray:
+        if self._i + n > len(self._normal):
+            self._normal = np.concatenate((self._normal[self._i:], self.rng.standard_normal(max(self.BLOCK, n))))
+            self._i = 0
+        self._i += n
+        return self._normal[self._i - n:self._i]
+
+    def exponential(self, n: int) -> np.ndarray:
+        if self._j + n > len(self._exp):
+            self._exp = np.concatenate((self._exp[self._j:], self.rng.standard_exponential(max(self.BLOCK, n))))
+            self._j = 0
+        self._j += n
+        return self._exp[self._j - n:self._j]
+
+
 class DeviceClock:
     """One device's oscillator and link: device timestamps and host receive times for sample times."""
 
@@ -39,17 +65,17 @@ class DeviceClock:
         self.delay_min_ns = cfg.delay_min_ms * 1e6
         self.delay_extra_ns = cfg.delay_mean_extra_ms * 1e6
         self.host_start_ns = host_start_ns
-        self._rng = rng
+        self._draws = BlockDraws(rng)
         self._last_host_ns = -1
 
     def reseed(self, rng: np.random.Generator) -> None:
         """New jitter and delay draws from rng; the oscillator (offset, drift) stays."""
-        self._rng = rng
+        self._draws = BlockDraws(rng)
 
     def device_ns(self, t_s: np.ndarray) -> np.ndarray:
         """(N,) device timestamps (int64 ns) of events at true times t_s (N,)."""
         t_s = np.asarray(t_s, dtype=float)
-        jitter = self._rng.normal(0.0, self.jitter_ns, t_s.shape) if self.jitter_ns > 0 else 0.0
+        jitter = self._draws.normal(t_s.size).reshape(t_s.shape) * self.jitter_ns if self.jitter_ns > 0 else 0.0
         return (self.offset_ns + t_s * 1e9 * (1.0 + self.drift) + jitter).astype(np.int64)
 
     def true_s_of_device(self, device_ns: np.ndarray) -> np.ndarray:
@@ -61,7 +87,7 @@ class DeviceClock:
         t_s = np.asarray(t_s, dtype=float)
         delay = self.delay_min_ns
         if self.delay_extra_ns > 0:
-            delay = delay + self._rng.exponential(self.delay_extra_ns, t_s.shape)
+            delay = delay + self._draws.exponential(t_s.size).reshape(t_s.shape) * self.delay_extra_ns
         host = (self.host_start_ns + t_s * 1e9 + delay).astype(np.int64)
         if host.size:
             host = np.maximum.accumulate(np.maximum(host, self._last_host_ns))

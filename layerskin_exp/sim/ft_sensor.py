@@ -11,7 +11,9 @@ datasheet resolution.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
+from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.rig_config import ForceTorqueConfig
 
 
@@ -25,42 +27,57 @@ class FTSynth:
                                     rng.uniform(-cfg.bias_torque_max_nm, cfg.bias_torque_max_nm, 3)))
         self.noise_std = np.array(list(cfg.force_noise_n) + list(cfg.torque_noise_nm), dtype=float)
         self._drift_std_per_sample = cfg.bias_drift_n_per_s * np.sqrt(1.0 / cfg.rate_hz)
-        self._noise_block = np.empty((0, 6))
-        self._k = 0
+        self.reseed(rng)
 
     def reseed(self, rng: np.random.Generator) -> None:
         """New noise and bias-drift draws from rng; the bias reached so far stays."""
         self.rng = rng
-        self._noise_block = np.empty((0, 6))
-        self._k = 0
+        self._noise = np.empty((0, 6))  # drawn, not yet used: noise (K, 6), drift steps (K, 3)
+        self._drift = np.empty((0, 3))
 
-    def _noise(self) -> np.ndarray:
-        if self._k >= len(self._noise_block):  # draw in blocks: one generator call per 1024 samples
-            self._noise_block = self.rng.standard_normal((1024, 6)) * self.noise_std
-            self._drift_block = self.rng.standard_normal((1024, 3)) * self._drift_std_per_sample
-            self._k = 0
-        k = self._k
-        self._k += 1
-        self.bias[:3] += self._drift_block[k]
-        return self._noise_block[k]
+    def _peek(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Noise (n, 6) and bias-drift steps (n, 3) of the next n samples, without using them up.
+        Drawn in blocks of 1024 (one generator call each for noise, then drift)."""
+        while len(self._noise) < n:
+            self._noise = np.concatenate((self._noise, self.rng.standard_normal((1024, 6)) * self.noise_std))
+            self._drift = np.concatenate((self._drift, self.rng.standard_normal((1024, 3)) * self._drift_std_per_sample))
+        return self._noise[:n], self._drift[:n]
 
-    def load(self, force_n: np.ndarray, torque_z_nmm: float, contact_xy_mm: np.ndarray) -> np.ndarray:
-        """(6,) noiseless wrench [Fx, Fy, Fz, Mx, My, Mz] (N, N·m) of a contact load on the sensor."""
-        fx, fy, fz = float(force_n[0]), float(force_n[1]), float(force_n[2])
-        # Lever arm from the sensor origin to the contact point (m), z up; the applied force in
-        # that z-up frame points down when compressive.
-        rx, ry, rz = contact_xy_mm[0] * 1e-3, contact_xy_mm[1] * 1e-3, self.cfg.sensor_depth_mm * 1e-3
-        gx, gy, gz = fx, fy, -fz
-        mx = ry * gz - rz * gy
-        my = rz * gx - rx * gz
-        mz = rx * gy - ry * gx + torque_z_nmm * 1e-3
-        return np.array([fx, fy, fz, mx, my, mz])
+    def readings(self, recs: np.ndarray, held: np.ndarray) -> np.ndarray:
+        """(N, 6) the next N raw samples [Fx, Fy, Fz (N), Mx, My, Mz (N m)]: sample i reads the
+        load of step record recs[held[i]] (mechanics' step layout) + bias + noise, with the bias
+        after its own drift step. Nothing is used up until consume()."""
+        n = len(held)
+        noise, drift = self._peek(n)
+        out, self._bias_path = np.empty((n, 6)), np.empty((n, 3))
+        _readings(recs, held, self.cfg.sensor_depth_mm * 1e-3, self.bias, noise, drift, out, self._bias_path)
+        return out
 
-    def reading(self, force_n: np.ndarray, torque_z_nmm: float, contact_xy_mm: np.ndarray) -> np.ndarray:
-        """(6,) one raw sample: load + bias + noise."""
-        return self.reading_of_load(self.load(force_n, torque_z_nmm, contact_xy_mm))
+    def consume(self, n: int) -> None:
+        """The first n samples of the last readings() were taken: move past their draws."""
+        if n > 0:
+            self.bias[:3] = self._bias_path[n - 1]
+            self._noise, self._drift = self._noise[n:], self._drift[n:]
 
-    def reading_of_load(self, load: np.ndarray) -> np.ndarray:
-        """(6,) one raw sample of a noiseless wrench `load` (6,): load + bias + noise (the bias
-        before this sample's drift step)."""
-        return load + self.bias + self._noise()
+
+@njit(cache=True, nogil=True)
+def _readings(recs, held, depth_m, bias, noise, drift, out, bias_path):
+    """Loads of contact states on the sensor plus bias and noise (see FTSynth.readings). The
+    sensor origin lies depth_m below the skin centre; torques are those of the applied force
+    about it (lever arm to the contact point, z up, the compressive force pointing down) plus
+    the contact's own twisting moment."""
+    bx, by, bz = bias[0], bias[1], bias[2]
+    for i in range(held.shape[0]):
+        r = recs[held[i]]
+        fx, fy, fz = r[mk.S_FX], r[mk.S_FY], r[mk.S_FZ]
+        rx, ry, gz = r[mk.S_CX] * 1e-3, r[mk.S_CY] * 1e-3, -fz
+        bx += drift[i, 0]
+        by += drift[i, 1]
+        bz += drift[i, 2]
+        bias_path[i, 0], bias_path[i, 1], bias_path[i, 2] = bx, by, bz
+        out[i, 0] = fx + bx + noise[i, 0]
+        out[i, 1] = fy + by + noise[i, 1]
+        out[i, 2] = fz + bz + noise[i, 2]
+        out[i, 3] = ry * gz - depth_m * fy + bias[3] + noise[i, 3]
+        out[i, 4] = depth_m * fx - rx * gz + bias[4] + noise[i, 4]
+        out[i, 5] = rx * fy - ry * fx + r[mk.S_TORQUE] * 1e-3 + bias[5] + noise[i, 5]

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hardware.interfaces import DeviceError
+from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.kinematics import LimitedMotion
 from layerskin_exp.sim.rig_config import ArmConfig, GripperConfig
 
@@ -69,9 +70,6 @@ class GripScene:
         self.R_home = self.R_ref.copy()
         self.place_rod(0.0, 0.0)
         self._R_tcp = self.R_ref.copy()
-        self._rot_cache: tuple | None = None
-        self._geo: tuple | None = None
-        self._cache = None
         self._last_yaw = math.pi / 2
 
     def place_rod(self, offset_mm: float, yaw_deg: float) -> None:
@@ -82,7 +80,6 @@ class GripScene:
         self.rod_c_m = self.home_p_m + self.R_home @ c_tcp
         # skin normal = TCP y: turn the axis (TCP z at home) about it
         self.rod_a = self.R_home @ np.array([math.sin(th), 0.0, math.cos(th)])
-        self._cache = None
 
     def begin_trial(self, rng: np.random.Generator, variation) -> None:
         """The rod is re-clamped between trials: draw its placement (variation: TrialVariationConfig)."""
@@ -114,7 +111,6 @@ class GripScene:
         self.rot.position = [0.0, 0.0, 0.0]
         self.pos.command(pose6[:3].tolist(), speed_m_s, accel_m_s2)
         self.rot.command(rel.tolist(), w)
-        self._cache = None
 
     def command_gripper(self, opening_mm: float, speed_mm_s: float, force_pct: float) -> None:
         cfg = self.grip_cfg
@@ -131,7 +127,6 @@ class GripScene:
         self.force_limit_n = cfg.force_min_n + force_pct / 100.0 * (cfg.force_max_n - cfg.force_min_n)
         self.stalled = False
         self.jaw.command([self.requested_mm], self.grip_speed_mm_s)
-        self._cache = None
 
     def stop_arm(self) -> None:
         self.pos.stop()
@@ -144,25 +139,41 @@ class GripScene:
         self.stop_arm()
         self.stop_gripper()
 
-    # ---- world stepping ----------------------------------------------------------------------
-    def step(self, dt_s: float) -> None:
-        if self.pos.moving or self.rot.moving or self.jaw.moving:
-            self.pos.step(dt_s)
-            self.rot.step(dt_s)
-            self.jaw.step(dt_s)
-            self._cache = None
+    # ---- world stepping (see World.advance for the protocol) -------------------------------
+    def feedback_free(self) -> bool:
+        """False while the jaws close: the Hand-E stops them when the grip force reaches its
+        setting, which the world must check after every step."""
+        return not (self.jaw.moving and (self.jaw.velocity[0] < 0 or (self.jaw.target or [math.inf])[0]
+                                         < self.jaw.position[0]))
+
+    def plan(self, m: int, dt_s: float):
+        """The next m steps without changing the scene: rod (x, y, z) mm in the skin frame
+        (m, 3), its yaw (m,) rad, snapshots (m, 14) and a token for commit()."""
+        plans = (self.pos.plan(m, dt_s), self.rot.plan(m, dt_s), self.jaw.plan(m, dt_s))
+        xyz, yaw, R = self._rod_in_skin(self.pos.positions(plans[0]), self.rot.positions(plans[1]),
+                                        self.jaw.positions(plans[2])[:, 0], commit=False)
+        snap = np.empty((m, len(self.snapshot_names)))
+        snap[:, 0:3] = self.pos.positions(plans[0])
+        snap[:, 3:12] = R.reshape(m, 9)
+        snap[:, 12] = self.jaw.positions(plans[2])[:, 0]
+        snap[:, 13] = float(self.stalled)
+        return xyz, yaw, snap, (plans, yaw, R)
+
+    def commit(self, token, k: int) -> None:
+        plans, yaw, R = token
+        for motion, plan in zip((self.pos, self.rot, self.jaw), plans, strict=True):
+            motion.commit(plan, k)
+        self._last_yaw, self._R_tcp = float(yaw[k]), R[k]
+
+    def after_step(self, fz_n: float) -> None:
+        """The Hand-E stops its jaws once the grip force reaches its force setting."""
+        if self.jaw.moving and self.jaw.velocity[0] < 0 and fz_n >= self.force_limit_n:
+            self.jaw.halt()
+            self.stalled = True
 
     def tcp_rotation(self) -> np.ndarray:
-        """TCP rotation (3, 3) in base; reused while R_ref and the rotation vector are unchanged
-        (do not modify the returned array)."""
-        rv = self.rot.position
-        key = (rv[0], rv[1], rv[2])
-        cached = self._rot_cache
-        if cached is not None and cached[0] is self.R_ref and cached[1] == key:
-            return cached[2]
-        R = self.R_ref @ rotvec_to_matrix(rv)
-        self._rot_cache = (self.R_ref, key, R)
-        return R
+        """TCP rotation (3, 3) in base."""
+        return self.R_ref @ rotvec_to_matrix(self.rot.position)
 
     @property
     def opening_mm(self) -> float:
@@ -173,38 +184,26 @@ class GripScene:
         origin = p_m + R_tcp @ np.array([0.0, -opening_mm / 2.0 * 1e-3, 0.0])
         return origin, R_tcp @ R_TCP_SKIN
 
+    def _rod_in_skin(self, p_m: np.ndarray, rotvec: np.ndarray, opening_mm: np.ndarray, commit: bool):
+        """Rod pose in the skin frame for m arm/jaw states (mechanics.rod_poses); commit: these are
+        the scene's current state (keeps its yaw branch and TCP rotation)."""
+        m = len(p_m)
+        xyz, yaw, R = np.empty((m, 3)), np.empty(m), np.empty((m, 3, 3))
+        last = mk.rod_poses(self.R_ref, np.ascontiguousarray(rotvec), np.ascontiguousarray(p_m),
+                            np.ascontiguousarray(opening_mm), self.rod_c_m, self.rod_a, R_TCP_SKIN,
+                            self.radius_mm, self._last_yaw, xyz, yaw, R)
+        if commit:
+            self._last_yaw = last
+            self._R_tcp = R[-1]
+        return xyz, yaw, R
+
     def indenter_pose(self) -> tuple[list[float], float]:
         """Rod in the skin frame: the axis point nearest the skin origin (x, y mm), the height of the
         rod's surface above the undeformed cover (z mm, negative = pressed), and its yaw (rad: the
         axis direction measured from skin x; +-pi/2 at the home pose, where it lies along skin y)."""
-        if self._cache is not None:
-            return self._cache
-        self._R_tcp = R_tcp = self.tcp_rotation()
-        opening = self.opening_mm
-        geo = self._geo
-        if geo is None or geo[0] is not R_tcp or geo[1] != opening or geo[2] is not self.rod_a:
-            # what only the orientation, the opening and the rod give (same operations as skin_pose)
-            R_skin = R_tcp @ R_TCP_SKIN
-            geo = self._geo = (R_tcp, opening, self.rod_a, R_tcp @ np.array([0.0, -opening / 2.0 * 1e-3, 0.0]),
-                               R_skin.T, R_skin.T @ self.rod_a)
-        _, _, _, jaw_offset, R_skin_T, a_s = geo
-        origin = np.asarray(self.pos.position) + jaw_offset
-        c_s = R_skin_T @ (self.rod_c_m - origin) * 1e3
-        pt = c_s - (c_s @ a_s) * a_s
-        # The skin model's yaw is the axis direction from skin x; a rod has no head or tail, so
-        # keep the branch nearest the last value (continuous through +-90 deg).
-        yaw = math.atan2(a_s[1], a_s[0])
-        yaw += math.pi * round((self._last_yaw - yaw) / math.pi)
-        self._last_yaw = yaw
-        self._cache = ([float(pt[0]), float(pt[1]), float(pt[2]) - self.radius_mm], yaw)
-        return self._cache
+        xyz, yaw, _ = self._rod_in_skin(np.array([self.pos.position]), np.array([self.rot.position]),
+                                        np.array([self.opening_mm]), commit=True)
+        return xyz[0].tolist(), float(yaw[0])
 
-    def after_state(self, state) -> None:
-        """The Hand-E stops its jaws once the grip force reaches its force setting."""
-        if self.jaw.moving and self.jaw.velocity[0] < 0 and float(state.force_n[2]) >= self.force_limit_n:
-            self.jaw.halt()
-            self.stalled = True
-
-    def snapshot(self) -> tuple[float, ...]:
-        p = self.pos.position
-        return (p[0], p[1], p[2], *self._R_tcp.ravel().tolist(), self.jaw.position[0], float(self.stalled))
+    def snapshot(self) -> np.ndarray:
+        return np.array([*self.pos.position, *self._R_tcp.ravel().tolist(), self.opening_mm, float(self.stalled)])

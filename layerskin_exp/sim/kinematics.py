@@ -5,97 +5,98 @@ opening, an arm's TCP position or rotation vector). Each step it steers its velo
 target at no more than the commanded speed, slowing on the braking curve v = sqrt(2 a d), and
 changes velocity by at most a * dt. That is a trapezoidal profile for a move from rest, and it
 also handles a new target or a stop mid-move without a jump in velocity; the braking curve is
-the discrete one, so a move ends on its target without overshoot. Scalar Python floats
-keep a step to a few microseconds.
+the discrete one, so a move ends on its target without overshoot. The step is compiled
+(mechanics.motion_steps); `plan(m, dt)` runs m steps without changing the point and `commit`
+adopts the state after one of them, so the world can run a stretch of steps at once and still
+stop a motion at the step where a safety guard trips.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from layerskin_exp.sim import mechanics as mk
+
 
 class LimitedMotion:
-    """n-dimensional point with speed and acceleration limits.
-
-    position, velocity: lists of n floats (units of the caller, e.g. mm and mm/s).
-    """
+    """n-dimensional point with speed and acceleration limits (units of the caller, e.g. mm and
+    mm/s). Its state is one float vector (mechanics' motion layout)."""
 
     def __init__(self, start: list[float], max_accel: float) -> None:
-        self.position = [float(v) for v in start]
-        self.velocity = [0.0] * len(self.position)
+        self.n = n = len(start)
         self.max_accel = float(max_accel)
-        self.target: list[float] | None = None
-        self.speed = 0.0
-        self._stopping = False
+        self.state = np.zeros(mk.motion_size(n))
+        self.state[mk.M_ACCEL] = self.max_accel
+        self.state[mk.M_POS:mk.M_POS + n] = start
+        self._p, self._v, self._g = slice(mk.M_POS, mk.M_POS + n), slice(mk.M_POS + n, mk.M_POS + 2 * n), \
+            slice(mk.M_POS + 2 * n, mk.M_POS + 3 * n)
 
-    def command(self, target: list[float], speed: float, accel: float | None = None) -> None:
-        """Start moving toward target at speed (accel defaults to the limit; capped at it)."""
-        self.target = [float(v) for v in target]
-        self.speed = float(speed)
-        self.accel = min(float(accel), self.max_accel) if accel else self.max_accel
-        self._stopping = False
+    # ---- state ---------------------------------------------------------------------------------
+    @property
+    def position(self) -> list[float]:
+        return self.state[self._p].tolist()
 
-    def stop(self) -> None:
-        """Decelerate at the acceleration limit until at rest."""
-        self.target = None
-        self.accel = self.max_accel
-        self._stopping = any(v != 0.0 for v in self.velocity)
+    @position.setter
+    def position(self, value: list[float]) -> None:
+        self.state[self._p] = value
 
-    def halt(self) -> None:
-        """Stop dead (a hard stop: jaws blocked by an object)."""
-        self.target = None
-        self._stopping = False
-        self.velocity = [0.0] * len(self.position)
+    @property
+    def velocity(self) -> list[float]:
+        return self.state[self._v].tolist()
+
+    @property
+    def target(self) -> list[float] | None:
+        return self.state[self._g].tolist() if self.state[mk.M_HAS_TARGET] else None
 
     @property
     def moving(self) -> bool:
-        return self.target is not None or self._stopping
+        return bool(self.state[mk.M_HAS_TARGET] or self.state[mk.M_STOPPING])
 
     def speed_now(self) -> float:
         return math.sqrt(sum(v * v for v in self.velocity))
 
+    # ---- commands ------------------------------------------------------------------------------
+    def command(self, target: list[float], speed: float, accel: float | None = None) -> None:
+        """Start moving toward target at speed (accel defaults to the limit; capped at it)."""
+        st = self.state
+        st[self._g] = target
+        st[mk.M_HAS_TARGET], st[mk.M_STOPPING] = 1.0, 0.0
+        st[mk.M_SPEED] = float(speed)
+        st[mk.M_ACCEL] = min(float(accel), self.max_accel) if accel else self.max_accel
+
+    def stop(self) -> None:
+        """Decelerate at the acceleration limit until at rest."""
+        st = self.state
+        st[mk.M_HAS_TARGET] = 0.0
+        st[mk.M_ACCEL] = self.max_accel
+        st[mk.M_STOPPING] = float(bool(np.any(st[self._v] != 0.0)))
+
+    def halt(self) -> None:
+        """Stop dead (a hard stop: jaws blocked by an object)."""
+        st = self.state
+        st[mk.M_HAS_TARGET] = st[mk.M_STOPPING] = 0.0
+        st[self._v] = 0.0
+
+    # ---- stepping ------------------------------------------------------------------------------
+    def plan(self, m: int, dt: float) -> np.ndarray:
+        """(m, state size) the states after each of the next m steps of dt s; the point is unchanged."""
+        out = np.empty((m, len(self.state)))
+        if self.moving:
+            mk.motion_steps(self.state, self.n, dt, m, out)
+        else:
+            out[:] = self.state
+        return out
+
+    def positions(self, plan: np.ndarray) -> np.ndarray:
+        """(m, n) positions of a plan."""
+        return plan[:, self._p]
+
+    def commit(self, plan: np.ndarray, k: int) -> None:
+        """Adopt the state after step k of a plan."""
+        self.state[:] = plan[k]
+
     def step(self, dt: float) -> None:
         """Advance dt seconds."""
-        if self.target is None and not self._stopping:
-            return
-        pos, vel = self.position, self.velocity
-        n = len(pos)
-        a_dt = self.accel * dt
-        if self.target is None:  # braking to rest
-            v = self.speed_now()
-            if v <= a_dt:
-                for i in range(n):
-                    pos[i] += 0.5 * vel[i] * dt
-                    vel[i] = 0.0
-                self._stopping = False
-                return
-            scale = (v - a_dt) / v
-            for i in range(n):
-                nv = vel[i] * scale
-                pos[i] += 0.5 * (vel[i] + nv) * dt
-                vel[i] = nv
-            return
-        err = [self.target[i] - pos[i] for i in range(n)]
-        dist = math.sqrt(sum(e * e for e in err))
-        v_now = self.speed_now()
-        if dist < 1e-12 or (v_now <= a_dt * (1 + 1e-9) and dist <= 0.5 * (v_now + a_dt) * dt):
-            # One step from the target and slow enough to stop inside the acceleration limit: arrive.
-            self.position = list(self.target)
-            self.velocity = [0.0] * n
-            self.target = None
-            return
-        # Discrete braking curve: after this step (trapezoidal integration) the point must still be
-        # able to stop at the target, 0.5 (v + v') dt + v'^2 / (2 a) <= d.
-        a = self.accel
-        disc = a_dt * a_dt / 4.0 + 2.0 * a * dist - a * v_now * dt
-        v_brake = -0.5 * a_dt + math.sqrt(disc) if disc > 0 else 0.0
-        v_want = min(self.speed, max(v_brake, 0.0))
-        dv = [err[i] / dist * v_want - vel[i] for i in range(n)]
-        dv_norm = math.sqrt(sum(d * d for d in dv))
-        if dv_norm > a_dt:
-            s = a_dt / dv_norm
-            dv = [d * s for d in dv]
-        for i in range(n):
-            nv = vel[i] + dv[i]
-            pos[i] += 0.5 * (vel[i] + nv) * dt
-            vel[i] = nv
+        self.commit(self.plan(1, dt), 0)

@@ -37,19 +37,30 @@ class PlatformScene:
                               "mm/s (sim.rig.platform.max_speed_mm_s)")
         self.stage.command(target.tolist(), float(speed_mm_s))
 
-    def step(self, dt_s: float) -> None:
-        self.stage.step(dt_s)
+    # ---- world stepping (see World.advance for the protocol) -------------------------------
+    def feedback_free(self) -> bool:
+        """Nothing reacts to the load here: the stage is stiff and position controlled."""
+        return True
+
+    def plan(self, m: int, dt_s: float):
+        """The next m steps without changing the scene: indenter tip (m, 3) mm, yaw (m,) rad,
+        snapshots (m, 3) and a token for commit()."""
+        states = self.stage.plan(m, dt_s)
+        xyz = self.stage.positions(states)
+        return xyz, np.zeros(m), xyz, states
+
+    def commit(self, token, k: int) -> None:
+        self.stage.commit(token, k)
+
+    def after_step(self, fz_n: float) -> None:
+        """Nothing reacts to the load here."""
 
     def indenter_pose(self) -> tuple[list[float], float]:
         """Indenter tip (x, y, z) mm in the skin frame and its yaw (rad)."""
         return self.stage.position, 0.0
 
-    def after_state(self, state) -> None:
-        """Nothing reacts to the load here: the stage is stiff and position controlled."""
-
-    def snapshot(self) -> tuple[float, ...]:
-        p = self.stage.position
-        return (p[0], p[1], p[2])
+    def snapshot(self) -> np.ndarray:
+        return np.asarray(self.stage.position, float)
 
     def stop_all(self) -> None:
         self.stage.stop()

@@ -25,12 +25,12 @@ passive-matrix readout with crosstalk, offsets, noise and quantisation.
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from layerskin_exp.config import SkinConfig
+from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.contact import ContactTables, build_tables
 from layerskin_exp.sim.friction import StickSlip
@@ -111,19 +111,8 @@ def _clip(x, lo, hi, out=None):
     return np.minimum(np.maximum(x, lo, out=out), hi, out=out)
 
 
-def _chord(cx: float, cy: float, yaw: float, half: float) -> tuple[float, float]:
-    """Parameters s1 < 0 < s2 where the line c + s (cos yaw, sin yaw) leaves the square |x|,|y| <= half."""
-    lo, hi = -1e9, 1e9
-    for c, d in ((cx, math.cos(yaw)), (cy, math.sin(yaw))):
-        if abs(d) < 1e-12:
-            if abs(c) > half:
-                return 0.0, 0.0
-            continue
-        a, b = (-half - c) / d, (half - c) / d
-        lo, hi = max(lo, min(a, b)), min(hi, max(a, b))
-    if hi <= lo:
-        return 0.0, 0.0
-    return min(lo, 0.0), max(hi, 0.0)
+# Where a rod's line leaves the sensing square (compiled; also callable from Python).
+_chord = mk.chord
 
 
 class SkinModel:
@@ -140,26 +129,19 @@ class SkinModel:
         self.tab = tables_for(sim, indenter)
         self.law = SpacerLaw(sim.spacer)
         n = skin.n_taxels
-        # --- scalar tables for step() (plain lists: fast scalar lookups)
-        self._delta = self.tab.delta_mm.tolist()
-        self._load = self.tab.load.tolist()
-        self._shear = self.tab.shear_extra.tolist()
-        self._torsion = self.tab.torsion_extra.tolist()
-        self._fric_r = self.tab.friction_radius_mm.tolist()
-        self._dd = self.tab.d_delta
-        self._last = len(self._delta) - 1
-        self._width2 = sim.spacer.width**2
+        # --- mechanics (mechanics.contact_steps): tables on the indentation grid, geometry, state
+        t = self.tab
+        self._mech_tab = np.ascontiguousarray(np.stack([t.delta_mm, t.load, t.shear_extra, t.torsion_extra,
+                                                        t.friction_radius_mm]), dtype=float)
         half = sim.spacer.width / 2
         self._half = half
         k0 = float(self.law.shear_stiffness_kpa_per_mm(0.0)) * 1e-3  # N/mm per mm^2
-        self._k0_area = k0 * sim.spacer.width**2
-        self._k0 = k0
-        self._j_pad = sim.spacer.width**4 / 6.0
+        self._mech_geo = np.array([t.d_delta, -1.0 if self.k_support is None else self.k_support, half,
+                                   sim.spacer.width**2, k0 * sim.spacer.width**2, k0, sim.spacer.width**4 / 6.0])
         self.friction = StickSlip(sim.cover.friction, sim.cover.kinetic, sim.cover.aging_s, sim.cover.overshoot)
-        self._prev = None  # (t, x, y, yaw)
+        self._contact = np.zeros(mk.CONTACT_SIZE)  # previous pose, configuration serial, last configuration
+        self._contact[mk.C_CONFIG:] = np.nan  # the first step is a new configuration
         self._model_id = next(_MODEL_IDS)
-        self._config: tuple | None = None  # loading configuration of the last step
-        self._config_key = (self._model_id, 0)
         self._maps_cache: tuple | None = None  # (config_key, (2, n, n) maps) of the last frame computed
         # --- quadrature over each taxel's electrode
         g, w = np.polynomial.legendre.leggauss(sim.contact.quad_points)
@@ -193,106 +175,50 @@ class SkinModel:
         self._last_t: float | None = None
 
     # ------------------------------------------------------------------ mechanics
-    def _lookup(self, table: list, delta: float) -> float:
-        x = delta / self._dd
-        i = int(x)
-        last = len(table) - 1
-        if i >= last:
-            slope = (table[last] - table[last - 1]) / self._dd
-            return table[last] + slope * (delta - self._delta[last])
-        if i < 0:
-            return 0.0
-        t = x - i
-        return table[i] + t * (table[i + 1] - table[i])
+    def step_many(self, t_s: np.ndarray, xyz_mm: np.ndarray, yaw_rad: np.ndarray) -> np.ndarray:
+        """Advance the contact through m commanded indenter poses (see the module docstring).
 
-    def _realised_indentation(self, d_cmd: float, length: float) -> float:
-        if d_cmd <= 0.0:
-            return 0.0
-        if self.k_support is None:
-            return d_cmd
-        # solve delta + length * load(delta) / k = d_cmd (monotone): bisect the table, then the segment
-        ks, dl, ld = self.k_support, self._delta, self._load
-        g = [dl[i] + length * ld[i] / ks for i in (0, len(dl) - 1)]
-        if d_cmd >= g[1]:
-            i = len(dl) - 2
-        else:
-            lo, hi = 0, len(dl) - 1
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                if dl[mid] + length * ld[mid] / ks <= d_cmd:
-                    lo = mid
-                else:
-                    hi = mid
-            i = lo
-        g0 = dl[i] + length * ld[i] / ks
-        g1 = dl[i + 1] + length * ld[i + 1] / ks
-        t = (d_cmd - g0) / (g1 - g0)
-        return dl[i] + t * (dl[i + 1] - dl[i])
+        t_s (m,), xyz_mm (m, 3) indenter pose in the skin frame, yaw_rad (m,). Returns the steps
+        as records (m, mechanics.STEP_FIELDS): time, force, torque, indentation, contact, yaw,
+        surface shift and rotation, slipping, cumulative slip, configuration serial."""
+        out = np.empty((len(t_s), mk.STEP_FIELDS))
+        mk.contact_steps(self.kind == "rod", self._mech_tab, self._mech_geo, self.friction.params,
+                         self._contact, self.friction.state, np.ascontiguousarray(t_s, dtype=float),
+                         np.ascontiguousarray(xyz_mm, dtype=float), np.ascontiguousarray(yaw_rad, dtype=float), out)
+        return out
+
+    def mech_state(self) -> np.ndarray:
+        """The mechanics' state (contact and friction), for restore_mech_state."""
+        return np.concatenate((self._contact, self.friction.state))
+
+    def restore_mech_state(self, saved: np.ndarray) -> None:
+        n = len(self._contact)
+        self._contact[:] = saved[:n]
+        self.friction.state[:] = saved[n:]
+
+    def state_of(self, rec: np.ndarray) -> MechState:
+        """The MechState of one step record (a row of step_many's output)."""
+        return MechState(
+            t_s=float(rec[mk.S_T]),
+            force_n=rec[mk.S_FX:mk.S_FZ + 1],
+            torque_z_nmm=float(rec[mk.S_TORQUE]),
+            indentation_mm=float(rec[mk.S_DELTA]),
+            contact_xy_mm=rec[mk.S_CX:mk.S_CY + 1],
+            indenter_yaw_rad=float(rec[mk.S_YAW]),
+            surface_shift_mm=rec[mk.S_UX:mk.S_UY + 1],
+            surface_rotation_rad=float(rec[mk.S_THETA]),
+            slipping=bool(rec[mk.S_SLIPPING]),
+            slip_mm=rec[mk.S_SLIP_X:mk.S_SLIP_Y + 1],
+            slip_rad=float(rec[mk.S_SLIP_RAD]),
+            config_key=(self._model_id, int(rec[mk.S_SERIAL])),
+        )
 
     def step(self, t_s: float, indenter_xyz_mm: np.ndarray, indenter_yaw_rad: float = 0.0) -> MechState:
-        """Advance the contact to the commanded indenter pose; see the module docstring."""
-        x, y, z = float(indenter_xyz_mm[0]), float(indenter_xyz_mm[1]), float(indenter_xyz_mm[2])
-        yaw = float(indenter_yaw_rad)
-        if self.kind == "rod":
-            s1, s2 = _chord(x, y, yaw, self._half)
-            length = s2 - s1
-        else:
-            s1 = s2 = 0.0
-            length = 1.0
-        delta = self._realised_indentation(-z, length) if length > 0 else 0.0
-        # every table shares the indentation grid: one bracket for all lookups (same formula as _lookup)
-        xg = delta / self._dd
-        i = int(xg)
-        if 0 <= i < self._last:
-            tg = xg - i
-            ld, sh = self._load, self._shear
-            load = ld[i] + tg * (ld[i + 1] - ld[i])
-            shear = sh[i] + tg * (sh[i + 1] - sh[i])
-            if self.kind != "rod":
-                tq, fr_r = self._torsion, self._fric_r
-                torsion = tq[i] + tg * (tq[i + 1] - tq[i])
-                radius = fr_r[i] + tg * (fr_r[i + 1] - fr_r[i])
-        else:
-            load, shear = self._lookup(self._load, delta), self._lookup(self._shear, delta)
-            if self.kind != "rod":
-                torsion, radius = self._lookup(self._torsion, delta), self._lookup(self._fric_r, delta)
-        fz = max(length * load, 0.0) if delta > 0 else 0.0
-        j_pad = self._j_pad + self._width2 * (x * x + y * y)
-        if self.kind == "rod":
-            k_t = self._k0_area + length * shear
-            k_r = self._k0 * j_pad + shear * (s2**3 - s1**3) / 3.0
-            radius = (s1 * s1 + s2 * s2) / (2.0 * length) if length > 0 else 0.0
-        else:
-            k_t = self._k0_area + shear
-            k_r = self._k0 * j_pad + torsion
-        if self._prev is None:
-            dt, dx, dy, dyaw = 0.0, 0.0, 0.0, 0.0
-        else:
-            pt, px, py, pyaw = self._prev
-            dt, dx, dy, dyaw = t_s - pt, x - px, y - py, yaw - pyaw
-        self._prev = (t_s, x, y, yaw)
-        fr = self.friction
-        fx, fy, tq = fr.update(dt, dx, dy, dyaw, fz, k_t, k_r, radius)
-        config = (delta, fx, fy, fz, tq, x, y, yaw, fr.ux, fr.uy, fr.theta)
-        if config != self._config:  # a new loading configuration (a hold repeats the last one)
-            self._config = config
-            self._config_key = (self._model_id, self._config_key[1] + 1)
-        # the state's vectors are views of one array (one allocation per step)
-        v = np.array((fx, fy, fz, x - fr.ux, y - fr.uy, fr.ux, fr.uy, fr.slip_x, fr.slip_y))
-        return MechState(
-            t_s=float(t_s),
-            force_n=v[0:3],
-            torque_z_nmm=tq,
-            indentation_mm=delta,
-            contact_xy_mm=v[3:5],
-            indenter_yaw_rad=yaw,
-            surface_shift_mm=v[5:7],
-            surface_rotation_rad=fr.theta,
-            slipping=fr.slipping,
-            slip_mm=v[7:9],
-            slip_rad=fr.slip_rad,
-            config_key=self._config_key,
-        )
+        """Advance the contact to one commanded indenter pose (step_many for one step)."""
+        rec = self.step_many(np.array([t_s], float), np.asarray(indenter_xyz_mm, float).reshape(1, 3),
+                             np.array([indenter_yaw_rad], float))
+        return self.state_of(rec[0])
+
 
     # ------------------------------------------------------------------ pressure maps
     def stack_height_mm(self, delta_mm):

@@ -67,6 +67,10 @@ class Stream:
     def push(self, host_ns: int, record) -> None:
         self._queue.append((host_ns, record))
 
+    def push_many(self, host_ns: list[int], records: list) -> None:
+        """Queue records in order with their host receive times (host_ns nondecreasing)."""
+        self._queue.extend(zip(host_ns, records, strict=True))
+
     def pop_received(self, host_now_ns: int) -> list:
         """Records the host has received by host_now_ns, oldest first."""
         q = self._queue
