@@ -28,9 +28,8 @@ def _layer_poses(rng, cfg, n, ids=None):
 
 def _errors(imager, poses, rng):
     """(markers found, 4): |dx|, |dy|, |dz| (mm) and rotation error angle (deg) per detection."""
-    img, origin = imager.render(poses, rng)
     out = []
-    for d in imager.detect(img, origin):
+    for d in imager.detect(imager.render(poses, rng)):
         R, t = poses[d.marker_id]
         R_est = Rotation.from_rotvec(d.rvec)
         angle_deg = np.degrees((R_est.inv() * Rotation.from_matrix(R)).magnitude())
@@ -86,7 +85,8 @@ def test_rendered_outlines_sit_where_the_pinhole_model_puts_them():
     for dx_px in (0.0, 0.13, 0.31, 0.5):
         t = np.array([dx_px * cfg.distance_mm / cfg.fx_px, 0.0, cfg.distance_mm])
         R = FACING.as_matrix()
-        img, (x0, y0) = imager.render({0: (R, t)}, None)
+        frame = imager.render({0: (R, t)}, None)
+        img, (x0, y0) = frame.patch, frame.origin_px
         q = imager.project(imager.obj_pts @ R.T + t)
         side_px = q[:, 1].max() - q[:, 1].min()
         row = img[int(round(q[:, 1].min() + side_px / 12)) - y0].astype(float)  # middle of the black border row
@@ -94,8 +94,7 @@ def test_rendered_outlines_sit_where_the_pinhole_model_puts_them():
         assert abs((255.0 - row[a:b]).sum() / 255.0 - (q[:, 0].max() - q[:, 0].min())) < 0.02
     rng = np.random.default_rng(3)
     for poses in _layer_poses(rng, cfg, 10):
-        img, origin = imager.render(poses, None)
-        dets = imager.detect(img, origin)
+        dets = imager.detect(imager.render(poses, None))
         assert len(dets) == 2
         for d in dets:
             R, t = poses[d.marker_id]
@@ -108,7 +107,8 @@ def test_corner_refinement_recovers_corners_from_a_rough_start():
     imager = MarkerImager(cfg)
     R = (Rotation.from_rotvec([0.02, -0.03, 0.3]) * FACING).as_matrix()
     t = np.array([1.0, -0.5, cfg.distance_mm])
-    img, (x0, y0) = imager.render({0: (R, t)}, None)
+    frame = imager.render({0: (R, t)}, None)
+    img, (x0, y0) = frame.patch, frame.origin_px
     true = imager.project(imager.obj_pts @ R.T + t) - [x0, y0]
     rough = true + 0.5 * np.sign(true - true.mean(axis=0))
     refined = refine_marker_corners(img, rough[None])[0]
