@@ -143,6 +143,7 @@ class MarkerTracker:
         centre_mm = np.array([np.mean(cfg.marker_x_mm), np.mean(cfg.marker_y_mm), 0.0])
         self.layer_offsets_mm = {int(mid): np.array([x, y, 0.0]) - centre_mm
                                  for mid, x, y in zip(cfg.marker_ids, cfg.marker_x_mm, cfg.marker_y_mm, strict=True)}
+        self.full_searches = 0  # frames that needed the full-frame search, since construction (diagnostics)
         self.reset()
 
     @staticmethod
@@ -162,7 +163,6 @@ class MarkerTracker:
         """Forget the track: the next frame is searched in full."""
         self._track: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # id -> (corners (4, 2), last motion (4, 2)) px
         self._since_full = 0
-        self.full_searches = 0  # frames that needed the full-frame search (diagnostics)
 
     def _window(self, shape: tuple[int, int]) -> tuple[int, int, int, int]:
         """(x0, y0, x1, y1) search window from the track, inside the frame of shape (H, W)."""
