@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from hardware.interfaces import MarkerCamera
 from hardware.sim.stream_device import SimStreamMixin
-from layerskin_exp.sim.camera import MarkerImager
+from layerskin_exp.sim.camera import MarkerImager, SensorFrame
 from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.rig_config import CameraConfig
 from layerskin_exp.sim.world import World
@@ -36,13 +36,14 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         self.R_base_cam = R_s @ R_SKIN_CAMERA
         self.t_base_cam_m = o + R_s @ centre_mm * 1e-3
         self.marker_xy_mm = np.stack([cfg.marker_x_mm, cfg.marker_y_mm], axis=1)  # (M, 2)
-        self._latest: tuple[np.ndarray, int, int] | None = None
+        self._latest: tuple[SensorFrame | np.ndarray, int, int] | None = None
         self._last_host_ns = -1
         world.add_producer(self.stream, self._produce)
         world.on_trial(self._reseed)
 
     def _reseed(self, world: World) -> None:
         self._img_rng = world.rng("camera.image")
+        self.imager.reset_tracking()  # each trial's detections depend on its own frames only
 
     def marker_poses(self, snap: np.ndarray, state) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Marker id -> (R (3, 3), t (3,) mm): marker frames in the camera frame for one scene snapshot
@@ -74,11 +75,14 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         for i in range(len(t_s)):
             h = max(int(host[i]), self._last_host_ns)  # the pipeline delivers in order
             self._last_host_ns = h
-            img, origin = self.imager.render(self.marker_poses(snaps[i], states[i]), self._img_rng)
+            frame = self.imager.render(self.marker_poses(snaps[i], states[i]), self._img_rng)
             if cfg.keep_images:
-                self._latest = (self.imager.full_frame(img, origin), int(dev_ns[i]), h)
-            for d in self.imager.detect(img, origin):
-                q = Rotation.from_rotvec(d.rvec).as_quat()
+                self._latest = (frame, int(dev_ns[i]), h)  # composed into a full image when asked for
+            dets = self.imager.detect(frame)
+            if not dets:
+                continue
+            quats = Rotation.from_rotvec(np.stack([d.rvec for d in dets])).as_quat()
+            for d, q in zip(dets, quats, strict=True):
                 pose = Pose(d.tvec_mm * 1e-3, q, "camera", int(dev_ns[i]), h, int(seq[i]))
                 self.stream.push(h, MarkerDetection(d.marker_id, pose, d.corners_px, int(seq[i]), int(dev_ns[i]), h))
 
@@ -93,10 +97,13 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
 
     def latest_image(self) -> np.ndarray | None:
         """The most recent full grey frame (H, W) uint8, when sim.rig.camera.keep_images is set."""
-        return None if self._latest is None else self._latest[0]
+        stamped = self.latest_image_stamped()
+        return None if stamped is None else stamped[0]
 
     def latest_image_stamped(self) -> tuple[np.ndarray, int, int] | None:
-        """(image, device_t_ns, host_t_ns) of the most recent frame, when images are kept."""
+        """(image (H, W) uint8, device_t_ns, host_t_ns) of the most recent frame, when images are kept."""
+        if self._latest is not None and isinstance(self._latest[0], SensorFrame):
+            self._latest = (self._latest[0].full(), *self._latest[1:])
         return self._latest
 
     def calibration(self) -> dict:

@@ -23,7 +23,7 @@ class SimSkinReader(SimStreamMixin, SkinReader):
         world.add_producer(self.stream, self._produce)
 
     def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
-        sup, deep = world.skin_model.frames(world.states(idx), t_s)
+        sup, deep = world.skin_model.frames_of_steps(world.records(idx), t_s)
         seq, dev_ns, host_ns = (a.tolist() for a in self.stream.stamp(t_s))
         self.stream.push_many(host_ns, [TwoLayerFrame(*rec) for rec in zip(sup, deep, seq, dev_ns, host_ns, strict=True)])
 

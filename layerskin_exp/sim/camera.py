@@ -3,20 +3,26 @@
 Rendering is exact projective geometry: each marker (with a white quiet zone) is a plane, so
 its image is the homography of the printed marker, drawn with cv2.warpPerspective onto a
 supersampled canvas and averaged down (INTER_AREA), then blurred and given sensor noise. Only a
-region around the markers is rendered (the rest of a real frame is background the detector
-would reject).
+region around the markers is rendered; the rest of the frame is uniform background, so a frame
+is held sparsely (SensorFrame: the rendered patch and where it sits) and composed in full only
+when an image is kept. While the markers hold still (identical poses, e.g. a hold or a stuck
+contact) the blurred patch is reused and only the sensor noise is drawn again.
 
-Detection: cv2.aruco.ArucoDetector finds and decodes the markers (subpixel corners). Its
-corners are then refined from the marker outlines: each outer side is located to a few
+Detection (MarkerTracker) works on full frames and reads nothing from the renderer: a full-frame
+search (cv2.aruco.ArucoDetector, multi-scale adaptive threshold) acquires the markers; after
+that each frame is searched only in a window around where the markers were last seen, moved
+on by their last frame-to-frame motion, with one threshold scale matched to the marker's
+module size; a marker missing from the window sends the frame back to the full-frame search.
+Corners are then refined from the marker outlines: each outer side is located to a few
 thousandths of a pixel from intensity profiles across it, well away from the corners, and the
 corners are the intersections of the four fitted lines (cornerSubPix, being a gradient
 estimator on a blurred 90-degree corner, pulls each corner ~0.1-0.2 px inward and drifts
 with the inner bit pattern inside its window: a 0.5 % scale error, i.e. ~0.7 mm of depth at
 120 mm, and tilt errors of several degrees). The two markers lie on one rigid printed layer
-(layout from the config), so their 8 corners give one joint pose (cv2.aruco.Board +
-cv2.solvePnP IPPE + cv2.solvePnPRefineLM), far better conditioned in depth and tilt than a
-single 38-px square; each marker's pose is that layer pose plus its known offset. A marker seen
-alone falls back to cv2.solvePnP(SOLVEPNP_IPPE_SQUARE). Pinhole model without distortion.
+(layout from the config), so their 8 corners give one joint pose (cv2.solvePnP IPPE, or SQPnP
+where IPPE degenerates, + cv2.solvePnPRefineLM), far better conditioned in depth and tilt than a
+single 38-px square; each marker's pose is that layer pose plus its known offset. A marker seen alone falls back to
+cv2.solvePnP(SOLVEPNP_IPPE_SQUARE). Pinhole model without distortion.
 
 Frames: camera x right, y down, z forward (OpenCV). Marker frame as ArUco defines it: x right,
 y up on the printed marker, z out of it; lengths in mm inside, m in the detections. The layer
@@ -33,7 +39,7 @@ import numpy as np
 from layerskin_exp.sim.rig_config import CameraConfig
 
 QUIET_ZONE = 0.25  # white margin around each marker, fraction of the marker side
-ROI_MARGIN_PX = 20  # background around the markers; the detector needs it to find their outlines
+ROI_MARGIN_PX = 20  # background rendered (blurred, noisy) around the stickers
 # Edge profiles for the corner refinement (px). Across a side: +-PROFILE_HALF_PX about the
 # detector's outline, inside the black border (1 module, ~6 px) and the quiet zone (~10 px);
 # along it: PROFILES_PER_SIDE profiles, skipping CORNER_SKIP_PX at each end where the blurred
@@ -44,6 +50,17 @@ PROFILES_PER_SIDE = 48
 CORNER_SKIP_PX = 4.0
 MIN_CONTRAST_GRAY = 40.0  # below this a side is not a clean black/white edge: keep the detector's corners
 MAX_REFINE_SHIFT_PX = 1.5  # a refined corner further than this from the detector's is rejected
+# Tracking: the search window is the markers' last corners and those moved on by their last
+# motion, grown by TRACK_MARGIN_SIDES marker sides; a track that lacks some of the board's
+# markers is re-searched over the full frame every REACQUIRE_FRAMES frames.
+TRACK_MARGIN_SIDES = 0.5
+REACQUIRE_FRAMES = 30
+# Candidates closer than this (mean corner distance / perimeter) are one marker. OpenCV's 0.125
+# groups a marker with the inner outline of the grey ring a cut-off window leaves around its
+# white sticker (~0.07 perimeters out) and may keep the ring, losing the marker; a marker's own
+# two border outlines are one module (1/6 side, ~0.04 perimeter) apart and stay grouped.
+MIN_MARKER_DISTANCE_RATE = 0.05
+MAX_REPROJECTION_PX = 1.0  # rms reprojection error above which an IPPE layer pose is not trusted
 
 
 @dataclass
@@ -56,132 +73,149 @@ class Detection:
     corners_px: np.ndarray
 
 
+@dataclass
+class SensorFrame:
+    """A grey frame held sparsely: `patch` (h, w) uint8 with its top-left pixel at origin_px (x0, y0)
+    in a frame of shape (H, W) that is background_gray everywhere else."""
+
+    patch: np.ndarray
+    origin_px: tuple[int, int]
+    shape: tuple[int, int]
+    background_gray: int
+
+    def crop(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+        """Pixels [y0:y1, x0:x1] of the frame (clipped to it), (h, w) uint8; a view when they lie in the patch."""
+        H, W = self.shape
+        x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
+        px, py = self.origin_px
+        ph, pw = self.patch.shape
+        if px <= x0 and py <= y0 and x1 <= px + pw and y1 <= py + ph:
+            return self.patch[y0 - py:y1 - py, x0 - px:x1 - px]
+        out = np.full((max(y1 - y0, 0), max(x1 - x0, 0)), self.background_gray, np.uint8)
+        ix0, iy0, ix1, iy1 = max(x0, px), max(y0, py), min(x1, px + pw), min(y1, py + ph)
+        if ix0 < ix1 and iy0 < iy1:
+            out[iy0 - y0:iy1 - y0, ix0 - x0:ix1 - x0] = self.patch[iy0 - py:iy1 - py, ix0 - px:ix1 - px]
+        return out
+
+    def full(self) -> np.ndarray:
+        """The whole frame (H, W) uint8."""
+        return self.crop(0, 0, self.shape[1], self.shape[0])
+
+
+def frame_region(frame: np.ndarray | SensorFrame, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+    """Pixels [y0:y1, x0:x1] of a full frame (an (H, W) array or a SensorFrame), clipped to it."""
+    if isinstance(frame, SensorFrame):
+        return frame.crop(x0, y0, x1, y1)
+    H, W = frame.shape[:2]
+    return frame[max(y0, 0):min(y1, H), max(x0, 0):min(x1, W)]
+
+
 def marker_object_points(size_mm: float) -> np.ndarray:
     """(4, 3) marker corners in the marker frame, in ArUco's order (TL, TR, BR, BL)."""
     h = size_mm / 2.0
     return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
 
 
-class MarkerImager:
-    """Renders marker planes seen by a pinhole camera and detects them."""
+def _camera_matrix(cfg: CameraConfig) -> np.ndarray:
+    return np.array([[cfg.fx_px, 0.0, cfg.cx_px], [0.0, cfg.fy_px, cfg.cy_px], [0.0, 0.0, 1.0]])
 
-    def __init__(self, cfg: CameraConfig) -> None:
-        self.cfg = cfg
-        self.K = np.array([[cfg.fx_px, 0.0, cfg.cx_px], [0.0, cfg.fy_px, cfg.cy_px], [0.0, 0.0, 1.0]])
+
+class MarkerTracker:
+    """Finds the printed markers in full grey frames and gives their poses; keeps a track between frames.
+
+    Uses only the camera model and the printed layout from cfg, and the images: the same code
+    runs on real frames ((H, W) uint8 arrays) and on the simulator's SensorFrames. track=False
+    searches every frame in full (the untracked pipeline, for comparison).
+    """
+
+    def __init__(self, cfg: CameraConfig, track: bool = True) -> None:
+        self.cfg, self.track = cfg, track
+        self.K = _camera_matrix(cfg)
         self.dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, cfg.dictionary))
+        self.marker_ids = tuple(int(m) for m in cfg.marker_ids)
+        self.acquirer = cv2.aruco.ArucoDetector(self.dictionary, self._params())
+        # Inside the window the marker's scale is known: one threshold window of ~2 modules.
+        module_px = cfg.fx_px * cfg.marker_size_mm / cfg.distance_mm / (self.dictionary.markerSize + 2)
+        win = max(3, 2 * int(round(module_px)) + 1)
+        self.follower = cv2.aruco.ArucoDetector(self.dictionary, self._params(win))
+        self.obj_pts = marker_object_points(cfg.marker_size_mm)
+        # The printed layout: every marker on one plane, at its (x, y) on the layer (mm).
+        centre_mm = np.array([np.mean(cfg.marker_x_mm), np.mean(cfg.marker_y_mm), 0.0])
+        self.layer_offsets_mm = {int(mid): np.array([x, y, 0.0]) - centre_mm
+                                 for mid, x, y in zip(cfg.marker_ids, cfg.marker_x_mm, cfg.marker_y_mm, strict=True)}
+        self.full_searches = 0  # frames that needed the full-frame search, since construction (diagnostics)
+        self.reset()
+
+    @staticmethod
+    def _params(window_px: int | None = None) -> cv2.aruco.DetectorParameters:
         params = cv2.aruco.DetectorParameters()
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
         params.cornerRefinementWinSize = 4
         params.relativeCornerRefinmentWinSize = 1.0  # the default 0.3 module shrinks the window to ~1 px
         params.cornerRefinementMinAccuracy = 0.01
         params.cornerRefinementMaxIterations = 50
-        self.detector = cv2.aruco.ArucoDetector(self.dictionary, params)
-        # Printed stickers: the marker with a white quiet zone. One sticker pixel spans about one
-        # supersampled canvas pixel at the working distance, so the warp's bilinear ramp across an
-        # edge is the canvas pixel's area coverage (a finer sticker would be point-sampled: edges
-        # then snap to the canvas grid, ~0.1 px at 2x supersampling).
-        modules = self.dictionary.markerSize + 2
-        module_px = cfg.fx_px * cfg.marker_size_mm / cfg.distance_mm / modules * cfg.supersample
-        bit_px = max(2, int(round(module_px)))
-        side = bit_px * modules
-        margin = int(round(side * QUIET_ZONE))
-        self.stickers = {}
-        for mid in cfg.marker_ids:
-            img = np.full((side + 2 * margin, side + 2 * margin), 255, np.uint8)
-            img[margin:margin + side, margin:margin + side] = cv2.aruco.generateImageMarker(self.dictionary, mid, side)
-            self.stickers[mid] = img
-        self.obj_pts = marker_object_points(cfg.marker_size_mm)
-        s = cfg.marker_size_mm * (side + 2 * margin) / side / 2.0  # sticker half-side, mm (margin is whole pixels)
-        self.sticker_pts = np.array([[-s, s, 0.0], [s, s, 0.0], [s, -s, 0.0], [-s, -s, 0.0]])
-        # The printed layout: every marker on one plane, at its (x, y) on the layer (mm).
-        centre_mm = np.array([np.mean(cfg.marker_x_mm), np.mean(cfg.marker_y_mm), 0.0])
-        self.layer_offsets_mm = {int(mid): np.array([x, y, 0.0]) - centre_mm
-                                 for mid, x, y in zip(cfg.marker_ids, cfg.marker_x_mm, cfg.marker_y_mm, strict=True)}
-        self.board = cv2.aruco.Board([(self.obj_pts + self.layer_offsets_mm[int(m)]).astype(np.float32)
-                                      for m in cfg.marker_ids], self.dictionary, np.array(cfg.marker_ids, np.int32))
-        self.background_gray = 90  # silicone seen by the camera
-        self._noise_bank: np.ndarray | None = None
+        params.minMarkerDistanceRate = MIN_MARKER_DISTANCE_RATE
+        if window_px is not None:
+            params.adaptiveThreshWinSizeMin = params.adaptiveThreshWinSizeMax = window_px
+        return params
 
-    def project(self, pts_cam_mm: np.ndarray) -> np.ndarray:
-        """(N, 3) camera-frame points (mm) -> (N, 2) pixel coordinates (pixel centres are integers)."""
-        p = pts_cam_mm @ self.K.T
-        return p[:, :2] / p[:, 2:3]
+    def reset(self) -> None:
+        """Forget the track: the next frame is searched in full."""
+        self._track: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # id -> (corners (4, 2), last motion (4, 2)) px
+        self._since_full = 0
 
-    def render(self, poses: dict[int, tuple[np.ndarray, np.ndarray]], rng: np.random.Generator | None
-               ) -> tuple[np.ndarray, tuple[int, int]]:
-        """Image of the region holding the markers.
+    def _window(self, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+        """(x0, y0, x1, y1) search window from the track, inside the frame of shape (H, W)."""
+        pts = np.concatenate([np.concatenate([c, c + v]) for c, v in self._track.values()])
+        side_px = max(float(np.linalg.norm(c[1] - c[0])) for c, _ in self._track.values())
+        m = TRACK_MARGIN_SIDES * side_px + PROFILE_HALF_PX
+        lo, hi = np.floor(pts.min(axis=0) - m), np.ceil(pts.max(axis=0) + m) + 1
+        return (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), shape[1]), min(int(hi[1]), shape[0]))
 
-        poses: marker id -> (R (3, 3), t (3,) mm), marker frame in the camera frame.
-        Returns the grey image (h, w) uint8 and its top-left pixel (x0, y0) in the full frame.
-        """
-        cfg, ss = self.cfg, self.cfg.supersample
-        quads = {mid: self.project(self.sticker_pts @ R.T + t) for mid, (R, t) in poses.items()}
-        allq = np.concatenate(list(quads.values()))
-        x0 = int(np.clip(np.floor(allq[:, 0].min()) - ROI_MARGIN_PX, 0, cfg.width_px - 1))
-        y0 = int(np.clip(np.floor(allq[:, 1].min()) - ROI_MARGIN_PX, 0, cfg.height_px - 1))
-        x1 = int(np.clip(np.ceil(allq[:, 0].max()) + ROI_MARGIN_PX + 1, x0 + 1, cfg.width_px))
-        y1 = int(np.clip(np.ceil(allq[:, 1].max()) + ROI_MARGIN_PX + 1, y0 + 1, cfg.height_px))
-        w, h = x1 - x0, y1 - y0
-        img = np.full((h, w), self.background_gray, np.uint8)
-        # Each sticker is drawn in its own supersampled box of whole image pixels (boxes that
-        # overlap are merged), then averaged down into the image: only those pixels cost ss**2.
-        boxes = []
-        for mid, q in quads.items():
-            lo = np.maximum(np.floor(q.min(axis=0)).astype(int) - [x0, y0] - 1, 0)
-            hi = np.minimum(np.ceil(q.max(axis=0)).astype(int) - [x0, y0] + 2, [w, h])
-            if np.all(hi > lo):
-                boxes.append([lo, hi, [mid]])
-        merged = True
-        while merged:
-            merged = False
-            for i in range(len(boxes)):
-                for j in range(i + 1, len(boxes)):
-                    (lo_i, hi_i, m_i), (lo_j, hi_j, m_j) = boxes[i], boxes[j]
-                    if np.all(lo_i < hi_j) and np.all(lo_j < hi_i):
-                        boxes[i] = [np.minimum(lo_i, lo_j), np.maximum(hi_i, hi_j), m_i + m_j]
-                        del boxes[j]
-                        merged = True
-                        break
-                if merged:
-                    break
-        for (bx0, by0), (bx1, by1), mids in boxes:
-            canvas = np.full(((by1 - by0) * ss, (bx1 - bx0) * ss), self.background_gray, np.uint8)
-            for mid in mids:
-                n = self.stickers[mid].shape[0]
-                src = np.array([[-0.5, -0.5], [n - 0.5, -0.5], [n - 0.5, n - 0.5], [-0.5, n - 0.5]], np.float32)
-                # Supersampled pixel j covers image [j / ss - 0.5, (j + 1) / ss - 0.5] (pixel centres are integers).
-                dst = ((quads[mid] - [x0 + bx0, y0 + by0] + 0.5) * ss - 0.5).astype(np.float32)
-                cv2.warpPerspective(self.stickers[mid], cv2.getPerspectiveTransform(src, dst), canvas.shape[::-1],
-                                    dst=canvas, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_TRANSPARENT)
-            img[by0:by1, bx0:bx1] = cv2.resize(canvas, (bx1 - bx0, by1 - by0), interpolation=cv2.INTER_AREA)
-        if cfg.blur_sigma_px > 0:
-            img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px)
-        if rng is not None and cfg.noise_std_gray > 0:
-            # Sensor noise: a random window of a pre-drawn Gaussian bank (one draw per frame is the
-            # costliest step of rendering otherwise).
-            if self._noise_bank is None:
-                self._noise_bank = rng.normal(0.0, cfg.noise_std_gray, 1 << 20).astype(np.float32)
-            k = int(rng.integers(0, self._noise_bank.size - img.size))
-            noise = self._noise_bank[k:k + img.size].reshape(img.shape)
-            img = np.clip(img + noise, 0, 255).astype(np.uint8)
-        return img, (x0, y0)
-
-    def detect(self, img: np.ndarray, origin_px: tuple[int, int]) -> list[Detection]:
-        """Markers in an image whose top-left pixel is origin_px: ArUco detection, outline-refined
-        corners, then a joint layer pose when two or more markers are found, IPPE_SQUARE otherwise."""
-        corners, ids, _ = self.detector.detectMarkers(img)
+    def _find(self, frame: np.ndarray | SensorFrame, box: tuple[int, int, int, int],
+              detector: cv2.aruco.ArucoDetector) -> dict[int, np.ndarray]:
+        """Board markers found in frame[box]: id -> refined (4, 2) full-frame corners."""
+        x0, y0, x1, y1 = box
+        corners, ids, _ = detector.detectMarkers(frame_region(frame, x0, y0, x1, y1))
         if ids is None:
-            return []
-        keep = [k for k, mid in enumerate(ids.ravel()) if int(mid) in self.stickers]
+            return {}
+        keep = [k for k, mid in enumerate(ids.ravel().tolist()) if mid in self.layer_offsets_mm]
         if not keep:
-            return []
-        refined = refine_marker_corners(img, np.stack([corners[k].reshape(4, 2) for k in keep]))
-        found = {int(ids.ravel()[k]): refined[j] + origin_px for j, k in enumerate(keep)}
+            return {}
+        c = np.stack([corners[k].reshape(4, 2) for k in keep]).astype(np.float64) + [x0, y0]
+        # Refine on the frame's own pixels around the markers (the profiles reach past the window's edge).
+        r = PROFILE_HALF_PX + 3.0
+        rx0, ry0 = int(np.floor(c[..., 0].min() - r)), int(np.floor(c[..., 1].min() - r))
+        rx1, ry1 = int(np.ceil(c[..., 0].max() + r)) + 1, int(np.ceil(c[..., 1].max() + r)) + 1
+        rx0, ry0 = max(rx0, 0), max(ry0, 0)
+        refined = refine_marker_corners(frame_region(frame, rx0, ry0, rx1, ry1), c - [rx0, ry0]) + [rx0, ry0]
+        mids = ids.ravel()
+        return {int(mids[k]): refined[j] for j, k in enumerate(keep)}
+
+    def detect(self, frame: np.ndarray | SensorFrame) -> list[Detection]:
+        """Markers in one full frame (H, W): tracked-window search, full-frame search when it loses a
+        marker, outline-refined corners, then a joint layer pose from two or more markers."""
+        found = None
+        tracking = self.track and bool(self._track) and (len(self._track) == len(self.marker_ids)
+                                                         or self._since_full < REACQUIRE_FRAMES)
+        if tracking:
+            found = self._find(frame, self._window(frame.shape), self.follower)
+            if not set(self._track) <= set(found):
+                found = None
+        if found is None:
+            found = self._find(frame, (0, 0, frame.shape[1], frame.shape[0]), self.acquirer)
+            self._since_full = 0
+            self.full_searches += 1
+        else:
+            self._since_full += 1
+        self._track = {mid: (pts, pts - self._track[mid][0] if mid in self._track else np.zeros((4, 2)))
+                       for mid, pts in found.items()}
         layer = self.layer_pose(found) if len(found) >= 2 else None
         out = []
+        if layer is not None:
+            R = cv2.Rodrigues(layer[0])[0]
         for mid, pts in found.items():
             if layer is not None:
-                R = cv2.Rodrigues(layer[0])[0]
                 rvec, tvec = layer[0], layer[1] + R @ self.layer_offsets_mm[mid]
             else:
                 ok, rvec, tvec = cv2.solvePnP(self.obj_pts, pts, self.K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
@@ -197,27 +231,154 @@ class MarkerImager:
         corners_px: marker id -> (4, 2) full-frame pixel corners in ArUco order.
         """
         mids = list(corners_px)
-        obj, img = self.board.matchImagePoints([corners_px[m].astype(np.float32).reshape(1, 4, 2) for m in mids],
-                                               np.array(mids, np.int32))
-        obj = obj.reshape(-1, 3).astype(np.float64)
-        img = np.concatenate([corners_px[m] for m in mids])  # same order as obj, full float64 precision
-        ok, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, self.K, None, flags=cv2.SOLVEPNP_IPPE)
-        if not ok:
-            return None
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, self.K, None, rvecs[0].copy(), tvecs[0].copy())
+        obj = np.concatenate([self.obj_pts + self.layer_offsets_mm[m] for m in mids])
+        img = np.concatenate([corners_px[m] for m in mids])
+        ok, rvecs, tvecs, reproj = cv2.solvePnPGeneric(obj, img, self.K, None, flags=cv2.SOLVEPNP_IPPE)
+        if ok and float(reproj[0, 0]) <= MAX_REPROJECTION_PX:
+            guess = (rvecs[0], tvecs[0])
+        else:
+            # IPPE's rotation vector degenerates for an exactly fronto-parallel layer (a rotation
+            # of pi): take the globally optimal SQPnP solution instead.
+            ok, rvec, tvec = cv2.solvePnP(obj, img, self.K, None, flags=cv2.SOLVEPNP_SQPNP)
+            if not ok:
+                return None
+            guess = (rvec, tvec)
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, self.K, None, guess[0].copy(), guess[1].copy())
         return rvec.ravel(), tvec.ravel()
 
-    def full_frame(self, roi: np.ndarray, origin_px: tuple[int, int]) -> np.ndarray:
-        """(H, W) uint8: the rendered region pasted into a background frame of the camera's size."""
-        frame = np.full((self.cfg.height_px, self.cfg.width_px), self.background_gray, np.uint8)
-        x0, y0 = origin_px
-        frame[y0:y0 + roi.shape[0], x0:x0 + roi.shape[1]] = roi
-        return frame
+
+class MarkerImager:
+    """Renders marker planes seen by a pinhole camera (SensorFrames) and detects them (a MarkerTracker).
+
+    reuse_still=False renders every frame afresh, track=False searches every frame in full
+    (both for comparison: the results are the same).
+    """
+
+    def __init__(self, cfg: CameraConfig, track: bool = True, reuse_still: bool = True) -> None:
+        self.cfg, self.reuse_still = cfg, reuse_still
+        self.tracker = MarkerTracker(cfg, track)
+        self.K = self.tracker.K
+        self.dictionary = self.tracker.dictionary
+        self.obj_pts = self.tracker.obj_pts
+        self.layer_offsets_mm = self.tracker.layer_offsets_mm
+        # Printed stickers: the marker with a white quiet zone. One sticker pixel spans about one
+        # supersampled canvas pixel at the working distance, so the warp's bilinear ramp across an
+        # edge is the canvas pixel's area coverage (a finer sticker would be point-sampled: edges
+        # then snap to the canvas grid, ~0.1 px at 2x supersampling).
+        modules = self.dictionary.markerSize + 2
+        module_px = cfg.fx_px * cfg.marker_size_mm / cfg.distance_mm / modules * cfg.supersample
+        bit_px = max(2, int(round(module_px)))
+        side = bit_px * modules
+        margin = int(round(side * QUIET_ZONE))
+        self.stickers = {}
+        for mid in cfg.marker_ids:
+            img = np.full((side + 2 * margin, side + 2 * margin), 255, np.uint8)
+            img[margin:margin + side, margin:margin + side] = cv2.aruco.generateImageMarker(self.dictionary, mid, side)
+            self.stickers[int(mid)] = img
+        n = side + 2 * margin
+        self._sticker_src = np.array([[-0.5, -0.5], [n - 0.5, -0.5], [n - 0.5, n - 0.5], [-0.5, n - 0.5]], np.float32)
+        s = cfg.marker_size_mm * (side + 2 * margin) / side / 2.0  # sticker half-side, mm (margin is whole pixels)
+        self.sticker_pts = np.array([[-s, s, 0.0], [s, s, 0.0], [s, -s, 0.0], [-s, -s, 0.0]])
+        self.background_gray = 90  # silicone seen by the camera
+        self._noise_bank: np.ndarray | None = None
+        self._clean: tuple[tuple, np.ndarray, np.ndarray, tuple[int, int]] | None = None  # last noise-free render
+
+    def project(self, pts_cam_mm: np.ndarray) -> np.ndarray:
+        """(N, 3) camera-frame points (mm) -> (N, 2) pixel coordinates (pixel centres are integers)."""
+        p = pts_cam_mm @ self.K.T
+        return p[:, :2] / p[:, 2:3]
+
+    def render(self, poses: dict[int, tuple[np.ndarray, np.ndarray]], rng: np.random.Generator | None
+               ) -> SensorFrame:
+        """One camera frame of the markers.
+
+        poses: marker id -> (R (3, 3), t (3,) mm), marker frame in the camera frame. rng: sensor
+        noise (None: noise-free). The frame is the rendered region (stickers plus ROI_MARGIN_PX,
+        blurred and noisy) in uniform background.
+        """
+        cfg = self.cfg
+        ids = tuple(poses)
+        key = np.concatenate([np.concatenate([R.ravel(), t]) for R, t in poses.values()])
+        if (self.reuse_still and self._clean is not None and self._clean[0] == ids
+                and np.array_equal(self._clean[1], key)):
+            clean, origin = self._clean[2], self._clean[3]
+        else:
+            clean, origin = self._render_clean(poses)
+            self._clean = (ids, key, clean, origin)
+        if rng is not None and cfg.noise_std_gray > 0:
+            # Sensor noise: a random window of a pre-drawn Gaussian bank (one draw per frame is the
+            # costliest step of rendering otherwise).
+            if self._noise_bank is None:
+                self._noise_bank = rng.normal(0.0, cfg.noise_std_gray, 1 << 20).astype(np.float32)
+            k = int(rng.integers(0, self._noise_bank.size - clean.size))
+            noisy = clean + self._noise_bank[k:k + clean.size].reshape(clean.shape)
+            img = np.clip(noisy, 0, 255, out=noisy).astype(np.uint8)
+        else:
+            img = clean.copy()
+        return SensorFrame(img, origin, (cfg.height_px, cfg.width_px), self.background_gray)
+
+    def _render_clean(self, poses: dict[int, tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, tuple[int, int]]:
+        """Blurred, noise-free image (h, w) uint8 of the region holding the stickers, and its top-left pixel."""
+        cfg, ss = self.cfg, self.cfg.supersample
+        mids = [int(m) for m in poses]
+        quads = self.project(np.concatenate([self.sticker_pts @ R.T + t for R, t in poses.values()])).reshape(-1, 4, 2)
+        qlo, qhi = quads.min(axis=1), quads.max(axis=1)  # (M, 2) each
+        x0 = int(np.clip(np.floor(qlo[:, 0].min()) - ROI_MARGIN_PX, 0, cfg.width_px - 1))
+        y0 = int(np.clip(np.floor(qlo[:, 1].min()) - ROI_MARGIN_PX, 0, cfg.height_px - 1))
+        x1 = int(np.clip(np.ceil(qhi[:, 0].max()) + ROI_MARGIN_PX + 1, x0 + 1, cfg.width_px))
+        y1 = int(np.clip(np.ceil(qhi[:, 1].max()) + ROI_MARGIN_PX + 1, y0 + 1, cfg.height_px))
+        w, h = x1 - x0, y1 - y0
+        img = np.full((h, w), self.background_gray, np.uint8)
+        # Each sticker is drawn in its own supersampled box of whole image pixels (boxes that
+        # overlap are merged), then averaged down into the image: only those pixels cost ss**2.
+        lo = np.maximum(np.floor(qlo).astype(int) - [x0 + 1, y0 + 1], 0).tolist()
+        hi = np.minimum(np.ceil(qhi).astype(int) - [x0 - 2, y0 - 2], [w, h]).tolist()
+        boxes = [[*lo[k], *hi[k], [k]] for k in range(len(mids)) if hi[k][0] > lo[k][0] and hi[k][1] > lo[k][1]]
+        merged = True
+        while merged:
+            merged = False
+            for i in range(len(boxes)):
+                for j in range(i + 1, len(boxes)):
+                    a, b = boxes[i], boxes[j]
+                    if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]:
+                        boxes[i] = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]), a[4] + b[4]]
+                        del boxes[j]
+                        merged = True
+                        break
+                if merged:
+                    break
+        for bx0, by0, bx1, by1, ks in boxes:
+            canvas = np.full(((by1 - by0) * ss, (bx1 - bx0) * ss), self.background_gray, np.uint8)
+            for k in ks:
+                # Supersampled pixel j covers image [j / ss - 0.5, (j + 1) / ss - 0.5] (pixel centres are integers).
+                dst = ((quads[k] - [x0 + bx0, y0 + by0] + 0.5) * ss - 0.5).astype(np.float32)
+                cv2.warpPerspective(self.stickers[mids[k]], cv2.getPerspectiveTransform(self._sticker_src, dst),
+                                    canvas.shape[::-1], dst=canvas, flags=cv2.INTER_LINEAR,
+                                    borderMode=cv2.BORDER_TRANSPARENT)
+            img[by0:by1, bx0:bx1] = cv2.resize(canvas, (bx1 - bx0, by1 - by0), interpolation=cv2.INTER_AREA)
+        if cfg.blur_sigma_px > 0:
+            img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px)
+        return img, (x0, y0)
+
+    def detect(self, frame: np.ndarray | SensorFrame) -> list[Detection]:
+        """Markers in one full frame, by this camera's tracker (see MarkerTracker.detect)."""
+        return self.tracker.detect(frame)
+
+    def reset_tracking(self) -> None:
+        """Start the next detection with a full-frame search (a new trial, a new camera session)."""
+        self.tracker.reset()
 
 
 _R_PX = np.arange(-PROFILE_HALF_PX, PROFILE_HALF_PX + 1e-9, PROFILE_STEP_PX, dtype=np.float32)  # (I,) across a side
 _U = np.linspace(0.0, 1.0, PROFILES_PER_SIDE)  # (J,) fractions of a side's usable length
 _PLATEAU = max(1, int(round(0.75 / PROFILE_STEP_PX)))  # samples in the outer 0.75 px of each profile end
+# Weights turning a profile (I,) into [its trapezoid integral, mean of the inner plateau, mean of the outer one].
+_PROFILE_WEIGHTS = np.zeros((_R_PX.size, 3), np.float32)
+_PROFILE_WEIGHTS[:, 0] = PROFILE_STEP_PX
+_PROFILE_WEIGHTS[[0, -1], 0] = PROFILE_STEP_PX / 2
+_PROFILE_WEIGHTS[:_PLATEAU, 1] = 1.0 / _PLATEAU
+_PROFILE_WEIGHTS[-_PLATEAU:, 2] = 1.0 / _PLATEAU
+_NEXT, _PREV = [1, 2, 3, 0], [3, 0, 1, 2]  # corner k + 1, corner k - 1
 
 
 def refine_marker_corners(img: np.ndarray, corners_px: np.ndarray) -> np.ndarray:
@@ -230,30 +391,33 @@ def refine_marker_corners(img: np.ndarray, corners_px: np.ndarray) -> np.ndarray
     intersection of its two sides. A marker whose edges are not clean keeps its input corners.
     """
     c = np.asarray(corners_px, np.float64).reshape(-1, 4, 2)
-    d = np.roll(c, -1, axis=1) - c  # side k runs from corner k to corner k + 1
-    length = np.linalg.norm(d, axis=2)  # (M, 4)
+    d = c[:, _NEXT] - c  # side k runs from corner k to corner k + 1
+    length = np.hypot(d[..., 0], d[..., 1])  # (M, 4)
     t = d / length[..., None]
-    n = np.stack([t[..., 1], -t[..., 0]], axis=2)
-    n *= np.sign(np.sum((c + d / 2 - c.mean(axis=1, keepdims=True)) * n, axis=2))[..., None]  # outward
+    n = t[..., ::-1] * [1.0, -1.0]
+    n *= np.sign(((c + d / 2 - c.mean(axis=1, keepdims=True)) * n).sum(axis=2))[..., None]  # outward
     s = CORNER_SKIP_PX + np.maximum(length - 2 * CORNER_SKIP_PX, 0.0)[..., None] * _U  # (M, 4, J)
-    # Sample points, x and y planes apart (2, M, 4, J, I) so the innermost axis is a profile.
-    base = (c[:, :, None, :] + s[..., None] * t[:, :, None, :]).transpose(3, 0, 1, 2).astype(np.float32)
-    xy = base[..., None] + n.transpose(2, 0, 1).astype(np.float32)[..., None, None] * _R_PX
-    prof = cv2.remap(img.astype(np.float32), xy[0].reshape(-1, _R_PX.size), xy[1].reshape(-1, _R_PX.size),
-                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(xy.shape[1:])  # (M, 4, J, I)
-    dark = prof[..., :_PLATEAU].mean(axis=(2, 3))  # (M, 4) inside: the black border
-    bright = prof[..., -_PLATEAU:].mean(axis=(2, 3))  # outside: the quiet zone
+    # Sample points, x and y planes apart (M, 4, J, I): J profiles per side (centred on it), I samples across each.
+    centres = (c[:, :, None, :] + s[..., None] * t[:, :, None, :]).astype(np.float32)  # (M, 4, J, 2)
+    across = (n[..., None] * _R_PX).astype(np.float32)  # (M, 4, 2, I)
+    map_x = centres[..., 0, None] + across[:, :, None, 0]
+    map_y = centres[..., 1, None] + across[:, :, None, 1]
+    prof = cv2.remap(img.astype(np.float32), map_x.reshape(-1, _R_PX.size), map_y.reshape(-1, _R_PX.size),
+                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # (M * 4 * J, I)
+    sums = (prof @ _PROFILE_WEIGHTS).reshape(*s.shape, 3).astype(np.float64)  # (M, 4, J, 3)
+    dark, bright = sums[..., 1].mean(axis=2), sums[..., 2].mean(axis=2)  # (M, 4): black border, quiet zone
     contrast = bright - dark
-    cover = (prof - dark[..., None, None]) / np.maximum(contrast, 1e-6)[..., None, None]
-    edge = PROFILE_HALF_PX - np.trapezoid(cover, dx=PROFILE_STEP_PX, axis=3)  # (M, 4, J) offset along n
+    # Edge offset along n: the profile's width minus its area of coverage (0 dark .. 1 bright).
+    edge = PROFILE_HALF_PX - (sums[..., 0] - 2 * PROFILE_HALF_PX * dark[..., None]) / np.maximum(contrast, 1e-6)[..., None]
     # Least-squares line edge = a + b s per side: the side is c + a n + s (t + b n).
     sm, em = s.mean(axis=2, keepdims=True), edge.mean(axis=2, keepdims=True)
-    b = np.sum((s - sm) * (edge - em), axis=2) / np.maximum(np.sum((s - sm) ** 2, axis=2), 1e-12)
+    ds = s - sm
+    b = (ds * (edge - em)).sum(axis=2) / np.maximum((ds * ds).sum(axis=2), 1e-12)
     a = em[..., 0] - b * sm[..., 0]
     p0 = c + a[..., None] * n
     dirs = t + b[..., None] * n
     # Corner k is where side k - 1 meets side k: p_prev + u d_prev = p0 + v dirs.
-    p_prev, d_prev = np.roll(p0, 1, axis=1), np.roll(dirs, 1, axis=1)
+    p_prev, d_prev = p0[:, _PREV], dirs[:, _PREV]
     det = d_prev[..., 0] * -dirs[..., 1] + dirs[..., 0] * d_prev[..., 1]
     rhs = p0 - p_prev
     u = (rhs[..., 0] * -dirs[..., 1] + dirs[..., 0] * rhs[..., 1]) / np.where(det == 0.0, np.nan, det)

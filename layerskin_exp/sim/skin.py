@@ -30,19 +30,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from layerskin_exp.config import SkinConfig
+from layerskin_exp.sim import frame_kernels as fk
 from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.contact import ContactTables, build_tables
 from layerskin_exp.sim.friction import StickSlip
-from layerskin_exp.sim.fsr import FSRLayer, advance_layers, conductance_layers
+from layerskin_exp.sim.fsr import FSRLayer, conductance_layers
 from layerskin_exp.sim.readout import MatrixReadout
 from layerskin_exp.sim.spacer import SpacerLaw, hex_cell_pattern
+
+# A step record's leading columns are the frame kernels' state (frames_of_steps passes them on).
+assert (fk.S_T, fk.S_FX, fk.S_FZ, fk.S_TORQUE, fk.S_DELTA, fk.S_AX, fk.S_AY, fk.S_YAW, fk.S_UX, fk.S_UY, fk.S_ROT) == (
+    mk.S_T, mk.S_FX, mk.S_FZ, mk.S_TORQUE, mk.S_DELTA, mk.S_CX, mk.S_CY, mk.S_YAW, mk.S_UX, mk.S_UY, mk.S_THETA)
 
 INDENTERS = ("hemisphere", "rod")
 # The hemisphere's fields are evaluated in a window around the contact: outside it each layer's
 # profile (times the deep layer's largest tilt factor) is below this fraction of its peak.
-WINDOW_EPS = 1e-8
-_TINY = np.finfo(float).tiny
+WINDOW_EPS = fk.WINDOW_EPS
 
 
 @dataclass
@@ -151,28 +155,35 @@ class SkinModel:
         self._nq = sim.contact.quad_points
         qx, qy = np.meshgrid(self._q, self._q)  # [y, x]
         self._lattice32 = hex_cell_pattern(qx, qy, sim.spacer.cell, sim.spacer.lattice_contrast).astype(np.float32)
-        self._q32 = self._q.astype(np.float32)
-        self._lattice_windows: dict[int, np.ndarray] = {}  # width -> (.., .., w*q, w*q) strided views
+        self._quad32 = np.concatenate([self._q, self._qw]).astype(np.float32)  # coordinates, then weights
         self._centres = centres
         self._half_electrode = 0.5 * skin.electrode_mm
-        # (n, n*q) Gauss weights of each taxel's block of quadrature points (taxel means as matmuls)
-        self._taxel_weights = np.kron(np.eye(n), self._qw[None, :]).astype(np.float32)
         self._build_lookups()
         # --- transduction and readout
         self.fsr = (FSRLayer(sim.fsr, (n, n), rng), FSRLayer(sim.fsr, (n, n), rng))
         self.readout = MatrixReadout(sim.readout, skin.adc_bits, n)
         r = sim.readout
         self.baseline_counts = np.clip(rng.normal(r.baseline_counts, r.baseline_sd_counts, size=(2, n, n)), 0, None)
-        self._last_maps: np.ndarray | None = None  # (2, n, n) pressure at the last frame
         period = skin.frame_period_ms * 1e-3
         slot = np.arange(2 * n).reshape(2, n)
-        self._row_offsets_s = (2 * n - 1 - slot)[None] * period / (2 * n)  # (1, 2, n) before frame end
+        self._row_offsets_s = (2 * n - 1 - slot) * period / (2 * n)  # (2, n) before the frame end
         self._gains = np.stack([layer.gain for layer in self.fsr])  # (2, n, n), fixed per sheet
+        # the FSR memories of both layers in one array; each FSRLayer keeps views of it
+        self._play, self._lag = np.zeros((2, n, n)), np.zeros((2, n, n))
+        for k, layer in enumerate(self.fsr):
+            layer.play, layer.lag = self._play[k], self._lag[k]
+        self._last_maps = np.zeros((2, n, n))  # pressure at the last frame
+        self._memory = np.zeros(2)  # [time of the last frame, whether there was one]
+        self._params = self._kernel_params()
+        self._tables = (self._params, self._lk, self._tilt_table, self._deep_bound, self._dist, self._quad32,
+                        self._lattice32)
+        self._no_jitter = np.zeros((0, 2, n))
+        self._no_noise = np.zeros((2, 0, n, n))
+        self.maps_computed = 0  # states whose pressure maps were computed (not reused in a hold)
         # Idle sheet: no pressure at the last frame and both FSR memories exactly zero. Unloaded
         # frames then leave it so and read the floor conductance: constant counts plus noise.
         self._idle = True
         self._idle_counts: np.ndarray | None = None  # (2, n, n) float counts before noise
-        self._last_t: float | None = None
 
     # ------------------------------------------------------------------ mechanics
     def step_many(self, t_s: np.ndarray, xyz_mm: np.ndarray, yaw_rad: np.ndarray) -> np.ndarray:
@@ -230,9 +241,10 @@ class SkinModel:
     def _build_lookups(self) -> None:
         """Resample the profile tables for nearest-bin lookups: in r^2 (hemisphere, no sqrt per
         point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
-        far below the profile's own scale. Stored as (value, next row - value) float32 pairs in
-        one complex64 array (one gather per point for both indentation rows), flattened with one
-        guard column of zeros. Also the reach of each pair of rows (`_window_reach`)."""
+        far below the profile's own scale. Stored as (value, next row - value) float32 pairs per
+        pair of indentation rows, with one guard column of zeros: `_lk` (2, n_delta - 1,
+        n_fine, 2) [superficial, deep]. Also the window bounds of each pair of rows
+        (`_deep_bound`, see frame_kernels) and the tilt tables (`_tilt_table`)."""
         tab = self.tab
         if self.kind == "hemisphere":
             r2_max = float(tab.dist_mm[-1]) ** 2
@@ -245,26 +257,27 @@ class SkinModel:
             grid = np.arange(tab.dist_mm[0], tab.dist_mm[-1], step)
             at = grid
             self._lk_origin, self._lk_scale = float(tab.dist_mm[0]), 1.0 / step
-        self._lk_n = len(grid) + 1
+        n_fine = len(grid) + 1
 
         def pairs(table):
-            fine = np.zeros((table.shape[0], self._lk_n), dtype=np.float32)
+            fine = np.zeros((table.shape[0], n_fine), dtype=np.float32)
             for k in range(table.shape[0]):
                 fine[k, :-1] = np.interp(at, tab.dist_mm, table[k])
-            out = np.empty((table.shape[0] - 1, self._lk_n, 2), dtype=np.float32)
+            out = np.empty((table.shape[0] - 1, n_fine, 2), dtype=np.float32)
             out[..., 0] = fine[:-1]
             out[..., 1] = fine[1:] - fine[:-1]
-            return out.view(np.complex64).ravel()
+            return out
 
-        self._lk_sup = pairs(tab.superficial_kpa)
-        self._lk_deep = pairs(tab.deep_kpa)
+        self._lk = np.ascontiguousarray(np.stack([pairs(tab.superficial_kpa), pairs(tab.deep_kpa)]))
         # Per pair of rows (k, k+1): the larger magnitude on the coarse grid, and (hemisphere) the
         # radius beyond which the superficial profile stays below WINDOW_EPS of its peak.
-        self._pair_max_sup = np.maximum(np.abs(tab.superficial_kpa[:-1]), np.abs(tab.superficial_kpa[1:]))
-        self._pair_max_deep = np.maximum(np.abs(tab.deep_kpa[:-1]), np.abs(tab.deep_kpa[1:]))
-        self._reach_sup = self._window_reach(self._pair_max_sup, np.ones(1))
-        self._tilt_table = np.stack([tab.tilt_gamma, tab.tilt_logz], axis=-1)
-        self._dist_row = tab.dist_mm[None, :]
+        pair_max_sup = np.maximum(np.abs(tab.superficial_kpa[:-1]), np.abs(tab.superficial_kpa[1:]))
+        pair_max_deep = np.maximum(np.abs(tab.deep_kpa[:-1]), np.abs(tab.deep_kpa[1:]))
+        reach_sup = self._window_reach(pair_max_sup, np.ones(1))
+        thr_deep = WINDOW_EPS * pair_max_deep.max(axis=1)
+        self._deep_bound = np.ascontiguousarray(np.column_stack([pair_max_deep, thr_deep, reach_sup]))
+        self._dist = np.ascontiguousarray(tab.dist_mm, dtype=float)
+        self._tilt_table = np.ascontiguousarray(np.stack([tab.tilt_gamma, tab.tilt_logz], axis=-1), dtype=float)
 
     def _window_reach(self, pair_max: np.ndarray, factor: np.ndarray) -> np.ndarray:
         """Radius (mm) beyond which pair_max (M, n_dist) x factor (M or 1, n_dist) stays below
@@ -278,188 +291,89 @@ class SkinModel:
         last = np.where(above.any(axis=1), last, -2)
         return dist[_clip(last + 2, 0, len(dist) - 1)]
 
-    def _delta_index(self, delta: np.ndarray):
-        x = _clip(delta / self.tab.d_delta, 0.0, len(self.tab.delta_mm) - 1.000001)
-        i = x.astype(np.int64)
-        return i, (x - i)
+    def _kernel_params(self) -> np.ndarray:
+        """The kernels' parameter vector (frame_kernels.P_*)."""
+        s, skin, tab = self.sim, self.skin, self.tab
+        prm = fk.transduction_params(s.fsr, s.readout, skin.adc_bits)
+        prm[fk.P_N], prm[fk.P_NQ], prm[fk.P_ROD] = skin.n_taxels, self._nq, float(self.kind == "rod")
+        prm[fk.P_X0], prm[fk.P_PITCH], prm[fk.P_HALF_EL] = self._centres[0], skin.pitch_mm, self._half_electrode
+        prm[fk.P_DDELTA], prm[fk.P_XMAX_DELTA] = tab.d_delta, len(tab.delta_mm) - 1.000001
+        prm[fk.P_DSHIFT] = tab.tilt_shift_mm[1] - tab.tilt_shift_mm[0]
+        prm[fk.P_XMAX_SHIFT] = len(tab.tilt_shift_mm) - 1.000001
+        prm[fk.P_H0] = s.cover.thickness + s.fsr.layer_thickness_mm + s.spacer.thickness
+        prm[fk.P_HCLIP] = 0.95 * s.spacer.thickness
+        prm[fk.P_LK_ORIGIN], prm[fk.P_LK_SCALE] = self._lk_origin, self._lk_scale
+        prm[fk.P_HALF_PAD] = self._half
+        prm[fk.P_PERIOD] = skin.frame_period_ms * 1e-3
+        prm[fk.P_REUSE] = 1.0
+        return prm
 
-    def _lookup_pairs(self, flat: np.ndarray, i: np.ndarray, t32: np.ndarray, coord: np.ndarray) -> np.ndarray:
-        """Profile (float32) at coord (N, a, b), r^2 or signed distance, overwritten, for frames
-        with indentation row i + t: nearest bin, linear between the two rows."""
-        n = self._lk_n
-        if self._lk_origin != 0.0:
-            coord -= self._lk_origin
-        coord *= self._lk_scale
-        coord += 0.5
-        j = coord.astype(np.int32)
-        _clip(j, 0, n - 1, out=j)  # guard column: zero outside the table
-        j += (i * n).astype(np.int32)[:, None, None]
-        pair = flat.take(j)
-        val = pair.imag * t32[:, None, None]
-        val += pair.real
-        return val
+    @property
+    def reuse_maps(self) -> bool:
+        """Whether states repeating the previous loading configuration (holds) reuse its maps."""
+        return bool(self._params[fk.P_REUSE])
 
-    def _tilt(self, i: np.ndarray, t: np.ndarray, shift: np.ndarray):
-        """Exponential-tilt rate and log-normaliser giving a deep-CoP shift (mm) at each frame."""
-        tab = self.tab
-        ds = tab.tilt_shift_mm[1] - tab.tilt_shift_mm[0]
-        x = _clip(shift / ds, 0.0, len(tab.tilt_shift_mm) - 1.000001)
-        si = x.astype(np.int64)
-        su = x - si
+    @reuse_maps.setter
+    def reuse_maps(self, on: bool) -> None:
+        self._params[fk.P_REUSE] = 1.0 if on else 0.0
 
-        # both tables at once: (n_delta, n_shift, 2) [gamma, logz]
-        table = self._tilt_table
-        su, t = su[:, None], t[:, None]
-        a = table[i, si] * (1 - su) + table[i, si + 1] * su
-        b = table[i + 1, si] * (1 - su) + table[i + 1, si + 1] * su
-        gl = a * (1 - t) + b * t
-        return gl[:, 0], gl[:, 1]
+    @property
+    def _maps_cache(self) -> tuple | None:
+        """(config_key, (2, n, n) maps) of the last state whose maps were computed, or None."""
+        serial = int(self._cache_serial[0])
+        return None if serial < 0 else ((self._model_id, serial), self._cache_maps.copy())
 
-    def _window(self, centre: np.ndarray, reach: np.ndarray):
-        """Taxel windows (start_y, start_x) (M,), common width, and which frames have one: every
-        taxel whose electrode comes within `reach` (M,) of `centre` (M, 2), square, inside the
-        array (shifted inward at the edges; frames whose reach misses the array have none)."""
-        n, pitch = self.skin.n_taxels, self.skin.pitch_mm
-        x0 = self._centres[0]
-        lo = np.ceil((centre - reach[:, None] - self._half_electrode - x0) / pitch)
-        hi = np.floor((centre + reach[:, None] + self._half_electrode - x0) / pitch)
-        lo = _clip(lo, 0, n).astype(np.int64)
-        hi = _clip(hi, -1, n - 1).astype(np.int64)
-        has = np.all(hi >= lo, axis=1)
-        width = int((hi - lo + 1)[has].max()) if has.any() else 0
-        start = np.minimum(lo, n - width)
-        return start[:, 1], start[:, 0], width, has
+    @_maps_cache.setter
+    def _maps_cache(self, value: tuple | None) -> None:
+        if not hasattr(self, "_cache_serial"):
+            n = self.skin.n_taxels
+            self._cache_serial = np.full(1, -1, dtype=np.int64)
+            self._cache_maps = np.zeros((2, n, n))
+        if value is None:
+            self._cache_serial[0] = -1
+        else:
+            self._cache_serial[0] = self._serials([value[0]])[0]
+            self._cache_maps[:] = value[1]
 
-    def _grid_axes(self, sy: np.ndarray, sx: np.ndarray, width: int):
-        """Quadrature rows/cols (M, width*q) of the windows and their coordinates (float32)."""
-        ar = np.arange(width * self._nq)
-        rows = (sy * self._nq)[:, None] + ar
-        cols = (sx * self._nq)[:, None] + ar
-        return rows, cols, self._q32[rows], self._q32[cols]
+    def _serials(self, keys) -> np.ndarray:
+        """(N,) int64 configuration serials of config keys (-1: none or another model's)."""
+        mid = self._model_id
+        return np.array([k[1] if k is not None and k[0] == mid else -1 for k in keys], dtype=np.int64)
 
-    def _window_fields(self, batch: StateBatch):
-        """Pressure (kPa, float32) at the quadrature points of each layer inside a window around
-        its contact. Returns per layer (frames (M,), start_y (M,), start_x (M,), width in taxels,
-        field (M, width*q, width*q) [y, x]); outside the window and for unloaded frames it is
-        zero (or, for the hemisphere, below WINDOW_EPS of the profile's peak)."""
-        fz = batch.force_n[:, 2]
-        live = np.flatnonzero(fz > 0)
-        n = self.skin.n_taxels
-        empty = (live[:0], live[:0], live[:0], 0, np.zeros((0, 0, 0), np.float32))
-        if len(live) == 0:
-            return empty, empty
-        b = batch if len(live) == len(fz) else StateBatch(**{k: v[live] for k, v in vars(batch).items()})
-        delta, fz, ft = b.indentation_mm, b.force_n[:, 2], b.force_n[:, :2]
-        a = b.contact_xy_mm
-        cd = a + b.surface_shift_mm  # contact in the deep frame
-        h_eff = self.stack_height_mm(delta)
-        ft_mag = np.hypot(ft[:, 0], ft[:, 1])
-        shift = ft_mag * h_eff / fz  # moment balance: F_t H = F_z shift
-        i, t = self._delta_index(delta)
-        t32 = t.astype(np.float32)
-        gamma, logz = self._tilt(i, t, shift)
-        f32 = np.float32
-        if self.kind == "rod":
-            full = (np.zeros(len(live), np.int64),) * 2
-            rows, cols, qy, qx = self._grid_axes(*full, n)
-            sup, deep = self._rod_fields(b, i, t32, gamma, logz, h_eff, qx - a[:, 0:1].astype(f32),
-                                         qy - a[:, 1:2].astype(f32), qx - cd[:, 0:1].astype(f32),
-                                         qy - cd[:, 1:2].astype(f32))
-            return (live, *full, n, sup), (live, *full, n, deep * self._lattice32[None])
-        # superficial: radial profile around the contact, in the superficial frame
-        sy, sx, width, has = self._window(a, self._reach_sup[i])
-        k = np.flatnonzero(has)
-        rows, cols, qy, qx = self._grid_axes(sy[k], sx[k], width)
-        dx = qx - a[k, 0:1].astype(f32)
-        dy = qy - a[k, 1:2].astype(f32)
-        r2 = (dx * dx)[:, None, :] + (dy * dy)[:, :, None]
-        sup = (live[k], sy[k], sx[k], width, self._lookup_pairs(self._lk_sup, i[k], t32[k], r2))
-        # deep: spread profile tilted along the shear, times the lattice pattern; its window
-        # bounds the profile times the largest tilt factor exp(|gamma| r - logz)
-        tilt_max = np.exp(np.abs(gamma)[:, None] * self._dist_row - logz[:, None])
-        sy, sx, width, has = self._window(cd, self._window_reach(self._pair_max_deep[i], tilt_max))
-        k = np.flatnonzero(has)
-        rows, cols, qy, qx = self._grid_axes(sy[k], sx[k], width)
-        dx = qx - cd[k, 0:1].astype(f32)
-        dy = qy - cd[k, 1:2].astype(f32)
-        # shear direction (0 without shear: ft is 0 there, so no 0/0)
-        nrm = (ft[k] / np.maximum(ft_mag[k, None], _TINY)).astype(f32)
-        g = (gamma[k, None] * nrm).astype(f32)  # tilt along the shear direction
-        half_logz = 0.5 * logz[k, None].astype(f32)
-        ex = np.exp(g[:, 0, None] * dx - half_logz)
-        ey = np.exp(g[:, 1, None] * dy - half_logz)
-        field = self._lookup_pairs(self._lk_deep, i[k], t32[k], (dx * dx)[:, None, :] + (dy * dy)[:, :, None])
-        field *= ey[:, :, None] * ex[:, None, :]
-        blocks = self._lattice_windows.get(width)
-        if blocks is None:
-            blocks = np.lib.stride_tricks.sliding_window_view(self._lattice32, (width * self._nq,) * 2)
-            self._lattice_windows[width] = blocks
-        field *= blocks[sy[k] * self._nq, sx[k] * self._nq]  # the lattice pattern under each window
-        return sup, (live[k], sy[k], sx[k], width, field)
+    @staticmethod
+    def _pack(batch: StateBatch) -> np.ndarray:
+        """(N, frame_kernels.N_STATE) float64 state matrix of a batch (the kernels' layout)."""
+        st = np.empty((len(batch.t_s), fk.N_STATE))
+        st[:, fk.S_T] = batch.t_s
+        st[:, fk.S_FX:fk.S_FZ + 1] = batch.force_n
+        st[:, fk.S_TORQUE] = batch.torque_z_nmm
+        st[:, fk.S_DELTA] = batch.indentation_mm
+        st[:, fk.S_AX:fk.S_AY + 1] = batch.contact_xy_mm
+        st[:, fk.S_YAW] = batch.indenter_yaw_rad
+        st[:, fk.S_UX:fk.S_UY + 1] = batch.surface_shift_mm
+        st[:, fk.S_ROT] = batch.surface_rotation_rad
+        return st
 
-    def _rod_fields(self, b, i, t32, gamma, logz, h_eff, dxs, dys, dxd, dyd):
-        """Rod line load on the full grid (live frames only), both layers [y, x], float32."""
-        f32 = np.float32
-        yaw = b.indenter_yaw_rad
-        yaw_s = yaw - b.surface_rotation_rad  # rod axis in the superficial frame
-        ps = ((-np.sin(yaw_s)).astype(f32)[:, None] * dxs)[:, None, :] + (np.cos(yaw_s).astype(f32)[:, None] * dys)[:, :, None]
-        sup = self._lookup_pairs(self._lk_sup, i, t32, ps)
-        fz = b.force_n[:, 2]
-        cd = b.contact_xy_mm + b.surface_shift_mm
-        chords = np.array([_chord(float(c[0]), float(c[1]), float(w), self._half) for c, w in zip(cd, yaw, strict=True)])
-        length = np.maximum(chords[:, 1] - chords[:, 0], 1e-9)
-        line_q = fz / length  # N/mm
-        i_s = (chords[:, 1] ** 3 - chords[:, 0] ** 3) / 3.0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            # torsion: traction T s / I_s across the line; its moment shifts the deep line by T H s / (I_s q)
-            twist = np.arctan(b.torque_z_nmm * h_eff / (i_s * line_q))
-        yaw_d = yaw + twist
-        ex, ey = np.cos(yaw_d).astype(f32)[:, None], np.sin(yaw_d).astype(f32)[:, None]
-        px, py = -ey * dxd, ex * dyd  # perp = px + py, along = ax + ay
-        ax, ay = ex * dxd, ey * dyd
-        ft = b.force_n[:, :2]
-        f_perp = -ft[:, 0] * ey[:, 0] + ft[:, 1] * ex[:, 0]
-        f_along = ft[:, 0] * ex[:, 0] + ft[:, 1] * ey[:, 0]
-        g = (np.sign(f_perp) * gamma).astype(f32)[:, None]
-        deep = self._lookup_pairs(self._lk_deep, i, t32, px[:, None, :] + py[:, :, None])
-        tx = np.exp(g * px - logz.astype(f32)[:, None])
-        ty = np.exp(g * py)
-        deep *= ty[:, :, None] * tx[:, None, :]
-        # along-axis shear: its moment is balanced by a linear load gradient along the line
-        mid = 0.5 * (chords[:, 0] + chords[:, 1])
-        beta = (f_along * h_eff / (line_q * length**3 / 12.0)).astype(f32)[:, None]
-        ramp = (1.0 + beta * (ax - mid.astype(f32)[:, None]))[:, None, :] + (beta * ay)[:, :, None]
-        np.maximum(ramp, 0.0, out=ramp)
-        deep *= ramp
-        return sup, deep
-
-    def _taxel_sums(self, out: np.ndarray, layer) -> np.ndarray:
-        """Writes the taxel means (float64) of one layer's windowed fields into out (N, 16, 16)
-        (left as it is outside the windows: pass zeros)."""
-        frames_idx, sy, sx, width, field = layer
-        if len(frames_idx) == 0:
-            return out
-        wq = width * self._nq
-        wm = self._taxel_weights[:width, :wq]  # (width, wq): block rows of the Gauss weights
-        # stacked small products (one large GEMM would wake OpenBLAS's thread pool)
-        tax = np.matmul(wm, np.matmul(field, wm.T))  # (M, width, width)
-        ar = np.arange(width)
-        out[frames_idx[:, None, None], (sy[:, None] + ar)[:, :, None], (sx[:, None] + ar)[:, None, :]] = tax
-        return out
+    @staticmethod
+    def _pack_states(states: list[MechState]) -> np.ndarray:
+        """_pack(stack_states(states)) in one array construction."""
+        rows = []
+        for s in states:
+            f, a, u = s.force_n, s.contact_xy_mm, s.surface_shift_mm
+            rows.append((s.t_s, f[0], f[1], f[2], s.torque_z_nmm, s.indentation_mm, a[0], a[1],
+                         s.indenter_yaw_rad, u[0], u[1], s.surface_rotation_rad))
+        return np.array(rows, dtype=float).reshape(-1, fk.N_STATE)
 
     def pressure_fields(self, batch: StateBatch) -> tuple[np.ndarray, np.ndarray]:
-        """Pressure (kPa, float32) at the quadrature points (N, n*q, n*q) of both layers, [y, x]."""
-        n_all = len(batch.t_s)
-        nq = self.skin.n_taxels * self._nq
-        out = []
-        for frames_idx, sy, sx, width, field in self._window_fields(batch):
-            full = np.zeros((n_all, nq, nq), np.float32)
-            ar = np.arange(width * self._nq)
-            rows = (sy * self._nq)[:, None] + ar
-            cols = (sx * self._nq)[:, None] + ar
-            full[frames_idx[:, None, None], rows[:, :, None], cols[:, None, :]] = field
-            out.append(full)
-        return out[0], out[1]
+        """Pressure (kPa, float32) at the quadrature points (N, n*q, n*q) of both layers, [y, x];
+        zero for unloaded states and (hemisphere) outside each layer's window around the
+        contact, where the profile is below WINDOW_EPS of its peak."""
+        st = self._pack(batch)
+        m = self.skin.n_taxels * self._nq
+        sup = np.zeros((len(st), m, m), np.float32)
+        deep = np.zeros((len(st), m, m), np.float32)
+        fk.fields_kernel(st, *self._tables, sup, deep)
+        return sup, deep
 
     def pressure_maps(self, states: list[MechState]) -> tuple[np.ndarray, np.ndarray]:
         """(N, 16, 16) mean pressure (kPa) over each taxel's electrode: superficial, deep."""
@@ -468,19 +382,17 @@ class SkinModel:
 
     def _maps(self, states: list[MechState]) -> np.ndarray:
         """(N, 2, 16, 16) mean pressure (kPa) over each taxel's electrode, [superficial, deep]."""
+        return self.maps_batch(stack_states(states), self._serials([s.config_key for s in states]))
+
+    def maps_batch(self, batch: StateBatch, config_serial: np.ndarray) -> np.ndarray:
+        """(N, 2, 16, 16) mean pressure (kPa) over each taxel's electrode, [superficial, deep],
+        for a batch with its configuration serials (N,) (MechState.config_key[1]; -1: none):
+        a state repeating the previous one's configuration (or the last computed) reuses it."""
         n = self.skin.n_taxels
-        cached = self._maps_cache
-        if cached is not None and all(s.config_key == cached[0] for s in states):
-            # a hold: the same loading configuration as the last frame computed, the same maps
-            maps = np.empty((len(states), 2, n, n))
-            maps[:] = cached[1]
-            return maps
-        maps = np.zeros((len(states), 2, n, n))
-        sup, deep = self._window_fields(stack_states(states))
-        self._taxel_sums(maps[:, 0], sup)
-        self._taxel_sums(maps[:, 1], deep)
-        key = states[-1].config_key if states else None
-        self._maps_cache = None if key is None else (key, maps[-1].copy())
+        st = self._pack(batch)
+        maps = np.empty((len(st), 2, n, n))
+        serial = np.ascontiguousarray(config_serial, dtype=np.int64).reshape(-1)
+        self.maps_computed += fk.maps_kernel(st, serial, *self._tables, self._cache_serial, self._cache_maps, maps)
         return maps
 
     # ------------------------------------------------------------------ frames
@@ -489,48 +401,56 @@ class SkinModel:
         baselines stay."""
         self.rng = rng
 
-    def _row_times(self, t_s: np.ndarray) -> np.ndarray:
-        """(N, 2, n) sampling instants: t_s[k] ends the frame; rows sampled in sequence before it."""
-        t = t_s[:, None, None] - self._row_offsets_s
-        jit = self.sim.readout.scan_jitter_ms * 1e-3
-        if jit > 0:
-            t = t + self.rng.normal(0.0, jit, size=t.shape)
-        return t
+    def _draws(self, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+        """The frames' random draws, in this order: scan jitter (N, 2, n) seconds added to each
+        row's sampling instant, read noise (2, N, n, n) counts (empty arrays when off)."""
+        r, n = self.sim.readout, self.skin.n_taxels
+        jit = r.scan_jitter_ms * 1e-3
+        jitter = self.rng.normal(0.0, jit, size=(n_frames, 2, n)) if jit > 0 else self._no_jitter
+        noise = self.rng.normal(0.0, r.noise_counts, size=(2, n_frames, n, n)) if r.noise_counts > 0 else self._no_noise
+        return jitter, noise
 
     def frames(self, states: list[MechState], t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(superficial, deep) uint16 counts (N, 16, 16) for frames completed at t_s (N,)."""
-        t_s = np.asarray(t_s, dtype=float).reshape(-1)
-        if len(states) != len(t_s):
-            raise ValueError(f"frames: {len(states)} states for {len(t_s)} frame times; pass one state per frame")
-        if len(t_s) == 0:
-            empty = np.zeros((0, self.skin.n_taxels, self.skin.n_taxels), np.uint16)
+        if len(states) != np.size(t_s):
+            raise ValueError(f"frames: {len(states)} states for {np.size(t_s)} frame times; pass one state per frame")
+        return self._frames_packed(self._pack_states(states), self._serials([s.config_key for s in states]), t_s)
+
+    def frames_batch(self, batch: StateBatch, config_serial: np.ndarray, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(superficial, deep) uint16 counts (N, 16, 16) for frames completed at t_s (N,), one
+        state of the batch per frame; config_serial (N,) int64: each state's configuration
+        serial (MechState.config_key[1] of this model; -1 if unknown), equal serials meaning
+        an unchanged loading configuration whose pressure maps are reused."""
+        if len(batch.t_s) != np.size(t_s) or np.size(config_serial) != np.size(t_s):
+            raise ValueError(f"frames_batch: {len(batch.t_s)} states, {np.size(config_serial)} serials for "
+                             f"{np.size(t_s)} frame times; pass one state and serial per frame")
+        return self._frames_packed(self._pack(batch), config_serial, t_s)
+
+    def frames_of_steps(self, recs: np.ndarray, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """frames() for step records of this model (step_many's rows, one per frame): their
+        leading columns are the frame kernels' state layout, their serials the hold cache's."""
+        return self._frames_packed(np.ascontiguousarray(recs[:, :fk.N_STATE]),
+                                   recs[:, mk.S_SERIAL].astype(np.int64), t_s)
+
+    def _frames_packed(self, st: np.ndarray, config_serial, t_s) -> tuple[np.ndarray, np.ndarray]:
+        """frames() on the kernels' state matrix st (N, N_STATE)."""
+        t_s = np.ascontiguousarray(t_s, dtype=np.float64).reshape(-1)
+        n_all, n = len(t_s), self.skin.n_taxels
+        if n_all == 0:
+            empty = np.zeros((0, n, n), np.uint16)
             return empty, empty.copy()
-        n = self.skin.n_taxels
-        if self._idle and not any(s.force_n[2] > 0.0 for s in states):
+        if self._idle and not (st[:, fk.S_FZ] > 0.0).any():
             return self._idle_frames(t_s)
-        maps = self._maps(states)  # (N, 2, n, n)
-        prev_maps = np.empty_like(maps)
-        prev_maps[0] = maps[0] if self._last_maps is None else self._last_maps
-        prev_maps[1:] = maps[:-1]
-        prev_t = np.empty_like(t_s)
-        prev_t[0] = t_s[0] - self.skin.frame_period_ms * 1e-3 if self._last_t is None else self._last_t
-        prev_t[1:] = t_s[:-1]
-        dt = t_s - prev_t  # time since the previous frame
-        span = np.maximum(dt, 1e-9)
-        rows_t = self._row_times(t_s)
-        w_prev = _clip((t_s[:, None, None] - rows_t) / span[:, None, None], 0.0, 1.0)[..., None]
-        sampled = maps * (1 - w_prev) + prev_maps * w_prev  # each row at its own instant
-        self._last_maps, self._last_t = maps[-1], float(t_s[-1])
-        eff = advance_layers(self.fsr, sampled, dt)  # both layers at once (N, 2, n, n)
-        self._idle = not (maps[-1].any() or any(f.play.any() or f.lag.any() for f in self.fsr))
-        g = conductance_layers(self.fsr, eff, self._gains)
-        volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
-        out = (self.readout.counts(volts) + self.baseline_counts[None]).transpose(1, 0, 2, 3)  # (2, N, n, n)
-        noise = self.sim.readout.noise_counts
-        if noise > 0:
-            out += self.rng.normal(0.0, noise, size=out.shape)
-        np.rint(out, out=out)
-        counts = _clip(out, 0, self.readout.full_scale, out=out).astype(np.uint16)
+        serial = np.ascontiguousarray(config_serial, dtype=np.int64).reshape(-1)
+        jitter, noise = self._draws(n_all)
+        maps = np.empty((n_all, 2, n, n))
+        counts = np.empty((2, n_all, n, n), np.uint16)
+        idle, computed = fk.frames_kernel(st, serial, t_s, jitter, noise, *self._tables, self._row_offsets_s,
+                                          self._gains, self.baseline_counts, self._play, self._lag,
+                                          self._last_maps, self._memory, self._cache_serial, self._cache_maps,
+                                          maps, counts)
+        self._idle = idle
+        self.maps_computed += computed
         return counts[0], counts[1]
 
     def _idle_frames(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -540,15 +460,12 @@ class SkinModel:
         if self._idle_counts is None:
             g = conductance_layers(self.fsr, np.zeros((1, 2, n, n)), self._gains)
             volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
-            self._idle_counts = (self.readout.counts(volts) + self.baseline_counts[None])[0]
-        self._row_times(t_s)  # the scan jitter draws (they do not matter at zero pressure)
-        out = np.repeat(self._idle_counts[:, None], len(t_s), axis=1)  # (2, N, n, n)
-        noise = self.sim.readout.noise_counts
-        if noise > 0:
-            out += self.rng.normal(0.0, noise, size=out.shape)
-        np.rint(out, out=out)
-        counts = _clip(out, 0, self.readout.full_scale, out=out).astype(np.uint16)
-        self._last_maps, self._last_t = np.zeros((2, n, n)), float(t_s[-1])
+            self._idle_counts = np.ascontiguousarray((self.readout.counts(volts) + self.baseline_counts[None])[0])
+        _, noise = self._draws(len(t_s))  # the scan jitter draws do not matter at zero pressure
+        counts = np.empty((2, len(t_s), n, n), np.uint16)
+        fk.idle_counts_kernel(self._idle_counts, noise, self.readout.full_scale, counts)
+        self._last_maps[:] = 0.0
+        self._memory[0], self._memory[1] = t_s[-1], 1.0
         return counts[0], counts[1]
 
     # ------------------------------------------------------------------ board description

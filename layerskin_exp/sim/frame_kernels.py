@@ -1,0 +1,567 @@
+"""Compiled kernels of the simulated skin's frame pipeline (numba, nopython, cached on disk).
+
+One call of `frames_kernel` turns N mechanical states into N frame pairs: pressure at the
+quadrature points of each layer (hemisphere: a window around the contact; rod: the full grid),
+Gauss-weighted taxel means, each row interpolated to its own sampling instant, FSR hysteresis
+and creep, conductance, passive-matrix readout with crosstalk, offsets, noise and rounding.
+The physics and its formulas are those documented in `skin.py`, `fsr.py` and `readout.py`;
+`SkinModel` only marshals arguments. Random draws (scan jitter, read noise) stay in numpy and
+come in as arrays, so a seed gives the same draws as the vectorised numpy pipeline did.
+
+Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
+- `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
+- `prm` (N_PARAM,) float64, entries `P_*` (geometry, table grids, FSR and readout constants);
+- `lk` (2, n_pairs, n_fine, 2) float32: superficial and deep profiles resampled for
+  nearest-bin lookups, (value of row k, row k+1 - row k) pairs, last column zero (guard);
+- `tilt` (n_delta, n_shift, 2) float64 [gamma, logz]; `deep_bound` (n_pairs, n_dist + 2):
+  the deep profile's pairwise maximum, then the WINDOW_EPS threshold and the superficial reach;
+- `dist` (n_dist,) float64; `quad` (n*q + q,) float32: quadrature coordinates then weights;
+  `lattice` (n*q, n*q) float32.
+
+Floating point: field values are float32 (as in the numpy pipeline), taxel means, FSR and
+readout float64.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+# --- columns of the (N, N_STATE) state matrix
+S_T, S_FX, S_FY, S_FZ, S_TORQUE, S_DELTA, S_AX, S_AY, S_YAW, S_UX, S_UY, S_ROT = range(12)
+N_STATE = 12
+
+# --- entries of the parameter vector
+(P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA, P_DSHIFT, P_XMAX_SHIFT,
+ P_H0, P_HCLIP, P_LK_ORIGIN, P_LK_SCALE, P_HALF_PAD, P_PERIOD, P_HYST, P_CREEP, P_CREEP_S,
+ P_PSAT, P_EXPONENT, P_G_FLOOR, P_G_SAT, P_G_LEAK, P_G_DIV, P_R_ON, P_SUPPLY_V, P_FULL_SCALE,
+ P_CROSSTALK, P_REUSE) = range(30)
+N_PARAM = 30
+
+_TINY = np.finfo(float).tiny
+WINDOW_EPS = 1e-8  # hemisphere windows: outside, the profile is below this fraction of its peak
+_jit = numba.njit(cache=True, error_model="numpy")
+_F0 = np.float32(0.0)
+_F1 = np.float32(1.0)
+_FHALF = np.float32(0.5)
+
+
+def transduction_params(fsr, readout, adc_bits: int | None = None, prm: np.ndarray | None = None) -> np.ndarray:
+    """Parameter vector (N_PARAM,) with the FSR and readout entries filled from their configs
+    (an FSRConfig and a ReadoutConfig, either may be None); other entries left as in prm."""
+    prm = np.zeros(N_PARAM) if prm is None else prm
+    if fsr is not None:
+        prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S] = fsr.hysteresis, fsr.creep, fsr.creep_s
+        prm[P_PSAT], prm[P_EXPONENT] = fsr.saturation_kpa, fsr.exponent
+        prm[P_G_FLOOR], prm[P_G_SAT] = 1.0 / (fsr.floor_mohm * 1e6), 1.0 / (fsr.saturated_kohm * 1e3)
+    if readout is not None:
+        prm[P_G_LEAK], prm[P_G_DIV] = 1.0 / (readout.leak_mohm * 1e6), 1.0 / (readout.divider_kohm * 1e3)
+        prm[P_R_ON], prm[P_SUPPLY_V] = readout.mux_on_ohm, readout.supply_v
+        prm[P_CROSSTALK] = 1.0 if readout.crosstalk else 0.0
+    if adc_bits is not None:
+        prm[P_FULL_SCALE] = float(2**adc_bits - 1)
+    return prm
+
+
+# ---------------------------------------------------------------------------------- tables
+@_jit
+def _delta_row(delta, prm):
+    """Indentation row i and fraction t of the contact tables (clipped to the grid)."""
+    x = min(max(delta / prm[P_DDELTA], 0.0), prm[P_XMAX_DELTA])
+    i = int(x)
+    return i, x - i
+
+
+@_jit
+def _tilt(tilt, i, t, shift, prm):
+    """Exponential-tilt rate gamma (1/mm) and log-normaliser giving a deep-CoP shift (mm)."""
+    x = min(max(shift / prm[P_DSHIFT], 0.0), prm[P_XMAX_SHIFT])
+    si = int(x)
+    su = x - si
+    a = tilt[i, si, 0] * (1 - su) + tilt[i, si + 1, 0] * su
+    b = tilt[i + 1, si, 0] * (1 - su) + tilt[i + 1, si + 1, 0] * su
+    gamma = a * (1 - t) + b * t
+    a = tilt[i, si, 1] * (1 - su) + tilt[i, si + 1, 1] * su
+    b = tilt[i + 1, si, 1] * (1 - su) + tilt[i + 1, si + 1, 1] * su
+    return gamma, a * (1 - t) + b * t
+
+
+@_jit
+def _lookup(lk, layer, i, t32, coord, origin32, scale32):
+    """Profile (float32) at coord (r^2 or signed distance, float32) for indentation row i + t:
+    nearest bin of the fine table, linear between the two rows; zero beyond the table."""
+    n_fine = lk.shape[2]
+    c = coord
+    if origin32 != _F0:
+        c = c - origin32
+    c = c * scale32 + _FHALF
+    j = int(c)
+    if j < 0:
+        j = 0
+    elif j > n_fine - 1:
+        j = n_fine - 1
+    return lk[layer, i, j, 1] * t32 + lk[layer, i, j, 0]
+
+
+@_jit
+def _chord(cx, cy, yaw, half):
+    """Parameters s1 <= 0 <= s2 where the line c + s (cos yaw, sin yaw) leaves |x|,|y| <= half
+    (the same formula as `skin._chord`, compiled)."""
+    lo, hi = -1e9, 1e9
+    for axis in range(2):
+        c = cx if axis == 0 else cy
+        d = math.cos(yaw) if axis == 0 else math.sin(yaw)
+        if abs(d) < 1e-12:
+            if abs(c) > half:
+                return 0.0, 0.0
+            continue
+        a, b = (-half - c) / d, (half - c) / d
+        lo, hi = max(lo, min(a, b)), min(hi, max(a, b))
+    if hi <= lo:
+        return 0.0, 0.0
+    return min(lo, 0.0), max(hi, 0.0)
+
+
+@_jit
+def _stack_height(delta, prm):
+    """Height of the cover surface above the deep sensing plane at the contact (mm)."""
+    return prm[P_H0] - min(max(delta, 0.0), prm[P_HCLIP])
+
+
+@_jit
+def _window(cx, cy, reach, prm, win, at):
+    """Taxel rows/cols [r0, r1] x [c0, c1] (inclusive) whose electrode comes within `reach` of
+    (cx, cy), written to win[at:at + 4]; r1 < r0 or c1 < c0 when the reach misses the array."""
+    n = int(prm[P_N])
+    x0, pitch, half_el = prm[P_X0], prm[P_PITCH], prm[P_HALF_EL]
+    for axis in range(2):
+        c = cx if axis == 0 else cy
+        lo = math.ceil((c - reach - half_el - x0) / pitch)
+        hi = math.floor((c + reach + half_el - x0) / pitch)
+        lo = min(max(lo, 0.0), float(n))
+        hi = min(max(hi, -1.0), float(n - 1))
+        # rows (y) first, then columns (x)
+        k = at + (2 if axis == 0 else 0)
+        win[k], win[k + 1] = int(lo), int(hi)
+
+
+@_jit
+def _deep_reach(deep_bound, dist, i, gamma, logz):
+    """Radius (mm) beyond which the deep profile times the largest tilt factor exp(|gamma| r -
+    logz) stays below WINDOW_EPS of the row's peak (the next-but-one coarse node beyond)."""
+    nd = dist.shape[0]
+    thr = deep_bound[i, nd]
+    ag = abs(gamma)
+    last = -2
+    for d in range(nd - 1, -1, -1):
+        if deep_bound[i, d] * math.exp(ag * dist[d] - logz) > thr:
+            last = d
+            break
+    return dist[min(max(last + 2, 0), nd - 1)]
+
+
+# ---------------------------------------------------------------------------------- fields
+@_jit
+def frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win):
+    """Pressure (kPa, float32) at the quadrature points of both layers for one loaded state
+    st (N_STATE,), written into f_sup, f_deep (n*q, n*q) [y, x] inside each layer's taxel
+    window; win (8,) receives the windows [r0, r1, c0, c1] (superficial, then deep)."""
+    n, nq = int(prm[P_N]), int(prm[P_NQ])
+    q = quad[:n * nq]
+    delta, fz = st[S_DELTA], st[S_FZ]
+    fx, fy = st[S_FX], st[S_FY]
+    ax, ay = st[S_AX], st[S_AY]
+    cdx, cdy = ax + st[S_UX], ay + st[S_UY]  # contact in the deep frame
+    h_eff = _stack_height(delta, prm)
+    ft_mag = math.hypot(fx, fy)
+    i, t = _delta_row(delta, prm)
+    t32 = np.float32(t)
+    gamma, logz = _tilt(tilt, i, t, ft_mag * h_eff / fz, prm)  # moment balance: F_t H = F_z shift
+    origin32, scale32 = np.float32(prm[P_LK_ORIGIN]), np.float32(prm[P_LK_SCALE])
+    ax32, ay32 = np.float32(ax), np.float32(ay)
+    cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
+    if prm[P_ROD] != 0.0:
+        _rod_fields(st, prm, lk, i, t32, gamma, logz, h_eff, q, lattice, f_sup, f_deep, origin32, scale32)
+        for k in range(2):
+            win[4 * k], win[4 * k + 1], win[4 * k + 2], win[4 * k + 3] = 0, n - 1, 0, n - 1
+        return
+    # superficial: radial profile around the contact, in the superficial frame
+    _window(ax, ay, deep_bound[i, dist.shape[0] + 1], prm, win, 0)
+    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
+    dxs = np.empty(n * nq, np.float32)
+    for c in range(c0, c1):
+        dxs[c] = q[c] - ax32
+    for r in range(r0, r1):
+        dy = q[r] - ay32
+        dy2 = dy * dy
+        for c in range(c0, c1):
+            f_sup[r, c] = _lookup(lk, 0, i, t32, dxs[c] * dxs[c] + dy2, origin32, scale32)
+    # deep: spread profile tilted along the shear, times the lattice pattern
+    _window(cdx, cdy, _deep_reach(deep_bound, dist, i, gamma, logz), prm, win, 4)
+    r0, r1, c0, c1 = win[4] * nq, (win[5] + 1) * nq, win[6] * nq, (win[7] + 1) * nq
+    den = max(ft_mag, _TINY)  # shear direction (0 without shear: ft is 0 there, so no 0/0)
+    gx = np.float32(gamma * np.float64(np.float32(fx / den)))
+    gy = np.float32(gamma * np.float64(np.float32(fy / den)))
+    half_logz = np.float32(0.5 * logz)
+    dxd = np.empty(n * nq, np.float32)
+    ex = np.empty(n * nq, np.float32)
+    for c in range(c0, c1):
+        dxd[c] = q[c] - cdx32
+        ex[c] = np.exp(gx * dxd[c] - half_logz)
+    for r in range(r0, r1):
+        dy = q[r] - cdy32
+        dy2 = dy * dy
+        ey = np.exp(gy * dy - half_logz)
+        for c in range(c0, c1):
+            v = _lookup(lk, 1, i, t32, dxd[c] * dxd[c] + dy2, origin32, scale32)
+            v = v * (ey * ex[c])
+            f_deep[r, c] = v * lattice[r, c]
+
+
+@_jit
+def _rod_fields(st, prm, lk, i, t32, gamma, logz, h_eff, q, lattice, f_sup, f_deep, origin32, scale32):
+    """Rod line load on the full quadrature grid, both layers [y, x] (float32)."""
+    m = q.shape[0]
+    yaw = st[S_YAW]
+    yaw_s = yaw - st[S_ROT]  # rod axis in the superficial frame
+    sx, cy = np.float32(-math.sin(yaw_s)), np.float32(math.cos(yaw_s))
+    ax32, ay32 = np.float32(st[S_AX]), np.float32(st[S_AY])
+    col = np.empty(m, np.float32)
+    for c in range(m):
+        col[c] = sx * (q[c] - ax32)
+    for r in range(m):
+        row = cy * (q[r] - ay32)
+        for c in range(m):
+            f_sup[r, c] = _lookup(lk, 0, i, t32, col[c] + row, origin32, scale32)
+    fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
+    cdx, cdy = st[S_AX] + st[S_UX], st[S_AY] + st[S_UY]
+    s1, s2 = _chord(cdx, cdy, yaw, prm[P_HALF_PAD])
+    length = max(s2 - s1, 1e-9)
+    line_q = fz / length  # N/mm
+    i_s = (s2**3 - s1**3) / 3.0
+    # torsion: traction T s / I_s across the line; its moment shifts the deep line by T H s / (I_s q)
+    twist = math.atan(st[S_TORQUE] * h_eff / (i_s * line_q))
+    yaw_d = yaw + twist
+    ex, ey = np.float32(math.cos(yaw_d)), np.float32(math.sin(yaw_d))
+    f_perp = -fx * np.float64(ey) + fy * np.float64(ex)
+    f_along = fx * np.float64(ex) + fy * np.float64(ey)
+    sgn = 1.0 if f_perp > 0 else (-1.0 if f_perp < 0 else 0.0)
+    g = np.float32(sgn * gamma)
+    logz32 = np.float32(logz)
+    # along-axis shear: its moment is balanced by a linear load gradient along the line
+    mid32 = np.float32(0.5 * (s1 + s2))
+    beta = np.float32(f_along * h_eff / (line_q * length**3 / 12.0))
+    cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
+    px = np.empty(m, np.float32)
+    tx = np.empty(m, np.float32)
+    ramp_x = np.empty(m, np.float32)
+    for c in range(m):
+        dx = q[c] - cdx32
+        px[c] = -ey * dx
+        tx[c] = np.exp(g * px[c] - logz32)
+        ramp_x[c] = _F1 + beta * (ex * dx - mid32)
+    for r in range(m):
+        dy = q[r] - cdy32
+        py = ex * dy
+        ty = np.exp(g * py)
+        ramp_y = beta * (ey * dy)
+        for c in range(m):
+            v = _lookup(lk, 1, i, t32, px[c] + py, origin32, scale32)
+            v = v * (ty * tx[c])
+            ramp = ramp_x[c] + ramp_y
+            if ramp < _F0:
+                ramp = _F0
+            f_deep[r, c] = (v * ramp) * lattice[r, c]
+
+
+@_jit
+def _taxel_means(field, win, at, quad, n, nq, out):
+    """Gauss-weighted mean of field over each taxel of window win[at:at + 4] into out (n, n),
+    zero elsewhere."""
+    out[:, :] = 0.0
+    for tr in range(win[at], win[at + 1] + 1):
+        for tc in range(win[at + 2], win[at + 3] + 1):
+            s = 0.0
+            for a in range(nq):
+                row = 0.0
+                for b in range(nq):
+                    row += np.float64(quad[n * nq + b]) * np.float64(field[tr * nq + a, tc * nq + b])
+                s += np.float64(quad[n * nq + a]) * row
+            out[tr, tc] = s
+
+
+@_jit
+def _state_maps(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win, out):
+    """(2, n, n) taxel-mean pressure (kPa) of one state into out; zero when unloaded."""
+    n, nq = int(prm[P_N]), int(prm[P_NQ])
+    if not st[S_FZ] > 0.0:
+        out[:, :, :] = 0.0
+        return
+    frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win)
+    _taxel_means(f_sup, win, 0, quad, n, nq, out[0])
+    _taxel_means(f_deep, win, 4, quad, n, nq, out[1])
+
+
+@_jit
+def maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, cache_serial, cache_maps, maps):
+    """Taxel-mean pressure maps (N, 2, n, n) of N states into maps. A state whose config serial
+    (>= 0) equals the previous one's (or, for the first, cache_serial[0]) repeats its loading
+    configuration and reuses its maps (holds). Updates the cache (the last state's serial and
+    maps). Returns how many states' maps were computed."""
+    m = quad.shape[0] - int(prm[P_NQ])
+    f_sup = np.empty((m, m), np.float32)
+    f_deep = np.empty((m, m), np.float32)
+    win = np.empty(8, np.int64)
+    reuse = prm[P_REUSE] != 0.0
+    prev = cache_serial[0]
+    computed = 0
+    for k in range(states.shape[0]):
+        s = serial[k]
+        if reuse and s >= 0 and s == prev:
+            if k == 0:
+                maps[0] = cache_maps
+            else:
+                maps[k] = maps[k - 1]
+        else:
+            _state_maps(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win, maps[k])
+            computed += 1
+        prev = s
+    n_all = states.shape[0]
+    if n_all:
+        cache_serial[0] = serial[n_all - 1]
+        cache_maps[:] = maps[n_all - 1]
+    return computed
+
+
+@_jit
+def fields_kernel(states, prm, lk, tilt, deep_bound, dist, quad, lattice, out_sup, out_deep):
+    """Pressure (kPa, float32) at the quadrature points of N states into out_sup, out_deep
+    (N, n*q, n*q), zero-initialised by the caller; only each layer's window is written."""
+    win = np.empty(8, np.int64)
+    for k in range(states.shape[0]):
+        if states[k, S_FZ] > 0.0:
+            frame_fields(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, out_sup[k], out_deep[k], win)
+
+
+# ---------------------------------------------------------------------------------- transduction
+@_jit
+def _fsr_step(p_kpa, play, lag, alpha, w, c):
+    """One sample of the play operator (hysteresis) and first-order creep lag; returns the
+    effective pressure and the new (play, lag)."""
+    p = max(p_kpa, 0.0)
+    play = min(max(play, p * (1.0 - w)), p * (1.0 + w))
+    lag = lag + alpha * (play - lag)
+    return (1.0 - c) * play + c * lag, play, lag
+
+
+@_jit
+def _conductance(p_kpa, gain, prm):
+    """gain (G_floor + G_sat x / (1 + x)), x = (p / p_sat)^n for p > 0 (siemens)."""
+    x = (p_kpa / prm[P_PSAT]) ** prm[P_EXPONENT] if p_kpa > 0.0 else 0.0
+    return gain * (x * prm[P_G_SAT] / (1.0 + x) + prm[P_G_FLOOR])
+
+
+@_jit
+def fsr_advance_kernel(pressure, dt_s, play, lag, hysteresis, creep, creep_s, eff):
+    """Hysteresis and creep over N successive samples: pressure (N, L, a, b) (kPa), dt_s (N,)
+    seconds since the previous sample; play, lag (L, a, b) memories updated in place; eff
+    (N, L, a, b) receives the effective pressure."""
+    for k in range(pressure.shape[0]):
+        alpha = 1.0 - math.exp(-max(dt_s[k], 0.0) / creep_s)
+        for li in range(pressure.shape[1]):
+            for r in range(pressure.shape[2]):
+                for col in range(pressure.shape[3]):
+                    e, pl, lg = _fsr_step(pressure[k, li, r, col], play[li, r, col], lag[li, r, col],
+                                          alpha, hysteresis, creep)
+                    play[li, r, col], lag[li, r, col] = pl, lg
+                    eff[k, li, r, col] = e
+
+
+@_jit
+def conductance_kernel(pressure, gain, prm, out):
+    """Static conductance (siemens) out (N, L, a, b) of pressure (N, L, a, b), gains (L, a, b)."""
+    for k in range(pressure.shape[0]):
+        for li in range(pressure.shape[1]):
+            for r in range(pressure.shape[2]):
+                for col in range(pressure.shape[3]):
+                    out[k, li, r, col] = _conductance(pressure[k, li, r, col], gain[li, r, col], prm)
+
+
+@_jit
+def _column_volts(g, prm, work, out):
+    """Column voltages out (n, n) [driven row, column] of one layer with conductances g (n, n).
+
+    Crosstalk: nodal analysis over rows and columns; eliminating the column nodes leaves the
+    symmetric positive-definite row Schur complement S = D_r - G D_c^-1 G^T, and with Z = S^-1
+    driving row i through g_on reads V = Vs g_on (Z G D_c^-1)[i, :] / (1 + g_on Z_ii)
+    (Sherman-Morrison on the source branch). S = L L^T (LAPACK Cholesky); one forward
+    substitution against [G D_c^-1 | I] gives L^-1 G D_c^-1 and L^-1 (whose column norms are
+    Z_ii), one back substitution Z G D_c^-1. (np.linalg.solve/inv cost 3-6 us per 16x16 system
+    here, most of a frame's budget; the substitutions cost well under one.)
+    work: (n, 3n + 2) float64 scratch.
+    """
+    n = g.shape[0]
+    vs = prm[P_SUPPLY_V]
+    r_on = prm[P_R_ON]
+    if prm[P_CROSSTALK] == 0.0:
+        r_div = 1.0 / prm[P_G_DIV]  # each taxel alone in series with the mux and its divider
+        for r in range(n):
+            for c in range(n):
+                out[r, c] = vs * r_div / (r_on + 1.0 / g[r, c] + r_div)
+        return
+    d_c = work[:, 3 * n]
+    d_r = work[:, 3 * n + 1]
+    for c in range(n):
+        d_c[c] = prm[P_G_DIV]
+    for r in range(n):
+        s = prm[P_G_LEAK]
+        for c in range(n):
+            s += g[r, c]
+            d_c[c] += g[r, c]
+        d_r[r] = s
+    y = work[:, :2 * n]  # [G D_c^-1 | I], then L^-1 times it
+    for r in range(n):
+        for c in range(n):
+            y[r, c] = g[r, c] / d_c[c]
+            y[r, n + c] = 1.0 if r == c else 0.0
+    s_mat = work[:, 2 * n:3 * n]
+    for r in range(n):
+        for k in range(r + 1):
+            s = 0.0
+            for c in range(n):
+                s += y[r, c] * g[k, c]
+            s_mat[r, k] = -s
+            s_mat[k, r] = -s
+        s_mat[r, r] += d_r[r]
+    chol = np.linalg.cholesky(s_mat)
+    for r in range(n):  # forward: y <- L^-1 y
+        for p in range(r):
+            lrp = chol[r, p]
+            for c in range(n + p + 1):
+                y[r, c] -= lrp * y[p, c]
+        inv = 1.0 / chol[r, r]
+        for c in range(n + r + 1):
+            y[r, c] *= inv
+    for i in range(n):  # Z_ii = sum_k (L^-1)_ki^2, into d_r (no longer needed)
+        s = 0.0
+        for k in range(i, n):
+            s += y[k, n + i] * y[k, n + i]
+        d_r[i] = s
+    for r in range(n - 1, -1, -1):  # back: y[:, :n] <- L^-T y[:, :n] = Z G D_c^-1
+        for p in range(r + 1, n):
+            lpr = chol[p, r]
+            for c in range(n):
+                y[r, c] -= lpr * y[p, c]
+        inv = 1.0 / chol[r, r]
+        for c in range(n):
+            y[r, c] *= inv
+    if r_on > 0:
+        g_on = 1.0 / r_on
+        for r in range(n):
+            f = vs * g_on / (1.0 + g_on * d_r[r])
+            for c in range(n):
+                out[r, c] = f * y[r, c]
+    else:
+        for r in range(n):
+            for c in range(n):
+                out[r, c] = vs * y[r, c] / d_r[r]
+
+
+@_jit
+def column_volts_kernel(g, prm, out):
+    """Column voltages out (M, n, n) for conductances g (M, n, n) (see `_column_volts`)."""
+    n = g.shape[1]
+    work = np.empty((n, 3 * n + 2))
+    for m in range(g.shape[0]):
+        _column_volts(g[m], prm, work, out[m])
+
+
+# ---------------------------------------------------------------------------------- frames
+@_jit
+def frames_kernel(states, serial, t_s, jitter, noise, prm, lk, tilt, deep_bound, dist, quad, lattice,
+                  row_offsets, gains, baseline, play, lag, last_maps, memory, cache_serial, cache_maps,
+                  maps, counts):
+    """N frame pairs: counts (2, N, n, n) uint16 for states (N, N_STATE) completed at t_s (N,).
+
+    serial (N,) int64: configuration serials (-1: unknown) for the maps reuse during holds;
+    jitter (N, 2, n) seconds added to each row's sampling instant (or (0, 2, n): none);
+    noise (2, N, n, n) counts added before rounding (or (2, 0, n, n): none);
+    row_offsets (2, n) seconds from each row's nominal instant to the frame end;
+    gains, baseline (2, n, n); play, lag, last_maps (2, n, n) updated in place;
+    memory (2,) float64 [time of the last frame, whether there was one] updated in place;
+    cache_serial (1,), cache_maps (2, n, n): the maps reuse cache (see `maps_kernel`);
+    maps (N, 2, n, n) scratch, receives the maps. Returns (whether the sheet is idle
+    afterwards: no pressure at the last frame and both FSR memories zero, maps computed).
+    """
+    n_all = states.shape[0]
+    n = int(prm[P_N])
+    computed = maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, cache_serial,
+                           cache_maps, maps)
+    has_jitter = jitter.shape[0] == n_all
+    has_noise = noise.shape[1] == n_all
+    w_h, c_cr, creep_s = prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S]
+    fs = prm[P_FULL_SCALE]
+    vs = prm[P_SUPPLY_V]
+    g = np.empty((n, n))
+    volts = np.empty((n, n))
+    work = np.empty((n, 3 * n + 2))
+    prev_t = memory[0] if memory[1] != 0.0 else t_s[0] - prm[P_PERIOD]
+    for k in range(n_all):
+        tk = t_s[k]
+        dt = tk - prev_t  # time since the previous frame
+        span = max(dt, 1e-9)
+        alpha = 1.0 - math.exp(-max(dt, 0.0) / creep_s)
+        for layer in range(2):
+            for r in range(n):
+                row_t = tk - row_offsets[layer, r]
+                if has_jitter:
+                    row_t = row_t + jitter[k, layer, r]
+                w = min(max((tk - row_t) / span, 0.0), 1.0)
+                for c in range(n):
+                    if k > 0:
+                        before = maps[k - 1, layer, r, c]
+                    elif memory[1] != 0.0:
+                        before = last_maps[layer, r, c]
+                    else:
+                        before = maps[0, layer, r, c]
+                    sampled = maps[k, layer, r, c] * (1 - w) + before * w  # the row at its own instant
+                    eff, pl, lg = _fsr_step(sampled, play[layer, r, c], lag[layer, r, c], alpha, w_h, c_cr)
+                    play[layer, r, c], lag[layer, r, c] = pl, lg
+                    g[r, c] = _conductance(eff, gains[layer, r, c], prm)
+            _column_volts(g, prm, work, volts)
+            for r in range(n):
+                for c in range(n):
+                    v = volts[r, c] / vs * fs + baseline[layer, r, c]
+                    if has_noise:
+                        v += noise[layer, k, r, c]
+                    v = min(max(np.rint(v), 0.0), fs)
+                    counts[layer, k, r, c] = np.uint16(v)
+        prev_t = tk
+    if n_all:
+        last_maps[:] = maps[n_all - 1]
+        memory[0], memory[1] = t_s[n_all - 1], 1.0
+    idle = True
+    for layer in range(2):
+        for r in range(n):
+            for c in range(n):
+                if last_maps[layer, r, c] != 0.0 or play[layer, r, c] != 0.0 or lag[layer, r, c] != 0.0:
+                    idle = False
+    return idle, computed
+
+
+@_jit
+def idle_counts_kernel(idle_counts, noise, full_scale, counts):
+    """Counts (2, N, n, n) of an idle sheet: constant float counts (2, n, n) plus noise
+    (2, N, n, n) (or (2, 0, n, n): none), rounded and clipped to [0, full_scale]."""
+    n_all = counts.shape[1]
+    has_noise = noise.shape[1] == n_all
+    for layer in range(2):
+        for k in range(n_all):
+            for r in range(counts.shape[2]):
+                for c in range(counts.shape[3]):
+                    v = idle_counts[layer, r, c]
+                    if has_noise:
+                        v += noise[layer, k, r, c]
+                    counts[layer, k, r, c] = np.uint16(min(max(np.rint(v), 0.0), full_scale))
