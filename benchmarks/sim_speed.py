@@ -3,9 +3,9 @@
 - calibration press/slide on the platform (10 ms control ticks, every stream drained each tick);
 - grip trial with camera rendering: approach, close 12 mm, 0 -> +5 -> 0 -> -5 -> 0 mm at 2 mm/s;
 - peak Python heap (tracemalloc) of a 60 s grip trial that keeps every record it reads.
-Shares of wall time: skin frames (SkinModel.frames) in both trials, camera render + detect in the grip.
+Shares of wall time: skin frames (SkinModel.frames_of_steps) in both trials, camera render + detect in the grip.
 Each speed is simulated seconds per wall second. Baseline, same run: the same trial with the
-naive per-taxel frame pipeline (benchmarks/skin_naive.py) in place of SkinModel.frames. The
+naive per-taxel frame pipeline (benchmarks/skin_naive.py) in place of the frame kernel. The
 naive pipeline is hemisphere-only and very slow, so its cost per frame pair is timed on a short
 stretch and the baseline extrapolated: wall - time in frames + frames x naive cost per frame.
 """
@@ -26,17 +26,18 @@ TICK_S = 0.01
 
 
 class _TimedFrames:
-    """Wraps a skin model's frames() to count frames and the wall time spent in it."""
+    """Wraps a skin model's frame pipeline (frames_of_steps, what the skin reader calls) to count
+    frames and the wall time spent in it."""
 
     def __init__(self, model) -> None:
-        self.inner, self.n, self.wall_s = model.frames, 0, 0.0
-        model.frames = self
+        self.inner, self.n, self.wall_s = model.frames_of_steps, 0, 0.0
+        model.frames_of_steps = self
 
-    def __call__(self, states, t_s):
+    def __call__(self, recs, t_s):
         t0 = time.perf_counter()
-        out = self.inner(states, t_s)
+        out = self.inner(recs, t_s)
         self.wall_s += time.perf_counter() - t0
-        self.n += len(states)
+        self.n += len(t_s)
         return out
 
 
