@@ -30,9 +30,9 @@ class SimArm(SimStreamMixin, Arm):
         snap = world.snapshots(idx)
         p = snap[:, :3] + self._noise_rng.normal(0.0, self.cfg.position_noise_m, (len(t_s), 3))
         q = self._quats(snap[:, 3:12])
-        seq, dev_ns, host_ns = self.stream.stamp(t_s)
-        for i in range(len(t_s)):
-            self.stream.push(int(host_ns[i]), Pose(p[i], q[i], "tcp", int(dev_ns[i]), int(host_ns[i]), int(seq[i])))
+        seq, dev_ns, host_ns = (a.tolist() for a in self.stream.stamp(t_s))
+        self.stream.push_many(host_ns, [Pose(pi, qi, "tcp", d, h, k)
+                                        for pi, qi, d, h, k in zip(p, q, dev_ns, host_ns, seq, strict=True)])
 
     def _quats(self, rot9: np.ndarray) -> np.ndarray:
         """(N, 4) quaternions x, y, z, w of row-major rotation matrices (N, 9). The tool mostly

@@ -27,11 +27,10 @@ class SimGripper(SimStreamMixin, Gripper):
         speed = int(round(255 * (sc.grip_speed_mm_s - self.cfg.min_speed_mm_s)
                           / (self.cfg.max_speed_mm_s - self.cfg.min_speed_mm_s)))
         force = int(round(255 * sc.force_pct / 100.0))
-        seq, dev_ns, host_ns = self.stream.stamp(t_s)
-        for i in range(len(t_s)):
-            self.stream.push(int(host_ns[i]), GripperState(
-                float(opening[i]), sc.requested_mm, speed, force, bool(snap[i, 13] > 0.5), 0,
-                int(dev_ns[i]), int(host_ns[i]), int(seq[i])))
+        seq, dev_ns, host_ns = (a.tolist() for a in self.stream.stamp(t_s))
+        self.stream.push_many(host_ns, [GripperState(o, sc.requested_mm, speed, force, st > 0.5, 0, d, h, k)
+                                        for o, st, d, h, k in zip(opening.tolist(), snap[:, 13].tolist(), dev_ns,
+                                                                  host_ns, seq, strict=True)])
 
     def move(self, opening_mm: float, speed_mm_s: float, force_pct: float) -> None:
         self._require_connected()

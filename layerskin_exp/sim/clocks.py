@@ -12,6 +12,7 @@ import math
 import zlib
 
 import numpy as np
+from numba import njit
 
 from layerskin_exp.sim.rig_config import DeviceClockConfig
 
@@ -72,24 +73,39 @@ class DeviceClock:
         """New jitter and delay draws from rng; the oscillator (offset, drift) stays."""
         self._draws = BlockDraws(rng)
 
-    def device_ns(self, t_s: np.ndarray) -> np.ndarray:
-        """(N,) device timestamps (int64 ns) of events at true times t_s (N,)."""
-        t_s = np.asarray(t_s, dtype=float)
-        jitter = self._draws.normal(t_s.size).reshape(t_s.shape) * self.jitter_ns if self.jitter_ns > 0 else 0.0
-        return (self.offset_ns + t_s * 1e9 * (1.0 + self.drift) + jitter).astype(np.int64)
-
     def true_s_of_device(self, device_ns: np.ndarray) -> np.ndarray:
         """Inverse of the oscillator (no jitter): true time (s) at which the device clock reads device_ns."""
         return (np.asarray(device_ns, dtype=float) - self.offset_ns) / (1e9 * (1.0 + self.drift))
 
-    def host_receive_ns(self, t_s: np.ndarray) -> np.ndarray:
-        """(N,) host receive times (int64 ns) of samples sent at true times t_s (N,), kept FIFO."""
-        t_s = np.asarray(t_s, dtype=float)
-        delay = self.delay_min_ns
-        if self.delay_extra_ns > 0:
-            delay = delay + self._draws.exponential(t_s.size).reshape(t_s.shape) * self.delay_extra_ns
-        host = (self.host_start_ns + t_s * 1e9 + delay).astype(np.int64)
-        if host.size:
-            host = np.maximum.accumulate(np.maximum(host, self._last_host_ns))
-            self._last_host_ns = int(host[-1])
-        return host
+    def stamp(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Device timestamps and host receive times (int64 ns, (N,) each) of samples taken at
+        true times t_s (N,): device time with its timestamp jitter; host time after the one-sided
+        transport delay, first in first out."""
+        t_s = np.ascontiguousarray(t_s, dtype=float)
+        n = len(t_s)
+        z = self._draws.normal(n) if self.jitter_ns > 0 else _NONE
+        e = self._draws.exponential(n) if self.delay_extra_ns > 0 else _NONE
+        dev, host = np.empty(n, np.int64), np.empty(n, np.int64)
+        self._last_host_ns = _stamp(t_s, float(self.offset_ns), 1e9 * (1.0 + self.drift), self.jitter_ns, z,
+                                    float(self.host_start_ns), self.delay_min_ns, self.delay_extra_ns, e,
+                                    self._last_host_ns, dev, host)
+        return dev, host
+
+
+_NONE = np.zeros(0)
+
+
+@njit(cache=True, nogil=True)
+def _stamp(t_s, offset_ns, ns_per_s, jitter_ns, z, host_start_ns, delay_min_ns, delay_extra_ns, e, last_host,
+           dev, host):
+    for i in range(t_s.shape[0]):
+        d = offset_ns + t_s[i] * ns_per_s
+        if z.shape[0]:
+            d += z[i] * jitter_ns
+        dev[i] = np.int64(d)
+        h = host_start_ns + t_s[i] * 1e9 + delay_min_ns
+        if e.shape[0]:
+            h += e[i] * delay_extra_ns
+        last_host = max(np.int64(h), last_host)  # FIFO: never before the previous sample
+        host[i] = last_host
+    return last_host

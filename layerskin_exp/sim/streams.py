@@ -12,7 +12,7 @@ from collections import deque
 
 import numpy as np
 
-from layerskin_exp.sim.clocks import DeviceClock
+from layerskin_exp.sim.clocks import BlockDraws, DeviceClock
 
 
 class Stream:
@@ -28,12 +28,19 @@ class Stream:
         self.clock = clock
         self.period_true_s = period_s / (1.0 + clock.drift)  # a fast oscillator samples early
         self.period_jitter_s = period_jitter_s
-        self.rng = rng
+        self.rng = rng  # (the setter keeps block draws from it)
         self.next_t_s = start_s + float(rng.uniform(0.0, self.period_true_s))
         self.enabled = False
         self.seq = 0
         self._queue: deque = deque()
-        self._offsets = np.zeros(1)  # cached running sum of the nominal period (no-jitter schedule)
+
+    @property
+    def rng(self) -> np.random.Generator:
+        return self._draws.rng
+
+    @rng.setter
+    def rng(self, rng: np.random.Generator) -> None:
+        self._draws = BlockDraws(rng)
 
     def due_times(self, t_end_s: float) -> np.ndarray:
         """(N,) true times of the samples up to and including t_end_s; advances the schedule."""
@@ -43,13 +50,10 @@ class Stream:
         if self.period_jitter_s > 0:
             # Interval jitter, clipped so the scan never runs backwards.
             steps = np.full(n, self.period_true_s)
-            steps = np.maximum(steps + self.rng.normal(0.0, self.period_jitter_s, n), 0.2 * self.period_true_s)
+            steps = np.maximum(steps + self._draws.normal(n) * self.period_jitter_s, 0.2 * self.period_true_s)
             times = self.next_t_s + np.concatenate(([0.0], np.cumsum(steps[:-1])))
         else:
-            # [0, cumsum of n - 1 equal periods]: a prefix of one cached running sum (same values)
-            if len(self._offsets) < n:
-                self._offsets = np.concatenate(([0.0], np.cumsum(np.full(2 * n, self.period_true_s))))
-            times = self.next_t_s + self._offsets[:n]
+            times = self.next_t_s + np.arange(n) * self.period_true_s
         while times[-1] <= t_end_s:  # jitter made the intervals short: extend
             more = times[-1] + np.cumsum(np.full(n, self.period_true_s))
             times = np.concatenate((times, more))
@@ -62,7 +66,7 @@ class Stream:
         n = len(t_s)
         seq = np.arange(self.seq, self.seq + n)
         self.seq += n
-        return seq, self.clock.device_ns(t_s), self.clock.host_receive_ns(t_s)
+        return (seq, *self.clock.stamp(t_s))
 
     def push(self, host_ns: int, record) -> None:
         self._queue.append((host_ns, record))
