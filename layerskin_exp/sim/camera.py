@@ -147,6 +147,8 @@ class MarkerTracker:
                                  for mid, x, y in zip(cfg.marker_ids, cfg.marker_x_mm, cfg.marker_y_mm, strict=True)}
         self.full_searches = 0  # frames that needed the full-frame search, since construction (diagnostics)
         self.reset()
+        # Load the compiled refinement kernels now rather than on the first frame (no latency spike there).
+        refine_marker_corners(np.zeros((32, 32), np.uint8), np.array([[[8.0, 8.0], [24.0, 8.0], [24.0, 24.0], [8.0, 24.0]]]))
 
     @staticmethod
     def _params(window_px: int | None = None) -> cv2.aruco.DetectorParameters:
