@@ -59,8 +59,8 @@ TRACK_MARGIN_SIDES = 0.5
 REACQUIRE_FRAMES = 30
 # Candidates closer than this (mean corner distance / perimeter) are one marker. OpenCV's 0.125
 # groups a marker with the inner outline of the grey ring a cut-off window leaves around its
-# white sticker (~0.07 perimeters out) and may keep the ring, losing the marker; a marker's own
-# two border outlines are one module (1/6 side, ~0.04 perimeter) apart and stay grouped.
+# white sticker (corners a quiet zone apart diagonally, ~0.09 perimeter) and may keep the ring,
+# losing the marker. No duplicates appear at 0.05 (the tests check one detection per marker).
 MIN_MARKER_DISTANCE_RATE = 0.05
 MAX_REPROJECTION_PX = 1.0  # rms reprojection error above which an IPPE layer pose is not trusted
 
