@@ -18,8 +18,11 @@ height), times the lattice's cell pattern. For the rod, torsion loads the line w
 proportional to the distance along it, whose local moments rotate the deep line.
 Each taxel integrates its electrode footprint with Gauss points.
 
-Frames (`frames`): row-sequential sampling instants, FSR hysteresis/creep and conductance,
-passive-matrix readout with crosstalk, offsets, noise and quantisation.
+Frames (`frames`, or `frames_batch` on arrays): row-sequential sampling instants, FSR
+hysteresis/creep and conductance, passive-matrix readout with crosstalk, offsets, noise and
+quantisation. The per-frame arithmetic (maps included) runs in one compiled call
+(`frame_kernels.frames_kernel`); this class holds the tables and memories as arrays and draws
+the random numbers (numpy, the same draws in the same order as ever).
 """
 
 from __future__ import annotations
