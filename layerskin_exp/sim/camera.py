@@ -31,9 +31,11 @@ frame has the markers' axes, its origin at the markers' mean position.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 from layerskin_exp.sim.rig_config import CameraConfig
@@ -57,8 +59,8 @@ TRACK_MARGIN_SIDES = 0.5
 REACQUIRE_FRAMES = 30
 # Candidates closer than this (mean corner distance / perimeter) are one marker. OpenCV's 0.125
 # groups a marker with the inner outline of the grey ring a cut-off window leaves around its
-# white sticker (~0.07 perimeters out) and may keep the ring, losing the marker; a marker's own
-# two border outlines are one module (1/6 side, ~0.04 perimeter) apart and stay grouped.
+# white sticker (corners a quiet zone apart diagonally, ~0.09 perimeter) and may keep the ring,
+# losing the marker. No duplicates appear at 0.05 (the tests check one detection per marker).
 MIN_MARKER_DISTANCE_RATE = 0.05
 MAX_REPROJECTION_PX = 1.0  # rms reprojection error above which an IPPE layer pose is not trusted
 
@@ -145,6 +147,8 @@ class MarkerTracker:
                                  for mid, x, y in zip(cfg.marker_ids, cfg.marker_x_mm, cfg.marker_y_mm, strict=True)}
         self.full_searches = 0  # frames that needed the full-frame search, since construction (diagnostics)
         self.reset()
+        # Load the compiled refinement kernels now rather than on the first frame (no latency spike there).
+        refine_marker_corners(np.zeros((32, 32), np.uint8), np.array([[[8.0, 8.0], [24.0, 8.0], [24.0, 24.0], [8.0, 24.0]]]))
 
     @staticmethod
     def _params(window_px: int | None = None) -> cv2.aruco.DetectorParameters:
@@ -369,16 +373,128 @@ class MarkerImager:
         self.tracker.reset()
 
 
-_R_PX = np.arange(-PROFILE_HALF_PX, PROFILE_HALF_PX + 1e-9, PROFILE_STEP_PX, dtype=np.float32)  # (I,) across a side
+_R_PX = np.arange(-PROFILE_HALF_PX, PROFILE_HALF_PX + 1e-9, PROFILE_STEP_PX)  # (I,) offsets across a side
 _U = np.linspace(0.0, 1.0, PROFILES_PER_SIDE)  # (J,) fractions of a side's usable length
 _PLATEAU = max(1, int(round(0.75 / PROFILE_STEP_PX)))  # samples in the outer 0.75 px of each profile end
-# Weights turning a profile (I,) into [its trapezoid integral, mean of the inner plateau, mean of the outer one].
-_PROFILE_WEIGHTS = np.zeros((_R_PX.size, 3), np.float32)
-_PROFILE_WEIGHTS[:, 0] = PROFILE_STEP_PX
-_PROFILE_WEIGHTS[[0, -1], 0] = PROFILE_STEP_PX / 2
-_PROFILE_WEIGHTS[:_PLATEAU, 1] = 1.0 / _PLATEAU
-_PROFILE_WEIGHTS[-_PLATEAU:, 2] = 1.0 / _PLATEAU
-_NEXT, _PREV = [1, 2, 3, 0], [3, 0, 1, 2]  # corner k + 1, corner k - 1
+_jit = numba.njit(cache=True, error_model="numpy")
+
+
+@_jit
+def _side_frames(c):
+    """Per side of each (4, 2) quad in c (M, 4, 2): length (M, 4), unit direction and outward unit normal (M, 4, 2)."""
+    m_count = c.shape[0]
+    length = np.empty((m_count, 4))
+    t = np.empty((m_count, 4, 2))
+    n = np.empty((m_count, 4, 2))
+    for m in range(m_count):
+        mx = (c[m, 0, 0] + c[m, 1, 0] + c[m, 2, 0] + c[m, 3, 0]) / 4.0
+        my = (c[m, 0, 1] + c[m, 1, 1] + c[m, 2, 1] + c[m, 3, 1]) / 4.0
+        for k in range(4):
+            k1 = (k + 1) % 4
+            dx, dy = c[m, k1, 0] - c[m, k, 0], c[m, k1, 1] - c[m, k, 1]
+            ln = math.sqrt(dx * dx + dy * dy)
+            length[m, k] = ln
+            t[m, k, 0], t[m, k, 1] = dx / ln, dy / ln
+            # Outward: the normal points away from the quad's centre as seen from the side's midpoint.
+            side = (c[m, k, 0] + dx / 2 - mx) * t[m, k, 1] - (c[m, k, 1] + dy / 2 - my) * t[m, k, 0]
+            sg = 1.0 if side > 0 else (-1.0 if side < 0 else 0.0)
+            n[m, k, 0], n[m, k, 1] = sg * t[m, k, 1], -sg * t[m, k, 0]
+    return length, t, n
+
+
+@_jit
+def _profile_maps(c, r_px, u, skip_px):
+    """Sample points of the edge profiles: x and y maps (M * 4 * J, I) float32; profile j of side k
+    of marker m is row (m * 4 + k) * J + j, centred on the side at skip_px + u[j] (length - 2 skip_px)."""
+    length, t, n = _side_frames(c)
+    n_j, n_i = u.size, r_px.size
+    map_x = np.empty((c.shape[0] * 4 * n_j, n_i), np.float32)
+    map_y = np.empty_like(map_x)
+    for m in range(c.shape[0]):
+        for k in range(4):
+            usable = max(length[m, k] - 2 * skip_px, 0.0)
+            for j in range(n_j):
+                s = skip_px + usable * u[j]
+                px, py = c[m, k, 0] + s * t[m, k, 0], c[m, k, 1] + s * t[m, k, 1]
+                row = (m * 4 + k) * n_j + j
+                for i in range(n_i):
+                    map_x[row, i] = px + r_px[i] * n[m, k, 0]
+                    map_y[row, i] = py + r_px[i] * n[m, k, 1]
+    return map_x, map_y
+
+
+@_jit
+def _fit_corners(c, prof, r_px, u, skip_px, step_px, plateau, min_contrast, max_shift_px):
+    """Corners (M, 4, 2) from the profiles (M * 4 * J, I) sampled at _profile_maps' points.
+
+    Per side: dark (inner) and bright (outer) levels from the profiles' end plateaus, each
+    profile's edge offset from its coverage integral (trapezoid rule), a least-squares line
+    offset = a + b s through those, and each corner where its two sides' lines meet. A marker
+    with a short or low-contrast side, or a corner moved further than max_shift_px, keeps c."""
+    length, t, n = _side_frames(c)
+    m_count, n_j, n_i = c.shape[0], u.size, r_px.size
+    half = (n_i - 1) * step_px / 2.0
+    out = c.copy()
+    p0 = np.empty((4, 2))
+    dirs = np.empty((4, 2))
+    s = np.empty(n_j)
+    edge = np.empty(n_j)
+    for m in range(m_count):
+        ok = True
+        for k in range(4):
+            if length[m, k] < 2 * skip_px + 4.0:
+                ok = False
+            usable = max(length[m, k] - 2 * skip_px, 0.0)
+            base = (m * 4 + k) * n_j
+            dark = 0.0
+            bright = 0.0
+            for j in range(n_j):
+                for i in range(plateau):
+                    dark += prof[base + j, i]
+                    bright += prof[base + j, n_i - 1 - i]
+            dark /= n_j * plateau
+            bright /= n_j * plateau
+            contrast = bright - dark
+            if not contrast >= min_contrast:
+                ok = False
+            for j in range(n_j):
+                area = 0.0
+                for i in range(n_i):
+                    area += prof[base + j, i]
+                area = (area - 0.5 * (prof[base + j, 0] + prof[base + j, n_i - 1])) * step_px
+                s[j] = skip_px + usable * u[j]
+                # Edge offset along n: the profile's width minus its area of coverage (0 dark .. 1 bright).
+                edge[j] = half - (area - 2 * half * dark) / max(contrast, 1e-6)
+            sm, em = s.mean(), edge.mean()
+            sxx = 0.0
+            sxy = 0.0
+            for j in range(n_j):
+                sxx += (s[j] - sm) ** 2
+                sxy += (s[j] - sm) * (edge[j] - em)
+            b = sxy / max(sxx, 1e-12)
+            a = em - b * sm
+            # The side is c + a n + s (t + b n).
+            for ax in range(2):
+                p0[k, ax] = c[m, k, ax] + a * n[m, k, ax]
+                dirs[k, ax] = t[m, k, ax] + b * n[m, k, ax]
+        if not ok:
+            continue
+        corners = np.empty((4, 2))
+        for k in range(4):
+            kp = (k + 3) % 4  # corner k is where side k - 1 meets side k
+            det = dirs[kp, 0] * -dirs[k, 1] + dirs[k, 0] * dirs[kp, 1]
+            if det == 0.0:
+                ok = False
+                break
+            rx, ry = p0[k, 0] - p0[kp, 0], p0[k, 1] - p0[kp, 1]
+            v = (rx * -dirs[k, 1] + dirs[k, 0] * ry) / det
+            corners[k, 0] = p0[kp, 0] + v * dirs[kp, 0]
+            corners[k, 1] = p0[kp, 1] + v * dirs[kp, 1]
+            if not (abs(corners[k, 0] - c[m, k, 0]) <= max_shift_px and abs(corners[k, 1] - c[m, k, 1]) <= max_shift_px):
+                ok = False
+        if ok:
+            out[m] = corners
+    return out
 
 
 def refine_marker_corners(img: np.ndarray, corners_px: np.ndarray) -> np.ndarray:
@@ -389,40 +505,12 @@ def refine_marker_corners(img: np.ndarray, corners_px: np.ndarray) -> np.ndarray
     the coverage integral of intensity profiles across it (exact for a symmetric blur of a step,
     no threshold), a line is fitted through those edge points, and each corner is the
     intersection of its two sides. A marker whose edges are not clean keeps its input corners.
+    The geometry runs in compiled kernels; the profiles are sampled by cv2.remap (bilinear).
     """
-    c = np.asarray(corners_px, np.float64).reshape(-1, 4, 2)
-    d = c[:, _NEXT] - c  # side k runs from corner k to corner k + 1
-    length = np.hypot(d[..., 0], d[..., 1])  # (M, 4)
-    t = d / length[..., None]
-    n = t[..., ::-1] * [1.0, -1.0]
-    n *= np.sign(((c + d / 2 - c.mean(axis=1, keepdims=True)) * n).sum(axis=2))[..., None]  # outward
-    s = CORNER_SKIP_PX + np.maximum(length - 2 * CORNER_SKIP_PX, 0.0)[..., None] * _U  # (M, 4, J)
-    # Sample points, x and y planes apart (M, 4, J, I): J profiles per side (centred on it), I samples across each.
-    centres = (c[:, :, None, :] + s[..., None] * t[:, :, None, :]).astype(np.float32)  # (M, 4, J, 2)
-    across = (n[..., None] * _R_PX).astype(np.float32)  # (M, 4, 2, I)
-    map_x = centres[..., 0, None] + across[:, :, None, 0]
-    map_y = centres[..., 1, None] + across[:, :, None, 1]
-    prof = cv2.remap(img.astype(np.float32), map_x.reshape(-1, _R_PX.size), map_y.reshape(-1, _R_PX.size),
-                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # (M * 4 * J, I)
-    sums = (prof @ _PROFILE_WEIGHTS).reshape(*s.shape, 3).astype(np.float64)  # (M, 4, J, 3)
-    dark, bright = sums[..., 1].mean(axis=2), sums[..., 2].mean(axis=2)  # (M, 4): black border, quiet zone
-    contrast = bright - dark
-    # Edge offset along n: the profile's width minus its area of coverage (0 dark .. 1 bright).
-    edge = PROFILE_HALF_PX - (sums[..., 0] - 2 * PROFILE_HALF_PX * dark[..., None]) / np.maximum(contrast, 1e-6)[..., None]
-    # Least-squares line edge = a + b s per side: the side is c + a n + s (t + b n).
-    sm, em = s.mean(axis=2, keepdims=True), edge.mean(axis=2, keepdims=True)
-    ds = s - sm
-    b = (ds * (edge - em)).sum(axis=2) / np.maximum((ds * ds).sum(axis=2), 1e-12)
-    a = em[..., 0] - b * sm[..., 0]
-    p0 = c + a[..., None] * n
-    dirs = t + b[..., None] * n
-    # Corner k is where side k - 1 meets side k: p_prev + u d_prev = p0 + v dirs.
-    p_prev, d_prev = p0[:, _PREV], dirs[:, _PREV]
-    det = d_prev[..., 0] * -dirs[..., 1] + dirs[..., 0] * d_prev[..., 1]
-    rhs = p0 - p_prev
-    u = (rhs[..., 0] * -dirs[..., 1] + dirs[..., 0] * rhs[..., 1]) / np.where(det == 0.0, np.nan, det)
-    out = p_prev + u[..., None] * d_prev
-    bad = ((length.min(axis=1) < 2 * CORNER_SKIP_PX + 4.0) | (contrast.min(axis=1) < MIN_CONTRAST_GRAY)
-           | ~np.isfinite(out).all(axis=(1, 2)) | ~(np.abs(out - c).max(axis=(1, 2)) <= MAX_REFINE_SHIFT_PX))
-    out[bad] = c[bad]
-    return out
+    c = np.ascontiguousarray(corners_px, np.float64).reshape(-1, 4, 2)
+    if c.shape[0] == 0:
+        return c.copy()
+    map_x, map_y = _profile_maps(c, _R_PX, _U, CORNER_SKIP_PX)
+    prof = cv2.remap(img.astype(np.float32), map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return _fit_corners(c, prof, _R_PX, _U, CORNER_SKIP_PX, PROFILE_STEP_PX, _PLATEAU, MIN_CONTRAST_GRAY,
+                        MAX_REFINE_SHIFT_PX)

@@ -37,8 +37,8 @@ N_STATE = 12
 (P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA, P_DSHIFT, P_XMAX_SHIFT,
  P_H0, P_HCLIP, P_LK_ORIGIN, P_LK_SCALE, P_HALF_PAD, P_PERIOD, P_HYST, P_CREEP, P_CREEP_S,
  P_PSAT, P_EXPONENT, P_G_FLOOR, P_G_SAT, P_G_LEAK, P_G_DIV, P_R_ON, P_SUPPLY_V, P_FULL_SCALE,
- P_CROSSTALK, P_REUSE) = range(30)
-N_PARAM = 30
+ P_CROSSTALK, P_REUSE, P_JITTER_S, P_NOISE_COUNTS) = range(32)
+N_PARAM = 32
 
 _TINY = np.finfo(float).tiny
 WINDOW_EPS = 1e-8  # hemisphere windows: outside, the profile is below this fraction of its peak
@@ -60,6 +60,7 @@ def transduction_params(fsr, readout, adc_bits: int | None = None, prm: np.ndarr
         prm[P_G_LEAK], prm[P_G_DIV] = 1.0 / (readout.leak_mohm * 1e6), 1.0 / (readout.divider_kohm * 1e3)
         prm[P_R_ON], prm[P_SUPPLY_V] = readout.mux_on_ohm, readout.supply_v
         prm[P_CROSSTALK] = 1.0 if readout.crosstalk else 0.0
+        prm[P_JITTER_S], prm[P_NOISE_COUNTS] = readout.scan_jitter_ms * 1e-3, readout.noise_counts
     if adc_bits is not None:
         prm[P_FULL_SCALE] = float(2**adc_bits - 1)
     return prm
@@ -89,10 +90,11 @@ def _tilt(tilt, i, t, shift, prm):
 
 
 @_jit
-def _lookup(lk, layer, i, t32, coord, origin32, scale32):
-    """Profile (float32) at coord (r^2 or signed distance, float32) for indentation row i + t:
-    nearest bin of the fine table, linear between the two rows; zero beyond the table."""
-    n_fine = lk.shape[2]
+def _lookup(lk_row, t32, coord, origin32, scale32):
+    """Profile (float32) at coord (r^2 or signed distance, float32) for indentation row i + t
+    (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table, linear between the two
+    rows; zero beyond the table (guard column)."""
+    n_fine = lk_row.shape[0]
     c = coord
     if origin32 != _F0:
         c = c - origin32
@@ -102,7 +104,7 @@ def _lookup(lk, layer, i, t32, coord, origin32, scale32):
         j = 0
     elif j > n_fine - 1:
         j = n_fine - 1
-    return lk[layer, i, j, 1] * t32 + lk[layer, i, j, 0]
+    return lk_row[j, 1] * t32 + lk_row[j, 0]
 
 
 @_jit
@@ -164,12 +166,31 @@ def _deep_reach(deep_bound, dist, i, gamma, logz):
 
 # ---------------------------------------------------------------------------------- fields
 @_jit
-def frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win):
+def _row_done(colsum, r, c0, c1, quad, n, nq, tax):
+    """After quadrature row r: when it closes a taxel row, the Gauss-weighted column sums
+    colsum (already weighted by the row weights) become that row's taxel means in tax."""
+    if r % nq != nq - 1:
+        return
+    tr = r // nq
+    for tc in range(c0 // nq, c1 // nq):
+        s = 0.0
+        for b in range(nq):
+            s += np.float64(quad[n * nq + b]) * colsum[tc * nq + b]
+            colsum[tc * nq + b] = 0.0
+        tax[tr, tc] = s
+
+
+@_jit
+def frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, tax):
     """Pressure (kPa, float32) at the quadrature points of both layers for one loaded state
     st (N_STATE,), written into f_sup, f_deep (n*q, n*q) [y, x] inside each layer's taxel
-    window; win (8,) receives the windows [r0, r1, c0, c1] (superficial, then deep)."""
+    window (hemisphere; the rod's is the whole grid), and the Gauss-weighted taxel means
+    (kPa) into tax (2, n, n), zero outside the windows."""
     n, nq = int(prm[P_N]), int(prm[P_NQ])
-    q = quad[:n * nq]
+    m = n * nq
+    q = quad[:m]
+    tax[:, :, :] = 0.0
+    colsum = np.zeros(m)
     delta, fz = st[S_DELTA], st[S_FZ]
     fx, fy = st[S_FX], st[S_FY]
     ax, ay = st[S_AX], st[S_AY]
@@ -180,50 +201,62 @@ def frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_de
     t32 = np.float32(t)
     gamma, logz = _tilt(tilt, i, t, ft_mag * h_eff / fz, prm)  # moment balance: F_t H = F_z shift
     origin32, scale32 = np.float32(prm[P_LK_ORIGIN]), np.float32(prm[P_LK_SCALE])
-    ax32, ay32 = np.float32(ax), np.float32(ay)
-    cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
+    lk_sup, lk_deep = lk[0, i], lk[1, i]
     if prm[P_ROD] != 0.0:
-        _rod_fields(st, prm, lk, i, t32, gamma, logz, h_eff, q, lattice, f_sup, f_deep, origin32, scale32)
-        for k in range(2):
-            win[4 * k], win[4 * k + 1], win[4 * k + 2], win[4 * k + 3] = 0, n - 1, 0, n - 1
+        _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice, f_sup, f_deep,
+                    origin32, scale32, colsum, tax)
         return
+    win = np.empty(4, np.int64)
     # superficial: radial profile around the contact, in the superficial frame
     _window(ax, ay, deep_bound[i, dist.shape[0] + 1], prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
-    dxs = np.empty(n * nq, np.float32)
+    ax32, ay32 = np.float32(ax), np.float32(ay)
+    dx2 = np.empty(m, np.float32)
     for c in range(c0, c1):
-        dxs[c] = q[c] - ax32
+        dx = q[c] - ax32
+        dx2[c] = dx * dx
     for r in range(r0, r1):
         dy = q[r] - ay32
         dy2 = dy * dy
+        wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
-            f_sup[r, c] = _lookup(lk, 0, i, t32, dxs[c] * dxs[c] + dy2, origin32, scale32)
+            v = _lookup(lk_sup, t32, dx2[c] + dy2, origin32, scale32)
+            f_sup[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        _row_done(colsum, r, c0, c1, quad, n, nq, tax[0])
     # deep: spread profile tilted along the shear, times the lattice pattern
-    _window(cdx, cdy, _deep_reach(deep_bound, dist, i, gamma, logz), prm, win, 4)
-    r0, r1, c0, c1 = win[4] * nq, (win[5] + 1) * nq, win[6] * nq, (win[7] + 1) * nq
+    _window(cdx, cdy, _deep_reach(deep_bound, dist, i, gamma, logz), prm, win, 0)
+    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
     den = max(ft_mag, _TINY)  # shear direction (0 without shear: ft is 0 there, so no 0/0)
     gx = np.float32(gamma * np.float64(np.float32(fx / den)))
     gy = np.float32(gamma * np.float64(np.float32(fy / den)))
     half_logz = np.float32(0.5 * logz)
-    dxd = np.empty(n * nq, np.float32)
-    ex = np.empty(n * nq, np.float32)
+    cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
+    ex = np.empty(m, np.float32)
     for c in range(c0, c1):
-        dxd[c] = q[c] - cdx32
-        ex[c] = np.exp(gx * dxd[c] - half_logz)
+        dx = q[c] - cdx32
+        dx2[c] = dx * dx
+        ex[c] = np.exp(gx * dx - half_logz)
     for r in range(r0, r1):
         dy = q[r] - cdy32
         dy2 = dy * dy
         ey = np.exp(gy * dy - half_logz)
+        wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
-            v = _lookup(lk, 1, i, t32, dxd[c] * dxd[c] + dy2, origin32, scale32)
-            v = v * (ey * ex[c])
-            f_deep[r, c] = v * lattice[r, c]
+            v = _lookup(lk_deep, t32, dx2[c] + dy2, origin32, scale32)
+            v = (v * (ey * ex[c])) * lattice[r, c]
+            f_deep[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        _row_done(colsum, r, c0, c1, quad, n, nq, tax[1])
 
 
 @_jit
-def _rod_fields(st, prm, lk, i, t32, gamma, logz, h_eff, q, lattice, f_sup, f_deep, origin32, scale32):
-    """Rod line load on the full quadrature grid, both layers [y, x] (float32)."""
-    m = q.shape[0]
+def _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice, f_sup, f_deep,
+                origin32, scale32, colsum, tax):
+    """Rod line load on the full quadrature grid, both layers [y, x] (float32), and taxel means."""
+    n, nq = int(prm[P_N]), int(prm[P_NQ])
+    m = n * nq
+    q = quad[:m]
     yaw = st[S_YAW]
     yaw_s = yaw - st[S_ROT]  # rod axis in the superficial frame
     sx, cy = np.float32(-math.sin(yaw_s)), np.float32(math.cos(yaw_s))
@@ -233,8 +266,12 @@ def _rod_fields(st, prm, lk, i, t32, gamma, logz, h_eff, q, lattice, f_sup, f_de
         col[c] = sx * (q[c] - ax32)
     for r in range(m):
         row = cy * (q[r] - ay32)
+        wa = np.float64(quad[m + r % nq])
         for c in range(m):
-            f_sup[r, c] = _lookup(lk, 0, i, t32, col[c] + row, origin32, scale32)
+            v = _lookup(lk_sup, t32, col[c] + row, origin32, scale32)
+            f_sup[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        _row_done(colsum, r, 0, m, quad, n, nq, tax[0])
     fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
     cdx, cdy = st[S_AX] + st[S_UX], st[S_AY] + st[S_UY]
     s1, s2 = _chord(cdx, cdy, yaw, prm[P_HALF_PAD])
@@ -267,53 +304,29 @@ def _rod_fields(st, prm, lk, i, t32, gamma, logz, h_eff, q, lattice, f_sup, f_de
         py = ex * dy
         ty = np.exp(g * py)
         ramp_y = beta * (ey * dy)
+        wa = np.float64(quad[m + r % nq])
         for c in range(m):
-            v = _lookup(lk, 1, i, t32, px[c] + py, origin32, scale32)
+            v = _lookup(lk_deep, t32, px[c] + py, origin32, scale32)
             v = v * (ty * tx[c])
             ramp = ramp_x[c] + ramp_y
             if ramp < _F0:
                 ramp = _F0
-            f_deep[r, c] = (v * ramp) * lattice[r, c]
-
-
-@_jit
-def _taxel_means(field, win, at, quad, n, nq, out):
-    """Gauss-weighted mean of field over each taxel of window win[at:at + 4] into out (n, n),
-    zero elsewhere."""
-    out[:, :] = 0.0
-    for tr in range(win[at], win[at + 1] + 1):
-        for tc in range(win[at + 2], win[at + 3] + 1):
-            s = 0.0
-            for a in range(nq):
-                row = 0.0
-                for b in range(nq):
-                    row += np.float64(quad[n * nq + b]) * np.float64(field[tr * nq + a, tc * nq + b])
-                s += np.float64(quad[n * nq + a]) * row
-            out[tr, tc] = s
-
-
-@_jit
-def _state_maps(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win, out):
-    """(2, n, n) taxel-mean pressure (kPa) of one state into out; zero when unloaded."""
-    n, nq = int(prm[P_N]), int(prm[P_NQ])
-    if not st[S_FZ] > 0.0:
-        out[:, :, :] = 0.0
-        return
-    frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win)
-    _taxel_means(f_sup, win, 0, quad, n, nq, out[0])
-    _taxel_means(f_deep, win, 4, quad, n, nq, out[1])
+            v = (v * ramp) * lattice[r, c]
+            f_deep[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        _row_done(colsum, r, 0, m, quad, n, nq, tax[1])
 
 
 @_jit
 def maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, cache_serial, cache_maps, maps):
-    """Taxel-mean pressure maps (N, 2, n, n) of N states into maps. A state whose config serial
-    (>= 0) equals the previous one's (or, for the first, cache_serial[0]) repeats its loading
-    configuration and reuses its maps (holds). Updates the cache (the last state's serial and
-    maps). Returns how many states' maps were computed."""
+    """Taxel-mean pressure maps (N, 2, n, n) of N states into maps (zero when unloaded). A
+    state whose config serial (>= 0) equals the previous one's (or, for the first,
+    cache_serial[0]) repeats its loading configuration and reuses its maps (holds), unless
+    prm[P_REUSE] is 0. Updates the cache (the last state's serial and maps). Returns how many
+    states' maps were computed."""
     m = quad.shape[0] - int(prm[P_NQ])
     f_sup = np.empty((m, m), np.float32)
     f_deep = np.empty((m, m), np.float32)
-    win = np.empty(8, np.int64)
     reuse = prm[P_REUSE] != 0.0
     prev = cache_serial[0]
     computed = 0
@@ -325,7 +338,10 @@ def maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, 
             else:
                 maps[k] = maps[k - 1]
         else:
-            _state_maps(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, win, maps[k])
+            if states[k, S_FZ] > 0.0:
+                frame_fields(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, maps[k])
+            else:
+                maps[k] = 0.0
             computed += 1
         prev = s
     n_all = states.shape[0]
@@ -339,10 +355,11 @@ def maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, 
 def fields_kernel(states, prm, lk, tilt, deep_bound, dist, quad, lattice, out_sup, out_deep):
     """Pressure (kPa, float32) at the quadrature points of N states into out_sup, out_deep
     (N, n*q, n*q), zero-initialised by the caller; only each layer's window is written."""
-    win = np.empty(8, np.int64)
+    n = int(prm[P_N])
+    tax = np.empty((2, n, n))
     for k in range(states.shape[0]):
         if states[k, S_FZ] > 0.0:
-            frame_fields(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, out_sup[k], out_deep[k], win)
+            frame_fields(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, out_sup[k], out_deep[k], tax)
 
 
 # ---------------------------------------------------------------------------------- transduction
@@ -358,8 +375,15 @@ def _fsr_step(p_kpa, play, lag, alpha, w, c):
 
 @_jit
 def _conductance(p_kpa, gain, prm):
-    """gain (G_floor + G_sat x / (1 + x)), x = (p / p_sat)^n for p > 0 (siemens)."""
-    x = (p_kpa / prm[P_PSAT]) ** prm[P_EXPONENT] if p_kpa > 0.0 else 0.0
+    """gain (G_floor + G_sat x / (1 + x)), x = (p / p_sat)^n for p > 0 (siemens).
+
+    The power runs in float32 (powf: a quarter of pow's cost here, relative error ~1e-7);
+    below 1e-30 x^n (n > 0 ... < 1e-30) cannot change G_floor + G_sat x / (1 + x) in float64."""
+    x = 0.0
+    if p_kpa > 0.0:
+        y = np.float32(p_kpa / prm[P_PSAT])
+        if y > np.float32(1e-30):
+            x = np.float64(y ** np.float32(prm[P_EXPONENT]))
     return gain * (x * prm[P_G_SAT] / (1.0 + x) + prm[P_G_FLOOR])
 
 
@@ -389,30 +413,23 @@ def conductance_kernel(pressure, gain, prm, out):
                     out[k, li, r, col] = _conductance(pressure[k, li, r, col], gain[li, r, col], prm)
 
 
-@_jit
-def _column_volts(g, prm, work, out):
-    """Column voltages out (n, n) [driven row, column] of one layer with conductances g (n, n).
+@numba.njit(cache=True, error_model="numpy", fastmath=True)
+def _column_volts(g, prm, y, chol, vec, out):
+    """Column voltages out (n, n) [driven row, column] of one layer with crosstalk, for
+    conductances g (n, n) [row, column] (siemens).
 
-    Crosstalk: nodal analysis over rows and columns; eliminating the column nodes leaves the
-    symmetric positive-definite row Schur complement S = D_r - G D_c^-1 G^T, and with Z = S^-1
-    driving row i through g_on reads V = Vs g_on (Z G D_c^-1)[i, :] / (1 + g_on Z_ii)
-    (Sherman-Morrison on the source branch). S = L L^T (LAPACK Cholesky); one forward
-    substitution against [G D_c^-1 | I] gives L^-1 G D_c^-1 and L^-1 (whose column norms are
-    Z_ii), one back substitution Z G D_c^-1. (np.linalg.solve/inv cost 3-6 us per 16x16 system
-    here, most of a frame's budget; the substitutions cost well under one.)
-    work: (n, 3n + 2) float64 scratch.
+    Nodal analysis over rows and columns; eliminating the column nodes leaves the symmetric
+    positive-definite row Schur complement S = D_r - G D_c^-1 G^T, and with Z = S^-1 driving
+    row i through g_on reads V = Vs g_on (Z G D_c^-1)[i, :] / (1 + g_on Z_ii) (Sherman-Morrison
+    on the source branch) = Vs X[i, :] / (r_on + Z_ii), X = Z G D_c^-1. S = L L^T (Cholesky,
+    in place), X by forward and back substitution; Z S = I gives
+    Z D_r = I + X D_c (G D_c^-1)^T, so Z_ii = (1 + sum_c X_ic g_ic) / d_r,i.
+    (numba's np.linalg.solve / inv / cholesky cost 6 / 3 / 0.7 us per 16x16 system here in
+    allocation and LAPACK call overhead, eight systems per 4-frame call; this, about 2 us.)
+    Scratch (float64, C-contiguous): y (n, n), chol (n, n), vec (2, n).
     """
     n = g.shape[0]
-    vs = prm[P_SUPPLY_V]
-    r_on = prm[P_R_ON]
-    if prm[P_CROSSTALK] == 0.0:
-        r_div = 1.0 / prm[P_G_DIV]  # each taxel alone in series with the mux and its divider
-        for r in range(n):
-            for c in range(n):
-                out[r, c] = vs * r_div / (r_on + 1.0 / g[r, c] + r_div)
-        return
-    d_c = work[:, 3 * n]
-    d_r = work[:, 3 * n + 1]
+    d_c, d_r = vec[0], vec[1]
     for c in range(n):
         d_c[c] = prm[P_G_DIV]
     for r in range(n):
@@ -421,35 +438,36 @@ def _column_volts(g, prm, work, out):
             s += g[r, c]
             d_c[c] += g[r, c]
         d_r[r] = s
-    y = work[:, :2 * n]  # [G D_c^-1 | I], then L^-1 times it
-    for r in range(n):
+    for r in range(n):  # y = G D_c^-1
         for c in range(n):
             y[r, c] = g[r, c] / d_c[c]
-            y[r, n + c] = 1.0 if r == c else 0.0
-    s_mat = work[:, 2 * n:3 * n]
-    for r in range(n):
+    for r in range(n):  # S, lower triangle
         for k in range(r + 1):
             s = 0.0
             for c in range(n):
                 s += y[r, c] * g[k, c]
-            s_mat[r, k] = -s
-            s_mat[k, r] = -s
-        s_mat[r, r] += d_r[r]
-    chol = np.linalg.cholesky(s_mat)
+            chol[r, k] = -s
+        chol[r, r] += d_r[r]
+    for j in range(n):  # Cholesky factor L, in place
+        s = chol[j, j]
+        for p in range(j):
+            s -= chol[j, p] * chol[j, p]
+        ljj = math.sqrt(s)
+        chol[j, j] = ljj
+        for i in range(j + 1, n):
+            s = chol[i, j]
+            for p in range(j):
+                s -= chol[i, p] * chol[j, p]
+            chol[i, j] = s / ljj
     for r in range(n):  # forward: y <- L^-1 y
         for p in range(r):
             lrp = chol[r, p]
-            for c in range(n + p + 1):
+            for c in range(n):
                 y[r, c] -= lrp * y[p, c]
         inv = 1.0 / chol[r, r]
-        for c in range(n + r + 1):
+        for c in range(n):
             y[r, c] *= inv
-    for i in range(n):  # Z_ii = sum_k (L^-1)_ki^2, into d_r (no longer needed)
-        s = 0.0
-        for k in range(i, n):
-            s += y[k, n + i] * y[k, n + i]
-        d_r[i] = s
-    for r in range(n - 1, -1, -1):  # back: y[:, :n] <- L^-T y[:, :n] = Z G D_c^-1
+    for r in range(n - 1, -1, -1):  # back: y <- L^-T y = X
         for p in range(r + 1, n):
             lpr = chol[p, r]
             for c in range(n):
@@ -457,37 +475,46 @@ def _column_volts(g, prm, work, out):
         inv = 1.0 / chol[r, r]
         for c in range(n):
             y[r, c] *= inv
-    if r_on > 0:
-        g_on = 1.0 / r_on
-        for r in range(n):
-            f = vs * g_on / (1.0 + g_on * d_r[r])
-            for c in range(n):
-                out[r, c] = f * y[r, c]
-    else:
-        for r in range(n):
-            for c in range(n):
-                out[r, c] = vs * y[r, c] / d_r[r]
+    vs, r_on = prm[P_SUPPLY_V], prm[P_R_ON]
+    for r in range(n):
+        s = 1.0
+        for c in range(n):
+            s += y[r, c] * g[r, c]
+        f = vs / (r_on + s / d_r[r])  # Vs / (r_on + Z_ii)
+        for c in range(n):
+            out[r, c] = f * y[r, c]
 
 
 @_jit
-def column_volts_kernel(g, prm, out):
-    """Column voltages out (M, n, n) for conductances g (M, n, n) (see `_column_volts`)."""
-    n = g.shape[1]
-    work = np.empty((n, 3 * n + 2))
-    for m in range(g.shape[0]):
-        _column_volts(g[m], prm, work, out[m])
+def column_volts_batch(g, prm, out):
+    """Column voltages out (M, n, n) [driven row, column] of M layers with conductances
+    g (M, n, n) (siemens): the crosstalk network (`_column_volts`), or without crosstalk each
+    taxel alone in series with the mux and its divider."""
+    n_mat, n = g.shape[0], g.shape[1]
+    vs, r_on = prm[P_SUPPLY_V], prm[P_R_ON]
+    if prm[P_CROSSTALK] == 0.0:
+        r_div = 1.0 / prm[P_G_DIV]
+        for m in range(n_mat):
+            for r in range(n):
+                for c in range(n):
+                    out[m, r, c] = vs * r_div / (r_on + 1.0 / g[m, r, c] + r_div)
+        return
+    y, chol, vec = np.empty((n, n)), np.empty((n, n)), np.empty((2, n))
+    for m in range(n_mat):
+        _column_volts(g[m], prm, y, chol, vec, out[m])
 
 
 # ---------------------------------------------------------------------------------- frames
 @_jit
-def frames_kernel(states, serial, t_s, jitter, noise, prm, lk, tilt, deep_bound, dist, quad, lattice,
+def frames_kernel(states, serial, t_s, draws, prm, lk, tilt, deep_bound, dist, quad, lattice,
                   row_offsets, gains, baseline, play, lag, last_maps, memory, cache_serial, cache_maps,
                   maps, counts):
     """N frame pairs: counts (2, N, n, n) uint16 for states (N, N_STATE) completed at t_s (N,).
 
     serial (N,) int64: configuration serials (-1: unknown) for the maps reuse during holds;
-    jitter (N, 2, n) seconds added to each row's sampling instant (or (0, 2, n): none);
-    noise (2, N, n, n) counts added before rounding (or (2, 0, n, n): none);
+    draws: standard normal draws, in this order: the scan jitter (N, 2, n) (times
+    prm[P_JITTER_S] seconds added to each row's sampling instant) if prm[P_JITTER_S] > 0,
+    then the read noise (2, N, n, n) (times prm[P_NOISE_COUNTS] counts) if that is > 0;
     row_offsets (2, n) seconds from each row's nominal instant to the frame end;
     gains, baseline (2, n, n); play, lag, last_maps (2, n, n) updated in place;
     memory (2,) float64 [time of the last frame, whether there was one] updated in place;
@@ -496,49 +523,51 @@ def frames_kernel(states, serial, t_s, jitter, noise, prm, lk, tilt, deep_bound,
     afterwards: no pressure at the last frame and both FSR memories zero, maps computed).
     """
     n_all = states.shape[0]
+    if n_all == 0:
+        return True, 0
     n = int(prm[P_N])
     computed = maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, cache_serial,
                            cache_maps, maps)
-    has_jitter = jitter.shape[0] == n_all
-    has_noise = noise.shape[1] == n_all
+    sj, sn = prm[P_JITTER_S], prm[P_NOISE_COUNTS]
+    at_noise = n_all * 2 * n if sj > 0.0 else 0  # where the noise draws start
     w_h, c_cr, creep_s = prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S]
-    fs = prm[P_FULL_SCALE]
-    vs = prm[P_SUPPLY_V]
-    g = np.empty((n, n))
-    volts = np.empty((n, n))
-    work = np.empty((n, 3 * n + 2))
+    g = np.empty((n_all * 2, n, n))  # conductance [frame * 2 + layer]
     prev_t = memory[0] if memory[1] != 0.0 else t_s[0] - prm[P_PERIOD]
     for k in range(n_all):
         tk = t_s[k]
         dt = tk - prev_t  # time since the previous frame
         span = max(dt, 1e-9)
         alpha = 1.0 - math.exp(-max(dt, 0.0) / creep_s)
+        if k > 0:
+            before = maps[k - 1]
+        elif memory[1] != 0.0:
+            before = last_maps
+        else:
+            before = maps[0]
         for layer in range(2):
             for r in range(n):
                 row_t = tk - row_offsets[layer, r]
-                if has_jitter:
-                    row_t = row_t + jitter[k, layer, r]
+                if sj > 0.0:
+                    row_t = row_t + sj * draws[(k * 2 + layer) * n + r]
                 w = min(max((tk - row_t) / span, 0.0), 1.0)
                 for c in range(n):
-                    if k > 0:
-                        before = maps[k - 1, layer, r, c]
-                    elif memory[1] != 0.0:
-                        before = last_maps[layer, r, c]
-                    else:
-                        before = maps[0, layer, r, c]
-                    sampled = maps[k, layer, r, c] * (1 - w) + before * w  # the row at its own instant
+                    # the row at its own sampling instant, between the previous frame and this one
+                    sampled = maps[k, layer, r, c] * (1 - w) + before[layer, r, c] * w
                     eff, pl, lg = _fsr_step(sampled, play[layer, r, c], lag[layer, r, c], alpha, w_h, c_cr)
                     play[layer, r, c], lag[layer, r, c] = pl, lg
-                    g[r, c] = _conductance(eff, gains[layer, r, c], prm)
-            _column_volts(g, prm, work, volts)
+                    g[2 * k + layer, r, c] = _conductance(eff, gains[layer, r, c], prm)
+        prev_t = tk
+    volts = np.empty_like(g)
+    column_volts_batch(g, prm, volts)
+    fs, vs = prm[P_FULL_SCALE], prm[P_SUPPLY_V]
+    for k in range(n_all):
+        for layer in range(2):
             for r in range(n):
                 for c in range(n):
-                    v = volts[r, c] / vs * fs + baseline[layer, r, c]
-                    if has_noise:
-                        v += noise[layer, k, r, c]
-                    v = min(max(np.rint(v), 0.0), fs)
-                    counts[layer, k, r, c] = np.uint16(v)
-        prev_t = tk
+                    v = volts[2 * k + layer, r, c] / vs * fs + baseline[layer, r, c]
+                    if sn > 0.0:
+                        v += sn * draws[at_noise + ((layer * n_all + k) * n + r) * n + c]
+                    counts[layer, k, r, c] = np.uint16(min(max(np.rint(v), 0.0), fs))
     if n_all:
         last_maps[:] = maps[n_all - 1]
         memory[0], memory[1] = t_s[n_all - 1], 1.0
@@ -552,16 +581,17 @@ def frames_kernel(states, serial, t_s, jitter, noise, prm, lk, tilt, deep_bound,
 
 
 @_jit
-def idle_counts_kernel(idle_counts, noise, full_scale, counts):
-    """Counts (2, N, n, n) of an idle sheet: constant float counts (2, n, n) plus noise
-    (2, N, n, n) (or (2, 0, n, n): none), rounded and clipped to [0, full_scale]."""
-    n_all = counts.shape[1]
-    has_noise = noise.shape[1] == n_all
+def idle_counts_kernel(idle_counts, draws, prm, counts):
+    """Counts (2, N, n, n) of an idle sheet: constant float counts (2, n, n) plus the read
+    noise (draws as in `frames_kernel`), rounded and clipped to [0, full scale]."""
+    n_all, n = counts.shape[1], counts.shape[2]
+    sn, fs = prm[P_NOISE_COUNTS], prm[P_FULL_SCALE]
+    at_noise = n_all * 2 * n if prm[P_JITTER_S] > 0.0 else 0
     for layer in range(2):
         for k in range(n_all):
-            for r in range(counts.shape[2]):
-                for c in range(counts.shape[3]):
+            for r in range(n):
+                for c in range(n):
                     v = idle_counts[layer, r, c]
-                    if has_noise:
-                        v += noise[layer, k, r, c]
-                    counts[layer, k, r, c] = np.uint16(min(max(np.rint(v), 0.0), full_scale))
+                    if sn > 0.0:
+                        v += sn * draws[at_noise + ((layer * n_all + k) * n + r) * n + c]
+                    counts[layer, k, r, c] = np.uint16(min(max(np.rint(v), 0.0), fs))

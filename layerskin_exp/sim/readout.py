@@ -35,7 +35,7 @@ class MatrixReadout:
         """Column voltages (M, 16, 16) [driven row, column] for conductances g_s (M, 16, 16)."""
         g = np.ascontiguousarray(g_s, dtype=float)
         out = np.empty_like(g)
-        fk.column_volts_kernel(g, self.params, out)
+        fk.column_volts_batch(g, self.params, out)
         return out
 
     def counts(self, volts: np.ndarray) -> np.ndarray:

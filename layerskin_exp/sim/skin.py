@@ -18,8 +18,11 @@ height), times the lattice's cell pattern. For the rod, torsion loads the line w
 proportional to the distance along it, whose local moments rotate the deep line.
 Each taxel integrates its electrode footprint with Gauss points.
 
-Frames (`frames`): row-sequential sampling instants, FSR hysteresis/creep and conductance,
-passive-matrix readout with crosstalk, offsets, noise and quantisation.
+Frames (`frames`, or `frames_batch` on arrays): row-sequential sampling instants, FSR
+hysteresis/creep and conductance, passive-matrix readout with crosstalk, offsets, noise and
+quantisation. The per-frame arithmetic (maps included) runs in one compiled call
+(`frame_kernels.frames_kernel`); this class holds the tables and memories as arrays and draws
+the random numbers (numpy, the same draws in the same order as ever).
 """
 
 from __future__ import annotations
@@ -98,6 +101,7 @@ def stack_states(states: list[MechState]) -> StateBatch:
 
 _TABLE_CACHE: dict[str, ContactTables] = {}
 _MODEL_IDS = itertools.count()
+_KERNELS_LOADED = False  # the frame kernels are loaded once per process (SkinModel._load_kernels)
 
 
 def tables_for(sim: SimConfig, kind: str) -> ContactTables:
@@ -177,13 +181,13 @@ class SkinModel:
         self._params = self._kernel_params()
         self._tables = (self._params, self._lk, self._tilt_table, self._deep_bound, self._dist, self._quad32,
                         self._lattice32)
-        self._no_jitter = np.zeros((0, 2, n))
-        self._no_noise = np.zeros((2, 0, n, n))
+        self._no_draws = np.zeros(0)
         self.maps_computed = 0  # states whose pressure maps were computed (not reused in a hold)
         # Idle sheet: no pressure at the last frame and both FSR memories exactly zero. Unloaded
         # frames then leave it so and read the floor conductance: constant counts plus noise.
         self._idle = True
-        self._idle_counts: np.ndarray | None = None  # (2, n, n) float counts before noise
+        self._load_kernels()
+        self._idle_counts = self._floor_counts()  # (2, n, n) float counts before noise
 
     # ------------------------------------------------------------------ mechanics
     def step_many(self, t_s: np.ndarray, xyz_mm: np.ndarray, yaw_rad: np.ndarray) -> np.ndarray:
@@ -401,14 +405,14 @@ class SkinModel:
         baselines stay."""
         self.rng = rng
 
-    def _draws(self, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
-        """The frames' random draws, in this order: scan jitter (N, 2, n) seconds added to each
-        row's sampling instant, read noise (2, N, n, n) counts (empty arrays when off)."""
+    def _draws(self, n_frames: int) -> np.ndarray:
+        """The frames' random draws as standard normals, in the order the pipeline has always
+        drawn them: scan jitter (N, 2, n), then read noise (2, N, n, n), each only when its rms
+        is > 0. (normal(0, s, shape) is s x standard_normal(shape), and consecutive draws are
+        one stream: one call gives the same numbers.) The kernels scale them."""
         r, n = self.sim.readout, self.skin.n_taxels
-        jit = r.scan_jitter_ms * 1e-3
-        jitter = self.rng.normal(0.0, jit, size=(n_frames, 2, n)) if jit > 0 else self._no_jitter
-        noise = self.rng.normal(0.0, r.noise_counts, size=(2, n_frames, n, n)) if r.noise_counts > 0 else self._no_noise
-        return jitter, noise
+        size = (n_frames * 2 * n if r.scan_jitter_ms > 0 else 0) + (2 * n_frames * n * n if r.noise_counts > 0 else 0)
+        return self.rng.standard_normal(size) if size else self._no_draws
 
     def frames(self, states: list[MechState], t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(superficial, deep) uint16 counts (N, 16, 16) for frames completed at t_s (N,)."""
@@ -442,10 +446,10 @@ class SkinModel:
         if self._idle and not (st[:, fk.S_FZ] > 0.0).any():
             return self._idle_frames(t_s)
         serial = np.ascontiguousarray(config_serial, dtype=np.int64).reshape(-1)
-        jitter, noise = self._draws(n_all)
+        draws = self._draws(n_all)
         maps = np.empty((n_all, 2, n, n))
         counts = np.empty((2, n_all, n, n), np.uint16)
-        idle, computed = fk.frames_kernel(st, serial, t_s, jitter, noise, *self._tables, self._row_offsets_s,
+        idle, computed = fk.frames_kernel(st, serial, t_s, draws, *self._tables, self._row_offsets_s,
                                           self._gains, self.baseline_counts, self._play, self._lag,
                                           self._last_maps, self._memory, self._cache_serial, self._cache_maps,
                                           maps, counts)
@@ -453,17 +457,36 @@ class SkinModel:
         self.maps_computed += computed
         return counts[0], counts[1]
 
+    def _load_kernels(self) -> None:
+        """Compile (first run) or load from numba's disk cache (~0.3 s) the frame kernels now,
+        once per process, rather than inside the first frames() call (a trial's first tick)."""
+        global _KERNELS_LOADED
+        if _KERNELS_LOADED:
+            return
+        n = self.skin.n_taxels
+        none = np.zeros((0, fk.N_STATE))
+        fk.frames_kernel(none, np.zeros(0, np.int64), np.zeros(0), self._no_draws, *self._tables,
+                         self._row_offsets_s, self._gains, self.baseline_counts, np.zeros((2, n, n)),
+                         np.zeros((2, n, n)), np.zeros((2, n, n)), np.zeros(2), np.full(1, -1, np.int64),
+                         np.zeros((2, n, n)), np.zeros((0, 2, n, n)), np.zeros((2, 0, n, n), np.uint16))
+        fk.idle_counts_kernel(np.zeros((2, n, n)), self._no_draws, self._params, np.zeros((2, 0, n, n), np.uint16))
+        _KERNELS_LOADED = True
+
+    def _floor_counts(self) -> np.ndarray:
+        """(2, n, n) float counts (before noise and rounding) of the unloaded sheet: zero
+        pressure, floor conductance, the same readout arithmetic as the frame kernel."""
+        n = self.skin.n_taxels
+        g = conductance_layers(self.fsr, np.zeros((1, 2, n, n)), self._gains)
+        volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
+        return np.ascontiguousarray((self.readout.counts(volts) + self.baseline_counts[None])[0])
+
     def _idle_frames(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """frames() for unloaded states on an idle sheet: the full pipeline's result (zero
         pressure, floor conductance, constant column voltages), with the same draws from rng."""
         n = self.skin.n_taxels
-        if self._idle_counts is None:
-            g = conductance_layers(self.fsr, np.zeros((1, 2, n, n)), self._gains)
-            volts = self.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
-            self._idle_counts = np.ascontiguousarray((self.readout.counts(volts) + self.baseline_counts[None])[0])
-        _, noise = self._draws(len(t_s))  # the scan jitter draws do not matter at zero pressure
+        draws = self._draws(len(t_s))  # the scan jitter draws do not matter at zero pressure
         counts = np.empty((2, len(t_s), n, n), np.uint16)
-        fk.idle_counts_kernel(self._idle_counts, noise, self.readout.full_scale, counts)
+        fk.idle_counts_kernel(self._idle_counts, draws, self._params, counts)
         self._last_maps[:] = 0.0
         self._memory[0], self._memory[1] = t_s[-1], 1.0
         return counts[0], counts[1]
