@@ -29,9 +29,15 @@ import math
 import numba
 import numpy as np
 
+from layerskin_exp.sim import mechanics as mk
+from layerskin_exp.sim.mechanics import chord as _chord
+
 # --- columns of the (N, N_STATE) state matrix
-S_T, S_FX, S_FY, S_FZ, S_TORQUE, S_DELTA, S_AX, S_AY, S_YAW, S_UX, S_UY, S_ROT = range(12)
+# the leading columns of a mechanics step record (SkinModel.step_many), so records pass as they are
+S_T, S_FX, S_FY, S_FZ, S_TORQUE, S_DELTA, S_AX, S_AY, S_YAW, S_UX, S_UY, S_ROT = (
+    mk.S_T, mk.S_FX, mk.S_FY, mk.S_FZ, mk.S_TORQUE, mk.S_DELTA, mk.S_CX, mk.S_CY, mk.S_YAW, mk.S_UX, mk.S_UY, mk.S_THETA)
 N_STATE = 12
+assert (S_T, S_ROT) == (0, N_STATE - 1)
 
 # --- entries of the parameter vector
 (P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA, P_DSHIFT, P_XMAX_SHIFT,
@@ -105,25 +111,6 @@ def _lookup(lk_row, t32, coord, origin32, scale32):
     elif j > n_fine - 1:
         j = n_fine - 1
     return lk_row[j, 1] * t32 + lk_row[j, 0]
-
-
-@_jit
-def _chord(cx, cy, yaw, half):
-    """Parameters s1 <= 0 <= s2 where the line c + s (cos yaw, sin yaw) leaves |x|,|y| <= half
-    (the same formula as `skin._chord`, compiled)."""
-    lo, hi = -1e9, 1e9
-    for axis in range(2):
-        c = cx if axis == 0 else cy
-        d = math.cos(yaw) if axis == 0 else math.sin(yaw)
-        if abs(d) < 1e-12:
-            if abs(c) > half:
-                return 0.0, 0.0
-            continue
-        a, b = (-half - c) / d, (half - c) / d
-        lo, hi = max(lo, min(a, b)), min(hi, max(a, b))
-    if hi <= lo:
-        return 0.0, 0.0
-    return min(lo, 0.0), max(hi, 0.0)
 
 
 @_jit

@@ -42,10 +42,6 @@ from layerskin_exp.sim.fsr import FSRLayer, conductance_layers
 from layerskin_exp.sim.readout import MatrixReadout
 from layerskin_exp.sim.spacer import SpacerLaw, hex_cell_pattern
 
-# A step record's leading columns are the frame kernels' state (frames_of_steps passes them on).
-assert (fk.S_T, fk.S_FX, fk.S_FZ, fk.S_TORQUE, fk.S_DELTA, fk.S_AX, fk.S_AY, fk.S_YAW, fk.S_UX, fk.S_UY, fk.S_ROT) == (
-    mk.S_T, mk.S_FX, mk.S_FZ, mk.S_TORQUE, mk.S_DELTA, mk.S_CX, mk.S_CY, mk.S_YAW, mk.S_UX, mk.S_UY, mk.S_THETA)
-
 INDENTERS = ("hemisphere", "rod")
 # The hemisphere's fields are evaluated in a window around the contact: outside it each layer's
 # profile (times the deep layer's largest tilt factor) is below this fraction of its peak.
