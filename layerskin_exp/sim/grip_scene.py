@@ -140,12 +140,6 @@ class GripScene:
         self.stop_gripper()
 
     # ---- world stepping (see World.advance for the protocol) -------------------------------
-    def feedback_free(self) -> bool:
-        """False while the jaws close: the Hand-E stops them when the grip force reaches its
-        setting, which the world must check after every step."""
-        return not (self.jaw.moving and (self.jaw.velocity[0] < 0 or (self.jaw.target or [math.inf])[0]
-                                         < self.jaw.position[0]))
-
     def plan(self, m: int, dt_s: float):
         """The next m steps without changing the scene: rod (x, y, z) mm in the skin frame
         (m, 3), its yaw (m,) rad, snapshots (m, 14) and a token for commit()."""
@@ -165,11 +159,23 @@ class GripScene:
             motion.commit(plan, k)
         self._last_yaw, self._R_tcp = float(yaw[k]), R[k]
 
-    def after_step(self, fz_n: float) -> None:
-        """The Hand-E stops its jaws once the grip force reaches its force setting."""
+    def first_reaction(self, token, recs: np.ndarray) -> int | None:
+        """Index of the first planned step after which after_step would stop the jaws (closing,
+        grip force at the setting), or None; recs (m, STEP_FIELDS) are the steps' contact records."""
+        jaw = token[0][2]  # the jaw's planned states (m, state size)
+        v = jaw[:, mk.M_POS + 1]
+        moving = (jaw[:, mk.M_HAS_TARGET] != 0) | (jaw[:, mk.M_STOPPING] != 0)
+        hit = np.flatnonzero(moving & (v < 0) & (recs[:, mk.S_FZ] >= self.force_limit_n))
+        return int(hit[0]) if len(hit) else None
+
+    def after_step(self, fz_n: float) -> bool:
+        """The Hand-E stops its jaws once the grip force reaches its force setting (returns
+        whether it did)."""
         if self.jaw.moving and self.jaw.velocity[0] < 0 and fz_n >= self.force_limit_n:
             self.jaw.halt()
             self.stalled = True
+            return True
+        return False
 
     def tcp_rotation(self) -> np.ndarray:
         """TCP rotation (3, 3) in base."""

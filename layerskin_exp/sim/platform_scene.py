@@ -38,10 +38,6 @@ class PlatformScene:
         self.stage.command(target.tolist(), float(speed_mm_s))
 
     # ---- world stepping (see World.advance for the protocol) -------------------------------
-    def feedback_free(self) -> bool:
-        """Nothing reacts to the load here: the stage is stiff and position controlled."""
-        return True
-
     def plan(self, m: int, dt_s: float):
         """The next m steps without changing the scene: indenter tip (m, 3) mm, yaw (m,) rad,
         snapshots (m, 3) and a token for commit()."""
@@ -52,8 +48,13 @@ class PlatformScene:
     def commit(self, token, k: int) -> None:
         self.stage.commit(token, k)
 
-    def after_step(self, fz_n: float) -> None:
-        """Nothing reacts to the load here."""
+    def first_reaction(self, token, recs: np.ndarray) -> int | None:
+        """Nothing reacts to the load here: the stage is stiff and position controlled."""
+        return None
+
+    def after_step(self, fz_n: float) -> bool:
+        """Nothing reacts to the load here (returns whether the scene changed)."""
+        return False
 
     def indenter_pose(self) -> tuple[list[float], float]:
         """Indenter tip (x, y, z) mm in the skin frame and its yaw (rad)."""

@@ -15,6 +15,9 @@ import numpy as np
 from layerskin_exp.sim.clocks import BlockDraws, DeviceClock
 
 
+_EMPTY = np.empty(0)
+
+
 class Stream:
     """Sample schedule and receive queue of one device stream.
 
@@ -44,19 +47,23 @@ class Stream:
 
     def due_times(self, t_end_s: float) -> np.ndarray:
         """(N,) true times of the samples up to and including t_end_s; advances the schedule."""
-        if self.next_t_s > t_end_s:
-            return np.empty(0)
-        n = int((t_end_s - self.next_t_s) / self.period_true_s) + 2
-        if self.period_jitter_s > 0:
-            # Interval jitter, clipped so the scan never runs backwards.
-            steps = np.full(n, self.period_true_s)
-            steps = np.maximum(steps + self._draws.normal(n) * self.period_jitter_s, 0.2 * self.period_true_s)
-            times = self.next_t_s + np.concatenate(([0.0], np.cumsum(steps[:-1])))
-        else:
-            times = self.next_t_s + np.arange(n) * self.period_true_s
+        t0, p = self.next_t_s, self.period_true_s
+        if t0 > t_end_s:
+            return _EMPTY
+        if self.period_jitter_s <= 0:
+            k = int((t_end_s - t0) / p) + 1  # samples t0 + i p <= t_end_s (settled exactly below)
+            while k > 0 and t0 + (k - 1) * p > t_end_s:
+                k -= 1
+            while t0 + k * p <= t_end_s:
+                k += 1
+            self.next_t_s = t0 + k * p
+            return t0 + np.arange(k) * p
+        n = int((t_end_s - t0) / p) + 2
+        # Interval jitter, clipped so the scan never runs backwards.
+        steps = np.maximum(p + self._draws.normal(n) * self.period_jitter_s, 0.2 * p)
+        times = t0 + np.concatenate(([0.0], np.cumsum(steps[:-1])))
         while times[-1] <= t_end_s:  # jitter made the intervals short: extend
-            more = times[-1] + np.cumsum(np.full(n, self.period_true_s))
-            times = np.concatenate((times, more))
+            times = np.concatenate((times, times[-1] + np.cumsum(np.full(n, p))))
         k = int(np.searchsorted(times, t_end_s, side="right"))
         self.next_t_s = float(times[k])
         return times[:k]

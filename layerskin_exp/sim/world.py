@@ -1,9 +1,9 @@
 """The simulated world: one true timeline that every simulated device observes.
 
 `advance(dt)` steps the scene's actuators and the skin mechanics at the mechanical rate, in
-stretches: the scene plans as many steps as it can without feedback from the contact (all of
-them for the platform; one at a time while the gripper's jaws close on the force limit), the
-skin mechanics run the stretch in one compiled call, and the samplers (the F/T sensor) take
+stretches: the scene plans the steps open loop, the skin mechanics run the stretch in one
+compiled call, and a stretch ends at the first step after which the scene reacts to the load
+(the gripper's jaws stop at their force setting). The samplers (the F/T sensor) take
 the samples that fall under it, each holding the last step before it. A sampler reports the
 first sample on which a safety guard would trip; the world then rewinds the stretch to that
 sample's step, lets the guard act on the scene there (so a trip stops motion from the next step
@@ -37,7 +37,7 @@ class World:
     """Scene + skin model + streams on one virtual timeline.
 
     scene: PlatformScene or GripScene (actuators and the indenter pose they give; plan/commit of
-    a stretch of steps, feedback_free, after_step, indenter_pose, snapshot).
+    a stretch of steps, first_reaction/after_step to the load, indenter_pose, snapshot).
     skin_model: SkinModel (step_many, state_of, mech_state/restore_mech_state, frames).
     """
 
@@ -146,14 +146,21 @@ class World:
         if n_steps == 0:
             self._sample(prev[:, mk.S_T], prev, t_end)
         while n_steps > 0:
-            m = n_steps if scene.feedback_free() else 1
+            m = n_steps
             t_k = (self._tick + 1 + np.arange(m)) * dt
             xyz, yaw, snap, token = scene.plan(m, dt)
-            saved = model.mech_state() if self._samplers else None
+            saved = model.mech_state()
             recs = model.step_many(t_k, xyz, yaw)
+            # the scene reacting to the load (the jaws' force stop) ends the stretch at that step
+            react = scene.first_reaction(token, recs)
+            if react is not None and react < m - 1:
+                m = react + 1
+                t_k, xyz, yaw, snap = t_k[:m], xyz[:m], yaw[:m], snap[:m]
+                model.restore_mech_state(saved)
+                recs = model.step_many(t_k, xyz, yaw)
             # the samplers see [previous step, this stretch]: a trip at index j keeps j steps
             trip = self._sample(np.concatenate((prev[:, mk.S_T], t_k)), np.concatenate((prev, recs)),
-                                min(t_k[-1] + dt, t_end), probe=True)
+                                min(t_k[-1] + dt, t_end), probe=True) if self._samplers else None
             if trip is not None and trip < m:
                 model.restore_mech_state(saved)
                 if trip == 0:  # under the previous step: the guard acts there, then plan again
@@ -163,9 +170,9 @@ class World:
                 t_k, xyz, yaw, snap = t_k[:m], xyz[:m], yaw[:m], snap[:m]
                 recs = model.step_many(t_k, xyz, yaw)
             scene.commit(token, m - 1)
-            scene.after_step(float(recs[-1, mk.S_FZ]))
-            if m == 1:  # the step's feedback may have changed the scene (a stalled jaw)
-                snap = np.asarray(scene.snapshot(), float).reshape(1, -1)
+            if scene.after_step(float(recs[-1, mk.S_FZ])):  # it reacted: the last snapshot shows it
+                snap = snap.copy()
+                snap[-1] = scene.snapshot()
             if trip is not None:  # the tripping sample and the rest under this stretch's last step
                 self._sample(t_k, recs, min(t_k[-1] + dt, t_end))
             self._recs.append(recs)
