@@ -14,7 +14,6 @@ import numpy as np
 
 from layerskin_exp.sim.clocks import BlockDraws, DeviceClock
 
-
 _EMPTY = np.empty(0)
 
 
