@@ -142,15 +142,13 @@ class GripScene:
     # ---- world stepping (see World.advance for the protocol) -------------------------------
     def plan(self, m: int, dt_s: float):
         """The next m steps without changing the scene: rod (x, y, z) mm in the skin frame
-        (m, 3), its yaw (m,) rad, snapshots (m, 14) and a token for commit()."""
-        plans = (self.pos.plan(m, dt_s), self.rot.plan(m, dt_s), self.jaw.plan(m, dt_s))
-        xyz, yaw, R = self._rod_in_skin(self.pos.positions(plans[0]), self.rot.positions(plans[1]),
-                                        self.jaw.positions(plans[2])[:, 0], commit=False)
+        (m, 3), its yaw (m,) rad, snapshots (m, 14) and a token for commit() (one compiled call,
+        mechanics.grip_plan)."""
+        plans = tuple(np.empty((m, len(mo.state))) for mo in (self.pos, self.rot, self.jaw))
+        xyz, yaw, R = np.empty((m, 3)), np.empty(m), np.empty((m, 3, 3))
         snap = np.empty((m, len(self.snapshot_names)))
-        snap[:, 0:3] = self.pos.positions(plans[0])
-        snap[:, 3:12] = R.reshape(m, 9)
-        snap[:, 12] = self.jaw.positions(plans[2])[:, 0]
-        snap[:, 13] = float(self.stalled)
+        mk.grip_plan(self.pos.state, self.rot.state, self.jaw.state, dt_s, m, self.R_ref, self.rod_c_m, self.rod_a,
+                     R_TCP_SKIN, self.radius_mm, self._last_yaw, float(self.stalled), *plans, xyz, yaw, R, snap)
         return xyz, yaw, snap, (plans, yaw, R)
 
     def commit(self, token, k: int) -> None:

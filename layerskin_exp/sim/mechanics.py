@@ -328,3 +328,25 @@ def rod_poses(R_ref, rotvec, p_m, opening_mm, rod_c_m, rod_a, R_tcp_skin, radius
         yaw[k] = w
         last_yaw = w
     return last_yaw
+
+
+@njit(cache=True, nogil=True)
+def grip_plan(pos_st, rot_st, jaw_st, dt, m, R_ref, rod_c_m, rod_a, R_tcp_skin, radius_mm, last_yaw, stalled,
+              pos_out, rot_out, jaw_out, xyz, yaw, R_tcp, snap):
+    """m steps of the grip rig's arm (TCP position, relative rotation vector) and jaw, and the rod
+    in the skin frame after each (see grip_scene.GripScene.plan); the states are left unchanged.
+    snap (m, 14): TCP position (3), TCP rotation row-major (9), opening, stalled."""
+    motion_steps(pos_st, 3, dt, m, pos_out)
+    motion_steps(rot_st, 3, dt, m, rot_out)
+    motion_steps(jaw_st, 1, dt, m, jaw_out)
+    p = pos_out[:, M_POS:M_POS + 3].copy()
+    rv = rot_out[:, M_POS:M_POS + 3].copy()
+    opening = jaw_out[:, M_POS].copy()
+    rod_poses(R_ref, rv, p, opening, rod_c_m, rod_a, R_tcp_skin, radius_mm, last_yaw, xyz, yaw, R_tcp)
+    for k in range(m):
+        for i in range(3):
+            snap[k, i] = p[k, i]
+            for j in range(3):
+                snap[k, 3 + 3 * i + j] = R_tcp[k, i, j]
+        snap[k, 12] = opening[k]
+        snap[k, 13] = stalled
