@@ -15,6 +15,7 @@ from layerskin_exp.sim.config import FSRConfig, ReadoutConfig, SimConfig
 from layerskin_exp.sim.fsr import FSRLayer
 from layerskin_exp.sim.readout import MatrixReadout
 from layerskin_exp.sim.skin import SkinModel, stack_states
+from tests.sim.test_skin_readout import _nodal_reference
 
 SKIN = SkinConfig()
 
@@ -71,22 +72,6 @@ def test_taxel_maps_are_the_gauss_means_of_the_fields():
             np.testing.assert_allclose(maps, means, rtol=1e-5, atol=1e-6 * scale)
 
 
-def _nodal_volts(g, ro):
-    """Full 32-node solve, one driven row at a time."""
-    n = g.shape[0]
-    out = np.zeros((n, n))
-    for i in range(n):
-        y = np.zeros((2 * n, 2 * n))
-        y[:n, :n] = np.diag(g.sum(axis=1) + ro.g_leak)
-        y[n:, n:] = np.diag(g.sum(axis=0) + ro.g_div)
-        y[:n, n:], y[n:, :n] = -g, -g.T
-        rhs = np.zeros(2 * n)
-        y[i, i] += 1 / ro.r_on
-        rhs[i] = ro.cfg.supply_v / ro.r_on
-        out[i] = np.linalg.solve(y, rhs)[n:]
-    return out
-
-
 def test_crosstalk_readout_matches_the_nodal_solve_on_a_loaded_sheet():
     """Random sheet: floor conductances with spread plus a pressed blob and scattered presses."""
     rng = np.random.default_rng(3)
@@ -97,7 +82,7 @@ def test_crosstalk_readout_matches_the_nodal_solve_on_a_loaded_sheet():
     g[1][rng.random((16, 16)) < 0.2] = 1 / 1.5e3
     got = ro.column_volts(g)
     for k in range(3):
-        np.testing.assert_allclose(got[k], _nodal_volts(g[k], ro), rtol=1e-9, atol=1e-13)
+        np.testing.assert_allclose(got[k], _nodal_reference(g[k], ro), rtol=1e-9, atol=1e-13)
 
 
 def test_fsr_memories_follow_the_recurrence():
