@@ -51,16 +51,3 @@ class StickSlip:
         """Unloaded, long-aged contact: no shear, no slip."""
         self.state[:] = 0.0
         self.state[mk.F_T_STICK] = self.state[mk.F_T_STICK_ROT] = 1e9
-
-    def update(self, dt_s: float, dx_mm: float, dy_mm: float, dtheta_rad: float, fz_n: float,
-               k_t_n_per_mm: float, k_r_nmm_per_rad: float, radius_mm: float) -> tuple[float, float, float]:
-        """Advance by one step of indenter motion (dx, dy, dtheta) in the deep frame.
-
-        Returns the tangential force (Fx, Fy) in N and torque in N mm the indenter applies.
-        """
-        return mk.friction_update(self.state, self.params, dt_s, dx_mm, dy_mm, dtheta_rad, fz_n,
-                                  k_t_n_per_mm, k_r_nmm_per_rad, radius_mm)
-
-    @property
-    def slipping(self) -> bool:
-        return bool(self.state[mk.F_SLIPPING])

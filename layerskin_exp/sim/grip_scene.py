@@ -188,25 +188,15 @@ class GripScene:
         origin = p_m + R_tcp @ np.array([0.0, -opening_mm / 2.0 * 1e-3, 0.0])
         return origin, R_tcp @ R_TCP_SKIN
 
-    def _rod_in_skin(self, p_m: np.ndarray, rotvec: np.ndarray, opening_mm: np.ndarray, commit: bool):
-        """Rod pose in the skin frame for m arm/jaw states (mechanics.rod_poses); commit: these are
-        the scene's current state (keeps its yaw branch and TCP rotation)."""
-        m = len(p_m)
-        xyz, yaw, R = np.empty((m, 3)), np.empty(m), np.empty((m, 3, 3))
-        last = mk.rod_poses(self.R_ref, np.ascontiguousarray(rotvec), np.ascontiguousarray(p_m),
-                            np.ascontiguousarray(opening_mm), self.rod_c_m, self.rod_a, R_TCP_SKIN,
-                            self.radius_mm, self._last_yaw, xyz, yaw, R)
-        if commit:
-            self._last_yaw = last
-            self._R_tcp = R[-1]
-        return xyz, yaw, R
-
     def indenter_pose(self) -> tuple[list[float], float]:
         """Rod in the skin frame: the axis point nearest the skin origin (x, y mm), the height of the
         rod's surface above the undeformed cover (z mm, negative = pressed), and its yaw (rad: the
         axis direction measured from skin x; +-pi/2 at the home pose, where it lies along skin y)."""
-        xyz, yaw, _ = self._rod_in_skin(np.array([self.pos.position]), np.array([self.rot.position]),
-                                        np.array([self.opening_mm]), commit=True)
+        xyz, yaw, R = np.empty((1, 3)), np.empty(1), np.empty((1, 3, 3))
+        self._last_yaw = mk.rod_poses(self.R_ref, np.array([self.rot.position]), np.array([self.pos.position]),
+                                      np.array([self.opening_mm]), self.rod_c_m, self.rod_a, R_TCP_SKIN,
+                                      self.radius_mm, self._last_yaw, xyz, yaw, R)
+        self._R_tcp = R[0]
         return xyz[0].tolist(), float(yaw[0])
 
     def snapshot(self) -> np.ndarray:

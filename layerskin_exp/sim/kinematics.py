@@ -13,8 +13,6 @@ stop a motion at the step where a safety guard trips.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from layerskin_exp.sim import mechanics as mk
@@ -47,15 +45,8 @@ class LimitedMotion:
         return self.state[self._v].tolist()
 
     @property
-    def target(self) -> list[float] | None:
-        return self.state[self._g].tolist() if self.state[mk.M_HAS_TARGET] else None
-
-    @property
     def moving(self) -> bool:
         return bool(self.state[mk.M_HAS_TARGET] or self.state[mk.M_STOPPING])
-
-    def speed_now(self) -> float:
-        return math.sqrt(sum(v * v for v in self.velocity))
 
     # ---- commands ------------------------------------------------------------------------------
     def command(self, target: list[float], speed: float, accel: float | None = None) -> None:

@@ -29,8 +29,9 @@ def motion_size(d: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _motion_step(st, d, dt):
-    """One step of a point under speed and acceleration limits (see kinematics.LimitedMotion)."""
+def _motion_step(st, d, dt, dv):
+    """One step of a point under speed and acceleration limits (see kinematics.LimitedMotion);
+    dv (d,) is scratch space."""
     has_target = st[M_HAS_TARGET] != 0.0
     if not has_target and st[M_STOPPING] == 0.0:
         return
@@ -72,7 +73,6 @@ def _motion_step(st, d, dt):
     v_brake = -0.5 * a_dt + math.sqrt(disc) if disc > 0 else 0.0
     v_want = min(st[M_SPEED], max(v_brake, 0.0))
     dv_norm = 0.0
-    dv = np.empty(d)
     for i in range(d):
         dv[i] = (st[g + i] - st[p + i]) / dist * v_want - st[v + i]
         dv_norm += dv[i] * dv[i]
@@ -89,8 +89,9 @@ def motion_steps(st0, d, dt, m, states_out):
     """Run m steps from state st0 (left unchanged); states_out (m, len(st0)) gets the state after
     each step."""
     st = st0.copy()
+    dv = np.empty(d)
     for k in range(m):
-        _motion_step(st, d, dt)
+        _motion_step(st, d, dt, dv)
         states_out[k, :] = st
 
 
