@@ -5,8 +5,10 @@ quadrature points of each layer (hemisphere: a window around the contact; rod: t
 Gauss-weighted taxel means, each row interpolated to its own sampling instant, FSR hysteresis
 and creep, conductance, passive-matrix readout with crosstalk, offsets, noise and rounding.
 The physics and its formulas are those documented in `skin.py`, `fsr.py` and `readout.py`;
-`SkinModel` only marshals arguments. Random draws (scan jitter, read noise) stay in numpy and
-come in as arrays, so a seed gives the same draws as the vectorised numpy pipeline did.
+`SkinModel` only marshals arguments. Random draws (scan jitter, read noise) come from the
+model's numpy Generator, drawn inside the kernel (numba runs the Generator's own bit generator
+and normal sampler) in the order the vectorised numpy pipeline took them, so a seed gives the
+same numbers.
 
 Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
 - `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
@@ -47,7 +49,10 @@ assert (S_T, S_ROT) == (0, N_STATE - 1)
 N_PARAM = 32
 
 _TINY = np.finfo(float).tiny
-WINDOW_EPS = 1e-8  # hemisphere windows: outside, the profile is below this fraction of its peak
+# Hemisphere windows: outside, the profile is below this fraction of its peak. At 1e-5 what is
+# left out moves a frame's counts by ~1e-4 count on average (one taxel in ~10^4 rounds to a
+# neighbouring count against the 1e-8 window; 1e-4 would shift some by several counts).
+WINDOW_EPS = 1e-5
 _jit = numba.njit(cache=True, error_model="numpy")
 _F0 = np.float32(0.0)
 _F1 = np.float32(1.0)
@@ -190,8 +195,9 @@ def frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_de
     origin32, scale32 = np.float32(prm[P_LK_ORIGIN]), np.float32(prm[P_LK_SCALE])
     lk_sup, lk_deep = lk[0, i], lk[1, i]
     if prm[P_ROD] != 0.0:
+        reach_deep = _deep_reach(deep_bound, dist, i, gamma, logz)
         _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice, f_sup, f_deep,
-                    origin32, scale32, colsum, tax)
+                    origin32, scale32, colsum, tax, deep_bound[i, dist.shape[0] + 1], reach_deep)
         return
     win = np.empty(4, np.int64)
     # superficial: radial profile around the contact, in the superficial frame
@@ -238,9 +244,25 @@ def frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_de
 
 
 @_jit
+def _band(a, b, reach, q, x0):
+    """Columns [c0, c1) of the quadrature coordinates q (ascending) where the signed distance
+    a (q[c] - x0) + b to a line lies within +-reach (mm); a margin of 1e-3 mm covers float32."""
+    reach = reach + 1e-3
+    if a == 0.0:
+        return (0, q.shape[0]) if abs(b) <= reach else (0, 0)
+    lo, hi = x0 + (-reach - b) / a, x0 + (reach - b) / a
+    if a < 0.0:
+        lo, hi = hi, lo
+    return np.searchsorted(q, lo, side="left"), np.searchsorted(q, hi, side="right")
+
+
+@_jit
 def _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice, f_sup, f_deep,
-                origin32, scale32, colsum, tax):
-    """Rod line load on the full quadrature grid, both layers [y, x] (float32), and taxel means."""
+                origin32, scale32, colsum, tax, reach_sup, reach_deep):
+    """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
+    quadrature row is evaluated on the band of columns within reach_sup / reach_deep (mm) of the
+    line (beyond, the profile is below WINDOW_EPS of its peak); f_sup, f_deep are left as they
+    were outside the bands."""
     n, nq = int(prm[P_N]), int(prm[P_NQ])
     m = n * nq
     q = quad[:m]
@@ -254,7 +276,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice
     for r in range(m):
         row = cy * (q[r] - ay32)
         wa = np.float64(quad[m + r % nq])
-        for c in range(m):
+        b0, b1 = _band(np.float64(sx), np.float64(row), reach_sup, q, np.float64(ax32))
+        for c in range(b0, b1):
             v = _lookup(lk_sup, t32, col[c] + row, origin32, scale32)
             f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
@@ -292,7 +315,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice
         ty = np.exp(g * py)
         ramp_y = beta * (ey * dy)
         wa = np.float64(quad[m + r % nq])
-        for c in range(m):
+        b0, b1 = _band(-np.float64(ey), np.float64(py), reach_deep, q, np.float64(cdx32))
+        for c in range(b0, b1):
             v = _lookup(lk_deep, t32, px[c] + py, origin32, scale32)
             v = v * (ty * tx[c])
             ramp = ramp_x[c] + ramp_y
@@ -493,15 +517,16 @@ def column_volts_batch(g, prm, out):
 
 # ---------------------------------------------------------------------------------- frames
 @_jit
-def frames_kernel(states, serial, t_s, draws, prm, lk, tilt, deep_bound, dist, quad, lattice,
+def frames_kernel(states, serial, t_s, rng, prm, lk, tilt, deep_bound, dist, quad, lattice,
                   row_offsets, gains, baseline, play, lag, last_maps, memory, cache_serial, cache_maps,
                   maps, counts):
     """N frame pairs: counts (2, N, n, n) uint16 for states (N, N_STATE) completed at t_s (N,).
 
     serial (N,) int64: configuration serials (-1: unknown) for the maps reuse during holds;
-    draws: standard normal draws, in this order: the scan jitter (N, 2, n) (times
-    prm[P_JITTER_S] seconds added to each row's sampling instant) if prm[P_JITTER_S] > 0,
-    then the read noise (2, N, n, n) (times prm[P_NOISE_COUNTS] counts) if that is > 0;
+    rng: the numpy Generator of the random draws, standard normals taken in this order: the
+    scan jitter (N, 2, n) (times prm[P_JITTER_S] seconds added to each row's sampling instant)
+    if prm[P_JITTER_S] > 0, then the read noise (2, N, n, n) (times prm[P_NOISE_COUNTS]
+    counts) if that is > 0 (`_read_noise`);
     row_offsets (2, n) seconds from each row's nominal instant to the frame end;
     gains, baseline (2, n, n); play, lag, last_maps (2, n, n) updated in place;
     memory (2,) float64 [time of the last frame, whether there was one] updated in place;
@@ -515,8 +540,7 @@ def frames_kernel(states, serial, t_s, draws, prm, lk, tilt, deep_bound, dist, q
     n = int(prm[P_N])
     computed = maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, cache_serial,
                            cache_maps, maps)
-    sj, sn = prm[P_JITTER_S], prm[P_NOISE_COUNTS]
-    at_noise = n_all * 2 * n if sj > 0.0 else 0  # where the noise draws start
+    sj = prm[P_JITTER_S]
     w_h, c_cr, creep_s = prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S]
     g = np.empty((n_all * 2, n, n))  # conductance [frame * 2 + layer]
     prev_t = memory[0] if memory[1] != 0.0 else t_s[0] - prm[P_PERIOD]
@@ -535,7 +559,7 @@ def frames_kernel(states, serial, t_s, draws, prm, lk, tilt, deep_bound, dist, q
             for r in range(n):
                 row_t = tk - row_offsets[layer, r]
                 if sj > 0.0:
-                    row_t = row_t + sj * draws[(k * 2 + layer) * n + r]
+                    row_t = row_t + sj * rng.standard_normal()
                 w = min(max((tk - row_t) / span, 0.0), 1.0)
                 for c in range(n):
                     # the row at its own sampling instant, between the previous frame and this one
@@ -547,14 +571,13 @@ def frames_kernel(states, serial, t_s, draws, prm, lk, tilt, deep_bound, dist, q
     volts = np.empty_like(g)
     column_volts_batch(g, prm, volts)
     fs, vs = prm[P_FULL_SCALE], prm[P_SUPPLY_V]
-    for k in range(n_all):
-        for layer in range(2):
+    values = g.reshape((2, n_all, n, n))  # the conductances are spent: their memory takes the counts
+    for layer in range(2):
+        for k in range(n_all):
             for r in range(n):
                 for c in range(n):
-                    v = volts[2 * k + layer, r, c] / vs * fs + baseline[layer, r, c]
-                    if sn > 0.0:
-                        v += sn * draws[at_noise + ((layer * n_all + k) * n + r) * n + c]
-                    counts[layer, k, r, c] = np.uint16(min(max(np.rint(v), 0.0), fs))
+                    values[layer, k, r, c] = volts[2 * k + layer, r, c] / vs * fs + baseline[layer, r, c]
+    _read_noise(values, rng, prm, counts)
     if n_all:
         last_maps[:] = maps[n_all - 1]
         memory[0], memory[1] = t_s[n_all - 1], 1.0
@@ -568,17 +591,30 @@ def frames_kernel(states, serial, t_s, draws, prm, lk, tilt, deep_bound, dist, q
 
 
 @_jit
-def idle_counts_kernel(idle_counts, draws, prm, counts):
-    """Counts (2, N, n, n) of an idle sheet: constant float counts (2, n, n) plus the read
-    noise (draws as in `frames_kernel`), rounded and clipped to [0, full scale]."""
-    n_all, n = counts.shape[1], counts.shape[2]
+def _read_noise(values, rng, prm, counts):
+    """counts (2, N, n, n) uint16: float counts values (2, N, n, n) plus the read noise
+    (prm[P_NOISE_COUNTS] rms; standard normals from rng in the arrays' order), rounded and
+    clipped to [0, full scale]."""
     sn, fs = prm[P_NOISE_COUNTS], prm[P_FULL_SCALE]
-    at_noise = n_all * 2 * n if prm[P_JITTER_S] > 0.0 else 0
+    src, dst = values.reshape(-1), counts.reshape(-1)
+    for i in range(src.shape[0]):
+        v = src[i]
+        if sn > 0.0:
+            v += sn * rng.standard_normal()
+        dst[i] = np.uint16(min(max(np.rint(v), 0.0), fs))
+
+
+@_jit
+def idle_counts_kernel(idle_counts, rng, prm, counts):
+    """Counts (2, N, n, n) of an idle sheet: constant float counts (2, n, n) plus the read
+    noise, rounded and clipped to [0, full scale]. Takes the draws `frames_kernel` would (the
+    scan jitter's too, unused at zero pressure, so a seed gives the same noise either way)."""
+    n_all, n = counts.shape[1], counts.shape[2]
+    if prm[P_JITTER_S] > 0.0:
+        for _ in range(n_all * 2 * n):
+            rng.standard_normal()
+    values = np.empty(counts.shape)
     for layer in range(2):
         for k in range(n_all):
-            for r in range(n):
-                for c in range(n):
-                    v = idle_counts[layer, r, c]
-                    if sn > 0.0:
-                        v += sn * draws[at_noise + ((layer * n_all + k) * n + r) * n + c]
-                    counts[layer, k, r, c] = np.uint16(min(max(np.rint(v), 0.0), fs))
+            values[layer, k] = idle_counts[layer]
+    _read_noise(values, rng, prm, counts)

@@ -21,8 +21,9 @@ Each taxel integrates its electrode footprint with Gauss points.
 Frames (`frames`, or `frames_batch` on arrays): row-sequential sampling instants, FSR
 hysteresis/creep and conductance, passive-matrix readout with crosstalk, offsets, noise and
 quantisation. The per-frame arithmetic (maps included) runs in one compiled call
-(`frame_kernels.frames_kernel`); this class holds the tables and memories as arrays and draws
-the random numbers (numpy, the same draws in the same order as ever).
+(`frame_kernels.frames_kernel`); this class holds the tables and memories as arrays and the
+numpy Generator the kernel draws from (the same standard normals in the same order as the
+vectorised numpy pipeline took them).
 """
 
 from __future__ import annotations
@@ -177,7 +178,6 @@ class SkinModel:
         self._params = self._kernel_params()
         self._tables = (self._params, self._lk, self._tilt_table, self._deep_bound, self._dist, self._quad32,
                         self._lattice32)
-        self._no_draws = np.zeros(0)
         self.maps_computed = 0  # states whose pressure maps were computed (not reused in a hold)
         # Idle sheet: no pressure at the last frame and both FSR memories exactly zero. Unloaded
         # frames then leave it so and read the floor conductance: constant counts plus noise.
@@ -401,15 +401,6 @@ class SkinModel:
         baselines stay."""
         self.rng = rng
 
-    def _draws(self, n_frames: int) -> np.ndarray:
-        """The frames' random draws as standard normals, in the order the pipeline has always
-        drawn them: scan jitter (N, 2, n), then read noise (2, N, n, n), each only when its rms
-        is > 0. (normal(0, s, shape) is s x standard_normal(shape), and consecutive draws are
-        one stream: one call gives the same numbers.) The kernels scale them."""
-        r, n = self.sim.readout, self.skin.n_taxels
-        size = (n_frames * 2 * n if r.scan_jitter_ms > 0 else 0) + (2 * n_frames * n * n if r.noise_counts > 0 else 0)
-        return self.rng.standard_normal(size) if size else self._no_draws
-
     def frames(self, states: list[MechState], t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(superficial, deep) uint16 counts (N, 16, 16) for frames completed at t_s (N,)."""
         if len(states) != np.size(t_s):
@@ -442,10 +433,9 @@ class SkinModel:
         if self._idle and not (st[:, fk.S_FZ] > 0.0).any():
             return self._idle_frames(t_s)
         serial = np.ascontiguousarray(config_serial, dtype=np.int64).reshape(-1)
-        draws = self._draws(n_all)
         maps = np.empty((n_all, 2, n, n))
         counts = np.empty((2, n_all, n, n), np.uint16)
-        idle, computed = fk.frames_kernel(st, serial, t_s, draws, *self._tables, self._row_offsets_s,
+        idle, computed = fk.frames_kernel(st, serial, t_s, self.rng, *self._tables, self._row_offsets_s,
                                           self._gains, self.baseline_counts, self._play, self._lag,
                                           self._last_maps, self._memory, self._cache_serial, self._cache_maps,
                                           maps, counts)
@@ -461,11 +451,11 @@ class SkinModel:
             return
         n = self.skin.n_taxels
         none = np.zeros((0, fk.N_STATE))
-        fk.frames_kernel(none, np.zeros(0, np.int64), np.zeros(0), self._no_draws, *self._tables,
+        fk.frames_kernel(none, np.zeros(0, np.int64), np.zeros(0), self.rng, *self._tables,
                          self._row_offsets_s, self._gains, self.baseline_counts, np.zeros((2, n, n)),
                          np.zeros((2, n, n)), np.zeros((2, n, n)), np.zeros(2), np.full(1, -1, np.int64),
                          np.zeros((2, n, n)), np.zeros((0, 2, n, n)), np.zeros((2, 0, n, n), np.uint16))
-        fk.idle_counts_kernel(np.zeros((2, n, n)), self._no_draws, self._params, np.zeros((2, 0, n, n), np.uint16))
+        fk.idle_counts_kernel(np.zeros((2, n, n)), self.rng, self._params, np.zeros((2, 0, n, n), np.uint16))
         _KERNELS_LOADED = True
 
     def _floor_counts(self) -> np.ndarray:
@@ -480,9 +470,8 @@ class SkinModel:
         """frames() for unloaded states on an idle sheet: the full pipeline's result (zero
         pressure, floor conductance, constant column voltages), with the same draws from rng."""
         n = self.skin.n_taxels
-        draws = self._draws(len(t_s))  # the scan jitter draws do not matter at zero pressure
         counts = np.empty((2, len(t_s), n, n), np.uint16)
-        fk.idle_counts_kernel(self._idle_counts, draws, self._params, counts)
+        fk.idle_counts_kernel(self._idle_counts, self.rng, self._params, counts)
         self._last_maps[:] = 0.0
         self._memory[0], self._memory[1] = t_s[-1], 1.0
         return counts[0], counts[1]

@@ -3,8 +3,9 @@
 `benchmarks.skin_naive.previous_model_class()` keeps the previous vectorised pipeline verbatim
 (every frame on the full quadrature grid, one layer and one crosstalk solve at a time). Both
 models share the seed, so their gains, offsets and scan jitter are the same draws; with the
-read noise off, the pressure maps must agree to float32 round-off and the counts to the
-rounding of the last count.
+read noise off, the pressure maps must agree to float32 round-off plus what the hemisphere
+windows leave out (below WINDOW_EPS of the profile's peak), and the counts to the rounding of
+the last count.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import pytest
 from benchmarks.skin_naive import previous_model_class
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.sim.config import ReadoutConfig, SimConfig
-from layerskin_exp.sim.skin import SkinModel
+from layerskin_exp.sim.skin import WINDOW_EPS, SkinModel
 
 SKIN = SkinConfig()
 PERIOD_S = SKIN.frame_period_ms * 1e-3
@@ -75,7 +76,7 @@ def test_pressure_maps_match_the_previous_pipeline(case):
         for g, w in zip(got, want, strict=True):
             assert g.shape == w.shape == (len(pick[lo:lo + 64]), 16, 16)
             scale = max(float(np.abs(w).max()), 1.0)
-            np.testing.assert_allclose(g, w, rtol=1e-4, atol=1e-6 * scale)
+            np.testing.assert_allclose(g, w, rtol=1e-4, atol=max(1e-6, 10 * WINDOW_EPS) * scale)
     # the comparison covers loaded frames, not just zeros
     assert max(float(ref.pressure_maps([s])[1].max()) for s in pick[::20]) > 50.0
 
