@@ -375,13 +375,19 @@ def fields_kernel(states, prm, lk, tilt, deep_bound, dist, quad, lattice, out_su
 
 # ---------------------------------------------------------------------------------- transduction
 @_jit
-def _fsr_step(p_kpa, play, lag, alpha, w, c):
-    """One sample of the play operator (hysteresis) and first-order creep lag; returns the
-    effective pressure and the new (play, lag)."""
-    p = max(p_kpa, 0.0)
-    play = min(max(play, p * (1.0 - w)), p * (1.0 + w))
-    lag = lag + alpha * (play - lag)
-    return (1.0 - c) * play + c * lag, play, lag
+def _fsr_row(now, before, w, play, lag, alpha, w_h, c_cr, eff):
+    """One sample of the FSR memories along a taxel row (n,): the play operator (hysteresis,
+    half-width w_h of the input) and a first-order creep lag (alpha = 1 - exp(-dt / tau)),
+    mixed as (1 - c_cr) play + c_cr lag into the effective pressure eff. The row is sampled at
+    its own instant: pressure interpolated between this frame's map (now) and the previous
+    frame's (before) with weight w on before. play, lag updated in place. (Branch-free, so
+    the loop vectorises.)"""
+    for c in range(now.shape[0]):
+        p = max(now[c] * (1 - w) + before[c] * w, 0.0)
+        pl = min(max(play[c], p * (1.0 - w_h)), p * (1.0 + w_h))
+        lg = lag[c] + alpha * (pl - lag[c])
+        play[c], lag[c] = pl, lg
+        eff[c] = (1.0 - c_cr) * pl + c_cr * lg
 
 
 @_jit
@@ -407,11 +413,8 @@ def fsr_advance_kernel(pressure, dt_s, play, lag, hysteresis, creep, creep_s, ef
         alpha = 1.0 - math.exp(-max(dt_s[k], 0.0) / creep_s)
         for li in range(pressure.shape[1]):
             for r in range(pressure.shape[2]):
-                for col in range(pressure.shape[3]):
-                    e, pl, lg = _fsr_step(pressure[k, li, r, col], play[li, r, col], lag[li, r, col],
-                                          alpha, hysteresis, creep)
-                    play[li, r, col], lag[li, r, col] = pl, lg
-                    eff[k, li, r, col] = e
+                row = pressure[k, li, r]
+                _fsr_row(row, row, 0.0, play[li, r], lag[li, r], alpha, hysteresis, creep, eff[k, li, r])
 
 
 @_jit
@@ -543,6 +546,7 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, tilt, deep_bound, dist, qua
     sj = prm[P_JITTER_S]
     w_h, c_cr, creep_s = prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S]
     g = np.empty((n_all * 2, n, n))  # conductance [frame * 2 + layer]
+    eff_row = np.empty(n)
     prev_t = memory[0] if memory[1] != 0.0 else t_s[0] - prm[P_PERIOD]
     for k in range(n_all):
         tk = t_s[k]
@@ -561,12 +565,10 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, tilt, deep_bound, dist, qua
                 if sj > 0.0:
                     row_t = row_t + sj * rng.standard_normal()
                 w = min(max((tk - row_t) / span, 0.0), 1.0)
+                _fsr_row(maps[k, layer, r], before[layer, r], w, play[layer, r], lag[layer, r], alpha, w_h, c_cr,
+                         eff_row)
                 for c in range(n):
-                    # the row at its own sampling instant, between the previous frame and this one
-                    sampled = maps[k, layer, r, c] * (1 - w) + before[layer, r, c] * w
-                    eff, pl, lg = _fsr_step(sampled, play[layer, r, c], lag[layer, r, c], alpha, w_h, c_cr)
-                    play[layer, r, c], lag[layer, r, c] = pl, lg
-                    g[2 * k + layer, r, c] = _conductance(eff, gains[layer, r, c], prm)
+                    g[2 * k + layer, r, c] = _conductance(eff_row[c], gains[layer, r, c], prm)
         prev_t = tk
     volts = np.empty_like(g)
     column_volts_batch(g, prm, volts)
