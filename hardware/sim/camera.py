@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from hardware.interfaces import MarkerCamera
 from hardware.sim.stream_device import SimStreamMixin
+from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.camera import MarkerImager, SensorFrame
 from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.rig_config import CameraConfig
@@ -16,6 +18,15 @@ from layerskin_exp.types import MarkerDetection, Pose
 # Camera axes in the skin frame at the home pose: looking down the skin normal onto the cover,
 # image x along skin x, image y along -skin y.
 R_SKIN_CAMERA = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def quat_xyzw(rvec: np.ndarray) -> np.ndarray:
+    """Unit quaternion (4,) x, y, z, w (w >= 0) of a rotation vector (3,) (angle up to pi)."""
+    x, y, z = float(rvec[0]), float(rvec[1]), float(rvec[2])
+    angle = math.sqrt(x * x + y * y + z * z)
+    # sin(angle / 2) / angle, by its series where the angle is tiny.
+    k = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(0.5 * angle) / angle
+    return np.array([x * k, y * k, z * k, math.cos(0.5 * angle)])
 
 
 class SimMarkerCamera(SimStreamMixin, MarkerCamera):
@@ -36,6 +47,8 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         self.R_base_cam = R_s @ R_SKIN_CAMERA
         self.t_base_cam_m = o + R_s @ centre_mm * 1e-3
         self.marker_xy_mm = np.stack([cfg.marker_x_mm, cfg.marker_y_mm], axis=1)  # (M, 2)
+        self._marker_xyz_mm = np.concatenate([self.marker_xy_mm, np.zeros((len(cfg.marker_ids), 1))], axis=1)
+        self._marker_ids = [int(m) for m in cfg.marker_ids]
         self._latest: tuple[SensorFrame | np.ndarray, int, int] | None = None
         self._last_host_ns = -1
         world.add_producer(self.stream, self._produce)
@@ -45,46 +58,44 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         self._img_rng = world.rng("camera.image")
         self.imager.reset_tracking()  # each trial's detections depend on its own frames only
 
-    def marker_poses(self, snap: np.ndarray, state) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    def marker_poses(self, snap: np.ndarray, rec: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Marker id -> (R (3, 3), t (3,) mm): marker frames in the camera frame for one scene snapshot
-        (13+ values, see GripScene.snapshot_names) and the skin's mechanical state."""
-        p, R_tcp, opening = snap[:3], snap[3:12].reshape(3, 3), snap[12]
-        o, R_s = self.scene.skin_pose(p, R_tcp, opening)
+        (13+ values, see GripScene.snapshot_names) and the skin's step record of the same step
+        (mechanics.S_* columns: contact point, surface shift and turn)."""
+        o, R_s = self.scene.skin_pose(snap[:3], snap[3:12].reshape(3, 3), snap[12])
         # The superficial layer is shifted by u and turned by phi about the contact point a
-        # (skin model's convention): x_deep = a + u + R(phi) (x_s - a).
-        phi = float(state.surface_rotation_rad)
-        c, s = np.cos(phi), np.sin(phi)
+        # (skin model's convention): x_deep = a + u + R(phi) (x_s - a), written as
+        # x_s + u + (R(phi) - I) (x_s - a) so that an unturned layer's markers do not take on
+        # rounding from a moving contact point (a still layer keeps bit-identical poses: its
+        # render is reused).
+        phi = float(rec[mk.S_THETA])
+        c, s = math.cos(phi), math.sin(phi)
         Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        a = np.asarray(state.contact_xy_mm, float)
-        xy = a + np.asarray(state.surface_shift_mm, float) + (self.marker_xy_mm - a) @ Rz[:2, :2].T
-        R_cb = self.R_base_cam.T
-        R_cm = R_cb @ R_s @ Rz
-        out = {}
-        for k, mid in enumerate(self.cfg.marker_ids):
-            t_b = o + R_s @ np.array([xy[k, 0], xy[k, 1], 0.0]) * 1e-3
-            out[int(mid)] = (R_cm, R_cb @ (t_b - self.t_base_cam_m) * 1e3)
-        return out
+        xy = self._marker_xyz_mm.copy()  # (M, 3), z = 0 on the layer
+        xy[:, :2] += rec[mk.S_UX:mk.S_UY + 1] + (self.marker_xy_mm - rec[mk.S_CX:mk.S_CY + 1]) @ (Rz[:2, :2] - np.eye(2)).T
+        R_cs = self.R_base_cam.T @ R_s
+        R_cm = R_cs @ Rz
+        # t_cam = R_cb (o + R_s xy 1e-3 - t_base_cam) 1e3, all markers at once.
+        t_mm = xy @ R_cs.T + self.R_base_cam.T @ (o - self.t_base_cam_m) * 1e3
+        return {mid: (R_cm, t_mm[k]) for k, mid in enumerate(self._marker_ids)}
 
     def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
         snaps = world.snapshots(idx)
-        states = world.states(idx)
+        recs = world.records(idx)
         seq, dev_ns, _ = self.stream.stamp(t_s)
         cfg = self.cfg
         lat = cfg.latency_ms * 1e6 + self._img_rng.normal(0.0, cfg.latency_jitter_ms * 1e6, len(t_s))
-        host = (world.host_start_ns + t_s * 1e9 + np.maximum(lat, 0.0)).astype(np.int64)
+        host = (world.host_start_ns + t_s * 1e9 + np.maximum(lat, 0.0)).astype(np.int64).tolist()
+        seq, dev_ns = seq.tolist(), dev_ns.tolist()
         for i in range(len(t_s)):
-            h = max(int(host[i]), self._last_host_ns)  # the pipeline delivers in order
+            h = max(host[i], self._last_host_ns)  # the pipeline delivers in order
             self._last_host_ns = h
-            frame = self.imager.render(self.marker_poses(snaps[i], states[i]), self._img_rng)
+            frame = self.imager.render(self.marker_poses(snaps[i], recs[i]), self._img_rng)
             if cfg.keep_images:
-                self._latest = (frame, int(dev_ns[i]), h)  # composed into a full image when asked for
-            dets = self.imager.detect(frame)
-            if not dets:
-                continue
-            quats = Rotation.from_rotvec(np.stack([d.rvec for d in dets])).as_quat()
-            for d, q in zip(dets, quats, strict=True):
-                pose = Pose(d.tvec_mm * 1e-3, q, "camera", int(dev_ns[i]), h, int(seq[i]))
-                self.stream.push(h, MarkerDetection(d.marker_id, pose, d.corners_px, int(seq[i]), int(dev_ns[i]), h))
+                self._latest = (frame, dev_ns[i], h)  # composed into a full image when asked for
+            for d in self.imager.detect(frame):
+                pose = Pose(d.tvec_mm * 1e-3, quat_xyzw(d.rvec), "camera", dev_ns[i], h, seq[i])
+                self.stream.push(h, MarkerDetection(d.marker_id, pose, d.corners_px, seq[i], dev_ns[i], h))
 
     def read_available(self) -> list[MarkerDetection]:
         self._require_connected()

@@ -220,6 +220,41 @@ def test_still_poses_reuse_the_render_but_draw_fresh_noise():
         assert fa.origin_px == fb.origin_px and np.array_equal(fa.patch, fb.patch)
     assert not np.array_equal(a[0].patch, a[1].patch)  # same pose, new sensor noise
     assert np.abs(a[0].patch.astype(int) - a[1].patch).mean() > 0.5
+    # Poses equal but for rounding (a layer held by the contact while the arm moves) reuse the
+    # render; a 1 um move (~0.008 px) renders afresh.
+    R, t = poses[0][0]
+    calls = []
+    inner = reuse._render_clean
+    reuse._render_clean = lambda p: calls.append(1) or inner(p)
+    reuse.render({0: (R, t + 1e-12)}, ra)
+    reuse.render({0: (R, t)}, ra)
+    assert len(calls) == 1  # a new marker set: rendered once, then the rounding-level move reuses it
+    reuse.render({0: (R, t + [1e-3, 0.0, 0.0])}, ra)
+    assert len(calls) == 2
+
+
+def test_sensor_noise_is_gaussian_read_noise_floored_to_grey_levels():
+    """Noisy frame minus the noise-free render of the same pose: floor(N(0, sigma)) away from
+    saturation, mean -1/2 and variance sigma^2 + 1/12 (uniform fractional part dropped); clipped at 0 and 255."""
+    cfg = CameraConfig(noise_std_gray=3.0)
+    poses = next(_moving_layer(cfg, 1, 10))
+    imager = MarkerImager(cfg)
+    clean = imager.render(poses, None).patch.astype(int)
+    rng = np.random.default_rng(11)
+    diffs, white = [], []
+    mid = (clean > 30) & (clean < 225)
+    for _ in range(5):
+        noisy = imager.render(poses, rng).patch.astype(int)
+        diffs.append((noisy - clean)[mid])
+        white.append(noisy[clean == 255])
+    d, white = np.concatenate(diffs), np.concatenate(white)
+    assert abs(np.mean(white == 255) - 0.5) < 0.03  # floor(noise) >= 0 half the time: held at 255
+    assert white.min() < 250
+    assert np.all(d == np.round(d))
+    assert abs(d.mean() + 0.5) < 0.03
+    assert abs(d.std() - np.sqrt(3.0**2 + 1 / 12)) < 0.03
+    # Independent windows: successive frames' noise is uncorrelated.
+    assert abs(np.corrcoef(diffs[0], diffs[1])[0, 1]) < 0.02
 
 
 def test_sensor_frame_crops_match_the_composed_frame():

@@ -45,3 +45,19 @@ def test_each_trial_starts_with_a_full_frame_search():
     rig.clock.sleep(0.2)
     assert rig.camera.read_available()
     assert tracker.full_searches == 2  # the new trial acquired the markers afresh, then tracked them
+
+
+def test_detection_quaternions_are_the_rotation_vectors():
+    """quat_xyzw against scipy's conversion: random rotations, tiny angles (series branch) and
+    the half turn a marker facing the camera sits near."""
+    from scipy.spatial.transform import Rotation
+
+    from hardware.sim.camera import quat_xyzw
+
+    rng = np.random.default_rng(0)
+    rvecs = np.concatenate([Rotation.random(50, rng=rng).as_rotvec(), rng.normal(0.0, 1e-6, (10, 3)),
+                            [[np.pi, 0.0, 0.0], [0.0, 0.0, 0.0], [3.1, 0.05, -0.02]]])
+    for rv in rvecs:
+        q = quat_xyzw(rv)
+        assert np.allclose(q, Rotation.from_rotvec(rv).as_quat(), atol=1e-15, rtol=0.0)
+        assert q[3] >= 0 and abs(np.linalg.norm(q) - 1.0) < 1e-15
