@@ -57,6 +57,10 @@ MAX_REFINE_SHIFT_PX = 1.5  # a refined corner further than this from the detecto
 # markers is re-searched over the full frame every REACQUIRE_FRAMES frames.
 TRACK_MARGIN_SIDES = 0.5
 REACQUIRE_FRAMES = 30
+# Inside the window only outlines within this fraction of the tracked markers' perimeter are
+# candidates (a frame changes it by far less): the sticker's own outline (1.5x) and the bit
+# pattern's blobs are dropped before they are decoded.
+TRACK_PERIMETER_TOL = 0.25
 # Candidates closer than this (mean corner distance / perimeter) are one marker. OpenCV's 0.125
 # groups a marker with the inner outline of the grey ring a cut-off window leaves around its
 # white sticker (corners a quiet zone apart diagonally, ~0.09 perimeter) and may keep the ring,
@@ -162,15 +166,18 @@ class MarkerTracker:
         self.dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, cfg.dictionary))
         self.marker_ids = tuple(int(m) for m in cfg.marker_ids)
         self.acquirer = cv2.aruco.ArucoDetector(self.dictionary, self._params())
-        # Inside the window the marker's scale is known: one threshold window of ~2 modules.
+        # Inside the window the marker's scale is known: one threshold window of ~2 modules, and
+        # outlines only of about the tracked markers' perimeter (set per frame, see _follow).
         module_px = cfg.fx_px * cfg.marker_size_mm / cfg.distance_mm / (self.dictionary.markerSize + 2)
         win = max(3, 2 * int(round(module_px)) + 1)
-        self.follower = cv2.aruco.ArucoDetector(self.dictionary, self._params(win))
+        self._follow_params = self._params(win)
+        self.follower = cv2.aruco.ArucoDetector(self.dictionary, self._follow_params)
         self.obj_pts = marker_object_points(cfg.marker_size_mm)
         # The printed layout: every marker on one plane, at its (x, y) on the layer (mm).
         centre_mm = np.array([np.mean(cfg.marker_x_mm), np.mean(cfg.marker_y_mm), 0.0])
         self.layer_offsets_mm = {int(mid): np.array([x, y, 0.0]) - centre_mm
                                  for mid, x, y in zip(cfg.marker_ids, cfg.marker_x_mm, cfg.marker_y_mm, strict=True)}
+        self._layer_obj: dict[tuple[int, ...], np.ndarray] = {}  # marker ids -> their (4 M, 3) corners on the layer
         self.full_searches = 0  # frames that needed the full-frame search, since construction (diagnostics)
         self.reset()
         # Load the compiled refinement kernels now rather than on the first frame (no latency spike there).
@@ -192,15 +199,49 @@ class MarkerTracker:
     def reset(self) -> None:
         """Forget the track: the next frame is searched in full."""
         self._track: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # id -> (corners (4, 2), last motion (4, 2)) px
+        self._box: tuple[int, int, int, int] | None = None  # the next search window, unclipped (x0, y0, x1, y1)
+        self._perimeter_px = 0.0  # largest tracked marker outline
+        self._layer: tuple[tuple[int, ...], np.ndarray, np.ndarray] | None = None  # last layer pose (ids, rvec, tvec)
         self._since_full = 0
+
+    def _update_track(self, found: dict[int, np.ndarray]) -> None:
+        """Track the markers just found; the next window spans their corners and those moved on by their
+        last motion, grown by TRACK_MARGIN_SIDES marker sides (plus the refinement's reach)."""
+        track, xs, ys, side, perimeter = {}, [], [], 0.0, 0.0
+        for mid, pts in found.items():
+            last = self._track.get(mid)
+            motion = pts - last[0] if last is not None else np.zeros((4, 2))
+            track[mid] = (pts, motion)
+            p = pts.tolist()
+            for (x, y), (dx, dy) in zip(p, motion.tolist(), strict=True):
+                xs += (x, x + dx)
+                ys += (y, y + dy)
+            sides = [math.hypot(p[k][0] - p[k - 1][0], p[k][1] - p[k - 1][1]) for k in range(4)]
+            side, perimeter = max(side, sides[1]), max(perimeter, sum(sides))  # sides[1]: corner 0 to 1
+        self._track, self._perimeter_px = track, perimeter
+        m = TRACK_MARGIN_SIDES * side + PROFILE_HALF_PX
+        self._box = (math.floor(min(xs) - m), math.floor(min(ys) - m), math.ceil(max(xs) + m) + 1,
+                     math.ceil(max(ys) + m) + 1) if found else None
 
     def _window(self, shape: tuple[int, int]) -> tuple[int, int, int, int]:
         """(x0, y0, x1, y1) search window from the track, inside the frame of shape (H, W)."""
-        pts = np.concatenate([np.concatenate([c, c + v]) for c, v in self._track.values()])
-        side_px = max(float(np.linalg.norm(c[1] - c[0])) for c, _ in self._track.values())
-        m = TRACK_MARGIN_SIDES * side_px + PROFILE_HALF_PX
-        lo, hi = np.floor(pts.min(axis=0) - m), np.ceil(pts.max(axis=0) + m) + 1
-        return (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), shape[1]), min(int(hi[1]), shape[0]))
+        x0, y0, x1, y1 = self._box
+        return max(x0, 0), max(y0, 0), min(x1, shape[1]), min(y1, shape[0])
+
+    def _follow(self, frame: np.ndarray | SensorFrame) -> dict[int, np.ndarray]:
+        """Board markers found in the tracked window."""
+        return self.find_in_window(frame, self._window(frame.shape), self._perimeter_px)
+
+    def find_in_window(self, frame: np.ndarray | SensorFrame, box: tuple[int, int, int, int],
+                       perimeter_px: float) -> dict[int, np.ndarray]:
+        """Board markers in frame[box] (x0, y0, x1, y1) whose outlines are within TRACK_PERIMETER_TOL of
+        perimeter_px, by the single-scale follower: id -> refined (4, 2) full-frame corners."""
+        span = max(box[2] - box[0], box[3] - box[1], 1)  # ArUco's perimeter bounds are relative to this
+        p = self._follow_params
+        p.minMarkerPerimeterRate = perimeter_px * (1.0 - TRACK_PERIMETER_TOL) / span
+        p.maxMarkerPerimeterRate = perimeter_px * (1.0 + TRACK_PERIMETER_TOL) / span
+        self.follower.setDetectorParameters(p)
+        return self._find(frame, box, self.follower)
 
     def _find(self, frame: np.ndarray | SensorFrame, box: tuple[int, int, int, int],
               detector: cv2.aruco.ArucoDetector) -> dict[int, np.ndarray]:
@@ -209,18 +250,17 @@ class MarkerTracker:
         corners, ids, _ = detector.detectMarkers(frame_region(frame, x0, y0, x1, y1))
         if ids is None:
             return {}
-        keep = [k for k, mid in enumerate(ids.ravel().tolist()) if mid in self.layer_offsets_mm]
+        mids = ids.ravel().tolist()
+        keep = [k for k, mid in enumerate(mids) if mid in self.layer_offsets_mm]
         if not keep:
             return {}
-        c = np.stack([corners[k].reshape(4, 2) for k in keep]).astype(np.float64) + [x0, y0]
+        c = np.concatenate([corners[k] for k in keep]).astype(np.float64).reshape(-1, 4, 2) + [x0, y0]
         # Refine on the frame's own pixels around the markers (the profiles reach past the window's edge).
         r = PROFILE_HALF_PX + 3.0
-        rx0, ry0 = int(np.floor(c[..., 0].min() - r)), int(np.floor(c[..., 1].min() - r))
-        rx1, ry1 = int(np.ceil(c[..., 0].max() + r)) + 1, int(np.ceil(c[..., 1].max() + r)) + 1
-        rx0, ry0 = max(rx0, 0), max(ry0, 0)
-        refined = refine_marker_corners(frame_region(frame, rx0, ry0, rx1, ry1), c - [rx0, ry0]) + [rx0, ry0]
-        mids = ids.ravel()
-        return {int(mids[k]): refined[j] for j, k in enumerate(keep)}
+        lo, hi = np.floor(c.min(axis=(0, 1)) - r), np.ceil(c.max(axis=(0, 1)) + r) + 1
+        rx0, ry0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
+        refined = refine_marker_corners(frame_region(frame, rx0, ry0, int(hi[0]), int(hi[1])), c - [rx0, ry0]) + [rx0, ry0]
+        return {mids[k]: refined[j] for j, k in enumerate(keep)}
 
     def detect(self, frame: np.ndarray | SensorFrame) -> list[Detection]:
         """Markers in one full frame (H, W): tracked-window search, full-frame search when it loses a
@@ -229,51 +269,68 @@ class MarkerTracker:
         tracking = self.track and bool(self._track) and (len(self._track) == len(self.marker_ids)
                                                          or self._since_full < REACQUIRE_FRAMES)
         if tracking:
-            found = self._find(frame, self._window(frame.shape), self.follower)
+            found = self._follow(frame)
             if not set(self._track) <= set(found):
                 found = None
         if found is None:
             found = self._find(frame, (0, 0, frame.shape[1], frame.shape[0]), self.acquirer)
             self._since_full = 0
             self.full_searches += 1
+            self._layer = None
         else:
             self._since_full += 1
-        self._track = {mid: (pts, pts - self._track[mid][0] if mid in self._track else np.zeros((4, 2)))
-                       for mid, pts in found.items()}
-        layer = self.layer_pose(found) if len(found) >= 2 else None
+        self._update_track(found)
+        ids = tuple(found)
+        layer = None
+        if len(found) >= 2:
+            # While tracked, the last layer pose of the same markers starts the refinement.
+            guess = self._layer[1:] if self._layer is not None and self._layer[0] == ids else None
+            layer = self.layer_pose(found, guess)
+        self._layer = None if layer is None else (ids, *layer)
         out = []
         if layer is not None:
-            R = cv2.Rodrigues(layer[0])[0]
+            rvec, tvec = layer
+            R = cv2.Rodrigues(rvec)[0]
+            for mid, pts in found.items():
+                out.append(Detection(mid, rvec.copy(), tvec + R @ self.layer_offsets_mm[mid], pts))
+            return out
         for mid, pts in found.items():
-            if layer is not None:
-                rvec, tvec = layer[0], layer[1] + R @ self.layer_offsets_mm[mid]
-            else:
-                ok, rvec, tvec = cv2.solvePnP(self.obj_pts, pts, self.K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
-                if not ok:
-                    continue
-            out.append(Detection(mid, np.ravel(rvec).copy(), np.ravel(tvec).copy(), pts))
+            ok, rvec, tvec = cv2.solvePnP(self.obj_pts, pts, self.K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+            if ok:
+                out.append(Detection(mid, rvec.ravel(), tvec.ravel(), pts))
         return out
 
-    def layer_pose(self, corners_px: dict[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    def layer_pose(self, corners_px: dict[int, np.ndarray], guess: tuple[np.ndarray, np.ndarray] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
         """Joint pose of the marker layer from all found corners: (rvec (3,), tvec (3,) mm) of the
         layer frame in the camera frame, or None if PnP fails.
 
-        corners_px: marker id -> (4, 2) full-frame pixel corners in ArUco order.
+        corners_px: marker id -> (4, 2) full-frame pixel corners in ArUco order. guess: a pose near
+        the answer (the last frame's) to refine from; without one, or when refining it leaves more
+        than MAX_REPROJECTION_PX rms, the pose starts from IPPE (SQPnP where IPPE degenerates).
         """
-        mids = list(corners_px)
-        obj = np.concatenate([self.obj_pts + self.layer_offsets_mm[m] for m in mids])
-        img = np.concatenate([corners_px[m] for m in mids])
+        ids = tuple(corners_px)
+        obj = self._layer_obj.get(ids)
+        if obj is None:
+            obj = self._layer_obj[ids] = np.concatenate([self.obj_pts + self.layer_offsets_mm[m] for m in ids])
+        img = np.concatenate(list(corners_px.values()))
+        if guess is not None:
+            # (3, 1) vectors: solvePnPRefineLM returns (3,) ones unrefined.
+            rvec, tvec = cv2.solvePnPRefineLM(obj, img, self.K, None, guess[0].reshape(3, 1), guess[1].reshape(3, 1))
+            proj = cv2.projectPoints(obj, rvec, tvec, self.K, None)[0].reshape(-1, 2)
+            if math.sqrt(((proj - img) ** 2).sum() / len(img)) <= MAX_REPROJECTION_PX:
+                return rvec.ravel(), tvec.ravel()
         ok, rvecs, tvecs, reproj = cv2.solvePnPGeneric(obj, img, self.K, None, flags=cv2.SOLVEPNP_IPPE)
         if ok and float(reproj[0, 0]) <= MAX_REPROJECTION_PX:
-            guess = (rvecs[0], tvecs[0])
+            start = (rvecs[0], tvecs[0])
         else:
             # IPPE's rotation vector degenerates for an exactly fronto-parallel layer (a rotation
             # of pi): take the globally optimal SQPnP solution instead.
             ok, rvec, tvec = cv2.solvePnP(obj, img, self.K, None, flags=cv2.SOLVEPNP_SQPNP)
             if not ok:
                 return None
-            guess = (rvec, tvec)
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, self.K, None, guess[0].copy(), guess[1].copy())
+            start = (rvec, tvec)
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, self.K, None, start[0].copy(), start[1].copy())
         return rvec.ravel(), tvec.ravel()
 
 

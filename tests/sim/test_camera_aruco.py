@@ -201,11 +201,16 @@ def test_a_window_cut_anywhere_around_a_sticker_still_finds_the_marker():
     t = np.array([0.5, -0.3, cfg.distance_mm])
     frame = imager.render({0: (R, t)}, None)
     q = imager.project(imager.obj_pts @ R.T + t)
+    perimeter_px = np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1).sum()
     for margin_px in range(4, 41, 2):
         x0, y0 = np.floor(q.min(axis=0)).astype(int) - margin_px
         x1, y1 = np.ceil(q.max(axis=0)).astype(int) + margin_px + 1
-        _, ids, _ = imager.tracker.follower.detectMarkers(frame.crop(x0, y0, x1, y1))
-        assert ids is not None and ids.ravel().tolist() == [0], margin_px
+        found = imager.tracker.find_in_window(frame, (x0, y0, x1, y1), perimeter_px)
+        assert list(found) == [0], margin_px
+        assert np.abs(found[0] - q).max() < 0.05  # px
+    # A marker much larger or smaller than the tracked one is not taken for it.
+    for scale in (0.6, 1.4):
+        assert imager.tracker.find_in_window(frame, (x0, y0, x1, y1), scale * perimeter_px) == {}
 
 
 def test_still_poses_reuse_the_render_but_draw_fresh_noise():
