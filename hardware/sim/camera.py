@@ -47,7 +47,8 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         self.R_base_cam = R_s @ R_SKIN_CAMERA
         self.t_base_cam_m = o + R_s @ centre_mm * 1e-3
         self.marker_xy_mm = np.stack([cfg.marker_x_mm, cfg.marker_y_mm], axis=1)  # (M, 2)
-        self._marker_xyz_mm = np.concatenate([self.marker_xy_mm, np.zeros((len(cfg.marker_ids), 1))], axis=1)
+        self._marker_xy = self.marker_xy_mm.tolist()
+        self._R_cam_base = np.ascontiguousarray(self.R_base_cam.T)
         self._marker_ids = [int(m) for m in cfg.marker_ids]
         self._latest: tuple[SensorFrame | np.ndarray, int, int] | None = None
         self._last_host_ns = -1
@@ -66,17 +67,16 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         # The superficial layer is shifted by u and turned by phi about the contact point a
         # (skin model's convention): x_deep = a + u + R(phi) (x_s - a), written as
         # x_s + u + (R(phi) - I) (x_s - a) so that an unturned layer's markers do not take on
-        # rounding from a moving contact point (a still layer keeps bit-identical poses: its
-        # render is reused).
+        # rounding from a moving contact point (a still layer keeps its poses: its render is reused).
         phi = float(rec[mk.S_THETA])
         c, s = math.cos(phi), math.sin(phi)
-        Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        xy = self._marker_xyz_mm.copy()  # (M, 3), z = 0 on the layer
-        xy[:, :2] += rec[mk.S_UX:mk.S_UY + 1] + (self.marker_xy_mm - rec[mk.S_CX:mk.S_CY + 1]) @ (Rz[:2, :2] - np.eye(2)).T
-        R_cs = self.R_base_cam.T @ R_s
-        R_cm = R_cs @ Rz
-        # t_cam = R_cb (o + R_s xy 1e-3 - t_base_cam) 1e3, all markers at once.
-        t_mm = xy @ R_cs.T + self.R_base_cam.T @ (o - self.t_base_cam_m) * 1e3
+        ax, ay, ux, uy = float(rec[mk.S_CX]), float(rec[mk.S_CY]), float(rec[mk.S_UX]), float(rec[mk.S_UY])
+        xyz = np.array([[x + ux + (c - 1.0) * (x - ax) - s * (y - ay), y + uy + s * (x - ax) + (c - 1.0) * (y - ay), 0.0]
+                        for x, y in self._marker_xy])  # (M, 3) mm on the layer
+        R_cs = self._R_cam_base @ R_s
+        R_cm = R_cs @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        # t_cam = R_cb (o + R_s xyz 1e-3 - t_base_cam) 1e3, all markers at once.
+        t_mm = xyz @ R_cs.T + self._R_cam_base @ (o - self.t_base_cam_m) * 1e3
         return {mid: (R_cm, t_mm[k]) for k, mid in enumerate(self._marker_ids)}
 
     def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:

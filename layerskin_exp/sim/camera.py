@@ -254,12 +254,15 @@ class MarkerTracker:
         keep = [k for k, mid in enumerate(mids) if mid in self.layer_offsets_mm]
         if not keep:
             return {}
-        c = np.concatenate([corners[k] for k in keep]).astype(np.float64).reshape(-1, 4, 2) + [x0, y0]
+        c = np.array([corners[k] for k in keep], np.float64).reshape(-1, 4, 2)  # window pixels
         # Refine on the frame's own pixels around the markers (the profiles reach past the window's edge).
         r = PROFILE_HALF_PX + 3.0
-        lo, hi = np.floor(c.min(axis=(0, 1)) - r), np.ceil(c.max(axis=(0, 1)) + r) + 1
-        rx0, ry0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
-        refined = refine_marker_corners(frame_region(frame, rx0, ry0, int(hi[0]), int(hi[1])), c - [rx0, ry0]) + [rx0, ry0]
+        (lx, ly), (hx, hy) = c.min(axis=(0, 1)).tolist(), c.max(axis=(0, 1)).tolist()
+        rx0, ry0 = max(math.floor(lx + x0 - r), 0), max(math.floor(ly + y0 - r), 0)
+        rx1, ry1 = math.ceil(hx + x0 + r) + 1, math.ceil(hy + y0 + r) + 1
+        c += (x0 - rx0, y0 - ry0)  # exact: whole pixels added to float32 corners
+        refined = refine_marker_corners(frame_region(frame, rx0, ry0, rx1, ry1), c)
+        refined += (rx0, ry0)
         return {mids[k]: refined[j] for j, k in enumerate(keep)}
 
     def detect(self, frame: np.ndarray | SensorFrame) -> list[Detection]:
@@ -315,8 +318,9 @@ class MarkerTracker:
             obj = self._layer_obj[ids] = np.concatenate([self.obj_pts + self.layer_offsets_mm[m] for m in ids])
         img = np.concatenate(list(corners_px.values()))
         if guess is not None:
-            # (3, 1) vectors: solvePnPRefineLM returns (3,) ones unrefined.
-            rvec, tvec = cv2.solvePnPRefineLM(obj, img, self.K, None, guess[0].reshape(3, 1), guess[1].reshape(3, 1))
+            # (3, 1) vectors (solvePnPRefineLM returns (3,) ones unrefined), copies (it refines in place).
+            rvec, tvec = cv2.solvePnPRefineLM(obj, img, self.K, None, guess[0].reshape(3, 1).copy(),
+                                              guess[1].reshape(3, 1).copy())
             proj = cv2.projectPoints(obj, rvec, tvec, self.K, None)[0].reshape(-1, 2)
             if math.sqrt(((proj - img) ** 2).sum() / len(img)) <= MAX_REPROJECTION_PX:
                 return rvec.ravel(), tvec.ravel()
@@ -385,7 +389,7 @@ class MarkerImager:
         """
         cfg = self.cfg
         ids = tuple(poses)
-        key = np.concatenate([np.concatenate([R.ravel(), t * 1e-3]) for R, t in poses.values()])  # m
+        key = np.concatenate([a for R, t in poses.values() for a in (R.ravel(), t * 1e-3)])  # t in m
         if (self.reuse_still and self._clean is not None and self._clean[0] == ids
                 and np.abs(self._clean[1] - key).max() <= STILL_POSE_TOL):
             clean, origin = self._clean[2], self._clean[3]
