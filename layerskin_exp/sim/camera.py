@@ -245,13 +245,14 @@ class MarkerTracker:
 
     def _find(self, frame: np.ndarray | SensorFrame, box: tuple[int, int, int, int],
               detector: cv2.aruco.ArucoDetector) -> dict[int, np.ndarray]:
-        """Board markers found in frame[box]: id -> refined (4, 2) full-frame corners."""
+        """Board markers found in frame[box]: id -> refined (4, 2) full-frame corners, in id order."""
         x0, y0, x1, y1 = box
         corners, ids, _ = detector.detectMarkers(frame_region(frame, x0, y0, x1, y1))
         if ids is None:
             return {}
         mids = ids.ravel().tolist()
-        keep = [k for k, mid in enumerate(mids) if mid in self.layer_offsets_mm]
+        # By id: the detector's order varies from frame to frame, the layer pose's start must not.
+        keep = sorted((k for k, mid in enumerate(mids) if mid in self.layer_offsets_mm), key=mids.__getitem__)
         if not keep:
             return {}
         c = np.array([corners[k] for k in keep], np.float64).reshape(-1, 4, 2)  # window pixels
