@@ -275,3 +275,26 @@ def test_sensor_frame_crops_match_the_composed_frame():
                 (-10, -5, 30, 20), (cfg.width_px - 20, cfg.height_px - 8, cfg.width_px + 5, cfg.height_px + 5)):
         bx0, by0, bx1, by1 = box
         assert np.array_equal(frame.crop(*box), full[max(by0, 0):by1, max(bx0, 0):bx1])
+
+
+def test_tracked_layer_pose_starts_from_the_last_frame_and_lands_where_a_fresh_solve_does(monkeypatch):
+    """While tracked, the layer pose is refined from the previous frame's (no IPPE after the
+    acquisition frame) and agrees with IPPE + refinement of the same corners to the refinement's tolerance."""
+    cfg = CameraConfig()
+    imager = MarkerImager(cfg)
+    tracker = imager.tracker
+    fresh_solves = []
+    ippe = camera.cv2.solvePnPGeneric
+    monkeypatch.setattr(camera.cv2, "solvePnPGeneric", lambda *a, **k: fresh_solves.append(1) or ippe(*a, **k))
+    rng = np.random.default_rng(12)
+    for poses in _moving_layer(cfg, 30, 12):
+        dets = imager.detect(imager.render(poses, rng))
+        assert len(dets) == 2
+        n = len(fresh_solves)
+        rvec, tvec = tracker.layer_pose({d.marker_id: d.corners_px for d in dets})  # from IPPE
+        assert len(fresh_solves) == n + 1
+        R = Rotation.from_rotvec(rvec)
+        for d in dets:
+            assert np.degrees((Rotation.from_rotvec(d.rvec).inv() * R).magnitude()) < 1e-3
+            assert np.abs(d.tvec_mm - (tvec + R.apply(tracker.layer_offsets_mm[d.marker_id]))).max() < 1e-4  # mm
+    assert len(fresh_solves) == 1 + 30  # the acquisition frame's, then only the checks above
