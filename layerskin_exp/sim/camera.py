@@ -5,14 +5,16 @@ its image is the homography of the printed marker, drawn with cv2.warpPerspectiv
 supersampled canvas and averaged down (INTER_AREA), then blurred and given sensor noise. Only a
 region around the markers is rendered; the rest of the frame is uniform background, so a frame
 is held sparsely (SensorFrame: the rendered patch and where it sits) and composed in full only
-when an image is kept. While the markers hold still (identical poses, e.g. a hold or a stuck
-contact) the blurred patch is reused and only the sensor noise is drawn again.
+when an image is kept. While the markers hold still (poses equal to within rounding, e.g. a hold
+or a stuck contact) the blurred patch is reused and only the sensor noise is drawn again: a
+window at a random offset of one fixed bank of floored Gaussian read noise per process.
 
 Detection (MarkerTracker) works on full frames and reads nothing from the renderer: a full-frame
 search (cv2.aruco.ArucoDetector, multi-scale adaptive threshold) acquires the markers; after
 that each frame is searched only in a window around where the markers were last seen, moved
 on by their last frame-to-frame motion, with one threshold scale matched to the marker's
-module size; a marker missing from the window sends the frame back to the full-frame search.
+module size and only outlines near the tracked markers' perimeter as candidates; a marker
+missing from the window sends the frame back to the full-frame search.
 Corners are then refined from the marker outlines: each outer side is located to a few
 thousandths of a pixel from intensity profiles across it, well away from the corners, and the
 corners are the intersections of the four fitted lines (cornerSubPix, being a gradient
@@ -20,9 +22,10 @@ estimator on a blurred 90-degree corner, pulls each corner ~0.1-0.2 px inward an
 with the inner bit pattern inside its window: a 0.5 % scale error, i.e. ~0.7 mm of depth at
 120 mm, and tilt errors of several degrees). The two markers lie on one rigid printed layer
 (layout from the config), so their 8 corners give one joint pose (cv2.solvePnP IPPE, or SQPnP
-where IPPE degenerates, + cv2.solvePnPRefineLM), far better conditioned in depth and tilt than a
-single 38-px square; each marker's pose is that layer pose plus its known offset. A marker seen alone falls back to
-cv2.solvePnP(SOLVEPNP_IPPE_SQUARE). Pinhole model without distortion.
+where IPPE degenerates, + cv2.solvePnPRefineLM; while tracked, the refinement starts from the
+last frame's pose instead), far better conditioned in depth and tilt than a single 38-px
+square; each marker's pose is that layer pose plus its known offset. A marker seen alone falls
+back to cv2.solvePnP(SOLVEPNP_IPPE_SQUARE). Pinhole model without distortion.
 
 Frames: camera x right, y down, z forward (OpenCV). Marker frame as ArUco defines it: x right,
 y up on the printed marker, z out of it; lengths in mm inside, m in the detections. The layer
