@@ -81,6 +81,16 @@ class Device(ABC):
     def is_connected(self) -> bool:
         return self._connected
 
+    def fault(self, now_ns: int) -> str | None:
+        """Why this device cannot be trusted right now, or None when it is fine.
+
+        now_ns: host monotonic time (the rig clock). Real drivers report a failed link, a fault
+        the device itself signals, or a stall: a streaming device that delivered nothing for
+        longer than its stall timeout (50 ms at most). The protocol loop asks every tick, from
+        its own thread; drivers answer from state their receive threads keep, without I/O.
+        """
+        return None
+
     def _require_connected(self) -> None:
         if not self._connected:
             raise DeviceNotConnectedError(f"{self.name}: not connected; call connect() first")
