@@ -21,3 +21,26 @@ def app_config(backend: str = "sim", seed: int = 0, **rig_overrides):
 @pytest.fixture
 def make_cfg():
     return app_config
+
+
+@pytest.fixture
+def realtime_world():
+    """Factory: a started RealtimeWorld for "platform" or "gripper" (stopped at teardown).
+
+    What the loopback emulators run on: rt.rig holds the simulated twins; use `with rt.lock:`.
+    """
+    from hardware.sim.realtime import RealtimeWorld
+    from layerskin_exp.config import validate
+
+    started = []
+
+    def make(setup: str = "platform", seed: int = 0, period_s: float = 0.002, **rig_overrides):
+        cfg = app_config("sim", seed, **rig_overrides)
+        rt = RealtimeWorld.from_config(validate(cfg.sim), validate(cfg.skin), setup, period_s)
+        rt.start()
+        started.append(rt)
+        return rt
+
+    yield make
+    for rt in started:
+        rt.stop()
