@@ -12,6 +12,7 @@ clock and watches the streams (that is what lets it stop a slide the moment a li
 
 from __future__ import annotations
 
+import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -213,9 +214,19 @@ class MarkerCamera(Device):
         return None
 
 
+Guard = Callable[[object], "str | None"]
+
+
 @dataclass
 class Rig:
-    """What a backend hands a protocol: a clock and the devices it has (None where absent)."""
+    """What a backend hands a protocol: a clock and the devices it has (None where absent).
+
+    Thread safety: real drivers acquire in their own threads and call back into the rig from
+    there (`check_guards` on every sample, `report_fault` on a broken link), while the protocol
+    runs in the main thread. The guard registry, the trip and the fault list are kept under one
+    lock; `stop_motion()` may be called from any thread (a guard trip in a receive thread, a
+    signal handler, the protocol loop) and never raises.
+    """
 
     backend: str
     clock: Clock
@@ -225,46 +236,93 @@ class Rig:
     arm: Arm | None = None
     gripper: Gripper | None = None
     camera: MarkerCamera | None = None
-    extras: dict = field(default_factory=dict)
-    # Safety guards: called by the backend for every F/T sample as it is acquired (the sim
-    # world at the sample's time, a lab driver in its receive thread). A guard returns None or
-    # a reason and must not act themselves; on the first reason the backend stops all motion at
-    # once and sets `tripped`.
-    guards: list[Callable[[Wrench], str | None]] = field(default_factory=list)
+    # Why motion was stopped by a guard (the first reason since the last clear_trip), or None.
     tripped: str | None = None
-    # Called with each trial's labels before it starts (Rig.begin_trial). The simulated backend
-    # draws the trial's noise and bench variation there; real devices need nothing.
-    trial_hooks: list[Callable[[dict], None]] = field(default_factory=list)
+    _guards: dict[str, list[Guard]] = field(default_factory=dict, init=False, repr=False)
+    _faults: list[str] = field(default_factory=list, init=False, repr=False)
+    _lock: threading.RLock = field(default_factory=threading.RLock, init=False, repr=False)
 
+    # ---- trials --------------------------------------------------------------------------------
     def begin_trial(self, labels: dict) -> None:
-        """A trial with these labels is about to start (protocols call this before each trial)."""
-        for hook in self.trial_hooks:
-            hook(dict(labels))
+        """A trial with these labels is about to start (protocols call this before each trial).
+        Real devices need nothing; the simulated rig draws the trial's noise here."""
 
-    def add_guard(self, guard: Callable[[Wrench], str | None]) -> None:
-        self.guards.append(guard)
+    # ---- guards --------------------------------------------------------------------------------
+    def add_guard(self, guard: Guard, stream: str = "ft") -> None:
+        """Watch every sample of `stream` ("ft", "skin", ...) as it is acquired: guard(sample)
+        returns None or a reason, and must not act itself (the rig stops motion on a reason)."""
+        with self._lock:
+            self._guards.setdefault(stream, []).append(guard)
 
-    def guard_reason(self, sample: Wrench) -> str | None:
+    def remove_guard(self, guard: Guard, stream: str = "ft") -> None:
+        with self._lock:
+            guards = self._guards.get(stream, [])
+            if guard in guards:
+                guards.remove(guard)
+
+    def guards(self, stream: str = "ft") -> tuple[Guard, ...]:
+        with self._lock:
+            return tuple(self._guards.get(stream, ()))
+
+    def watches(self, stream: str) -> bool:
+        """Whether any guard watches `stream` (backends skip the per-sample call otherwise)."""
+        return bool(self._guards.get(stream))
+
+    def guard_reason(self, sample, stream: str = "ft") -> str | None:
         """What check_guards would trip on for this sample (None if nothing, or if already
         tripped), without acting. Guards are pure functions of the sample."""
         if self.tripped is not None:
             return None
-        for g in self.guards:
+        for g in self.guards(stream):
             reason = g(sample)
             if reason:
                 return reason
         return None
 
-    def check_guards(self, sample: Wrench) -> str | None:
-        """Run the guards on one sample; stop motion on the first trip. Backends call this."""
+    def check_guards(self, sample, stream: str = "ft") -> str | None:
+        """Run the guards of `stream` on one sample; stop motion on the first trip. Backends
+        call this for every sample as it is acquired, from whatever thread acquires it."""
         if self.tripped is not None:
             return self.tripped
-        reason = self.guard_reason(sample)
+        reason = self.guard_reason(sample, stream)
         if reason:
-            self.tripped = reason
+            with self._lock:
+                if self.tripped is not None:  # another thread tripped first
+                    return self.tripped
+                self.tripped = reason
             self.stop_motion()
         return reason
 
+    def clear_trip(self) -> str | None:
+        """Acknowledge a trip (after it was logged) so motion may resume; returns the reason."""
+        with self._lock:
+            reason, self.tripped = self.tripped, None
+        return reason
+
+    # ---- faults --------------------------------------------------------------------------------
+    def report_fault(self, reason: str) -> None:
+        """A device or driver thread reports a failure (any thread). Motion stops at once; the
+        protocol loop raises it on its next tick."""
+        with self._lock:
+            self._faults.append(reason)
+        self.stop_motion()
+
+    def fault(self) -> str | None:
+        """The first reported fault, else the first connected device whose `fault()` is not None
+        (a stalled stream, a lost link, a fault the device signals). The protocol loop asks every
+        tick."""
+        with self._lock:
+            if self._faults:
+                return self._faults[0]
+        now_ns = self.clock.now_ns()
+        for d in self.devices():
+            if d.is_connected:
+                reason = d.fault(now_ns)
+                if reason:
+                    return reason
+        return None
+
+    # ---- devices -------------------------------------------------------------------------------
     def devices(self) -> list[Device]:
         return [d for d in (self.skin, self.ft, self.platform, self.arm, self.gripper, self.camera)
                 if d is not None]
@@ -276,13 +334,16 @@ class Rig:
             for d in self.devices():
                 d.connect()
                 done.append(d)
-        except Exception:
+        except BaseException:
             for d in reversed(done):
-                d.disconnect()
+                try:
+                    d.disconnect()
+                except Exception:  # noqa: BLE001 - keep the original error
+                    pass
             raise
 
     def stop_motion(self) -> None:
-        """Stop everything that moves; never raises (used on the way out of an error)."""
+        """Stop everything that moves; never raises. Safe from any thread."""
         for d in (self.platform, self.arm, self.gripper):
             if d is not None and d.is_connected:
                 try:
@@ -292,7 +353,10 @@ class Rig:
 
     def disconnect(self) -> None:
         for d in reversed(self.devices()):
-            d.disconnect()
+            try:
+                d.disconnect()
+            except Exception:  # noqa: BLE001 - disconnect the rest
+                pass
 
     def __enter__(self) -> Rig:
         self.connect()

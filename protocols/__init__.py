@@ -6,11 +6,14 @@
     python -m protocols.grip_depth -m grip_depth=6,9,12,15 trajectory=translation,torsion trial='range(7)'
         [hydra/launcher=joblib | hydra/launcher=slurm]
 
-Session files: `<data_root>/force_calibration/pos042_slide2.mcap`,
-`<data_root>/grip_depth/g12_translation_t3.mcap`. Rerunning a stopped command resumes: complete
-trials are skipped, an interrupted one (left as `<name>.mcap.partial`) is run again.
+Session files: `<data_root>/force_calibration/<design>/pos042_slide2.mcap`,
+`<data_root>/grip_depth/<design>/g12_translation_t3.mcap`, where `<design>` is a short hash of
+the configuration that shapes the data (`identity`): a design sweep writes one folder per value.
+Rerunning a stopped command resumes: complete trials of the same identity are skipped, an
+interrupted one (left as `<name>.mcap.partial`) is run again.
 
-Modules: `calibration` and `grip` (the protocols), `runner` (trial files, resume, logging),
-`safety` (limits the framework enforces), `app` (config checks, rig life cycle, exit codes),
-`progress` (multirun progress callback), `config` (schemas).
+Modules: `calibration` and `grip` (the protocols), `loop` (the one control loop: tick, drain,
+faults, deadlines), `runner` (trial files, resume, logging), `identity` (trial and design
+identity), `safety` (limits the framework enforces), `app` (config checks, rig life cycle, exit
+codes, signals), `progress` (multirun progress callback), `config` (schemas).
 """

@@ -2,13 +2,18 @@
 
 Exit codes: 0 done; 2 configuration refused (nothing connected, nothing written); 1 a device
 error, a refused motion or a timeout stopped the run (motion stopped, trial file closed
-"aborted: ..."); 130 Ctrl-C (same). Rerunning the same command resumes.
+"aborted: ..."); 130 Ctrl-C, 143 SIGTERM (same; SIGTERM is what SLURM and process managers
+send). Rerunning the same command resumes.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+import logging
+import signal
 import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -20,11 +25,33 @@ from omegaconf import DictConfig, OmegaConf
 
 from hardware.interfaces import DeviceError
 from layerskin_exp.config import ConfigError, format_config_error, validate
+from protocols.runner import Terminated
+
+log = logging.getLogger(__name__)
 
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 EXIT_CONFIG = 2
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def _sigterm_as_exception():
+    """Turn SIGTERM into `Terminated` in the main thread while the rig runs (Hydra runs jobs in
+    the main thread; elsewhere the default handling stays)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _refuse(err: Exception) -> None:
@@ -95,11 +122,21 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
     except DeviceError as e:
         print(f"error: {_one_line(e)}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
+    with _sigterm_as_exception():
+        return _run_connected(cfg, rig, typed, body)
+
+
+def _run_connected(cfg: DictConfig, rig, typed, body):
     try:
         rig.connect()
     except Exception as e:  # noqa: BLE001 - any failure to connect ends the run before motion
+        rig.disconnect()
         print(f"error: could not connect the {rig.backend} rig: {_one_line(e)}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
+    except Terminated:
+        rig.disconnect()
+        print("terminated (SIGTERM) while connecting; nothing moved", file=sys.stderr)
+        sys.exit(EXIT_TERMINATED)
     metadata = {"config": OmegaConf.to_container(cfg, resolve=True), "backend": rig.backend,
                 "calibration": rig.skin.calibration()}
     try:
@@ -109,6 +146,11 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
         print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
               "to resume", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
+    except Terminated:
+        rig.stop_motion()
+        print("terminated (SIGTERM): motion stopped, the current trial is marked aborted; rerun the same "
+              "command to resume", file=sys.stderr)
+        sys.exit(EXIT_TERMINATED)
     except ConfigError as e:
         rig.stop_motion()
         _refuse(e)

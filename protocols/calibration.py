@@ -20,6 +20,8 @@ from tqdm import tqdm
 from hardware.interfaces import DeviceError, Rig
 from layerskin_exp.config import ConfigError
 from protocols.config import SKIN_HALF_WIDTH_MM, ForceCalibrationConfig, PositionsConfig
+from protocols.identity import design_id, trial_identity
+from protocols.loop import ControlLoop
 from protocols.runner import TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
 from protocols.safety import FORCE_LIMIT, Safety
 
@@ -91,20 +93,20 @@ class PlatformControl:
     def __init__(self, rig: Rig, safety: Safety, cfg: ForceCalibrationConfig) -> None:
         self.safety, self.cfg = safety, cfg
         self.platform = rig.platform
-        self.clock = rig.clock
         self.log: TrialLog | None = None
+        self.loop: ControlLoop | None = None
         self._known_mm: np.ndarray | None = None  # last reported position, kept across trials
 
     def bind(self, log: TrialLog) -> PlatformControl:
-        """Use this trial's log from now on."""
+        """Use this trial's log (and a control loop on it) from now on."""
         self.log = log
+        self.loop = ControlLoop(log, self.cfg.control_period_s)
         return self
 
     def position_mm(self) -> np.ndarray:
         """Latest reported tip position (3,) mm; waits a tick for the first report if need be."""
         if self.log.last_stage is None and self._known_mm is None:
-            self.clock.sleep(self.cfg.control_period_s)
-            self.log.drain()
+            self.loop.tick()
         if self.log.last_stage is not None:
             self._known_mm = np.asarray(self.log.last_stage.position_mm, float)
         if self._known_mm is None:
@@ -120,43 +122,34 @@ class PlatformControl:
         target_mm = np.asarray(target_mm, float)
         self.safety.check_platform_move(target_mm, speed_mm_s)
         distance_mm = float(np.linalg.norm(target_mm - self.position_mm()))
+        rig = self.log.rig
         self.platform.move_to(target_mm, speed_mm_s)
-        deadline_ns = self.clock.now_ns() + int((1.5 * distance_mm / speed_mm_s + 2.0) * 1e9)
-        while True:
-            self.clock.sleep(self.cfg.control_period_s)
-            _, wrenches = self.log.drain()
-            tripped = self.log.rig.tripped
-            if tripped is not None and not self.safety.unloading:
-                self.wait_stopped()
-                if tripped.startswith(FORCE_LIMIT):
-                    return FORCE_LIMIT
-                self.safety.clear_trip()  # a stop condition checked per sample, not a fault
-                return tripped
+
+        def step(_frames, wrenches):
+            if rig.tripped is not None and not self.safety.unloading:
+                return "trip", rig.tripped
             reason = stop_when(wrenches) if stop_when is not None else None
             if reason is not None:
-                self.platform.stop()
-                self.wait_stopped()
-                return reason
-            if not self.platform.is_moving():
-                return None
-            if self.clock.now_ns() > deadline_ns:
-                raise TimeoutError(f"platform move to {np.round(target_mm, 3).tolist()} mm did not finish "
-                                   f"in time; check the platform")
+                return "stop", reason
+            return None if self.platform.is_moving() else ("arrived", None)
+
+        kind, reason = self.loop.until(step, 1.5 * distance_mm / speed_mm_s + 2.0,
+                                       f"platform move to {np.round(target_mm, 3).tolist()} mm")
+        if kind == "trip":
+            self.wait_stopped()
+            if reason.startswith(FORCE_LIMIT):
+                return FORCE_LIMIT
+            rig.clear_trip()  # a stop condition checked per sample, not a fault
+        elif kind == "stop":
+            self.platform.stop()
+            self.wait_stopped()
+        return reason
 
     def wait_stopped(self) -> None:
-        deadline_ns = self.clock.now_ns() + int(2e9)
-        while self.platform.is_moving():
-            if self.clock.now_ns() > deadline_ns:
-                raise TimeoutError("platform did not stop within 2 s")
-            self.clock.sleep(self.cfg.control_period_s)
-            self.log.drain()
-        self.log.drain()
+        self.loop.wait(self.platform.is_moving, 2.0, "platform stop")
 
     def hold(self, duration_s: float) -> None:
-        end_ns = self.clock.now_ns() + int(duration_s * 1e9)
-        while self.clock.now_ns() < end_ns:
-            self.clock.sleep(self.cfg.control_period_s)
-            self.log.drain()
+        self.loop.hold(duration_s)
 
     def lift(self, xy_mm) -> None:
         """Retract straight up to the clearance height; allowed while the force guard is tripped."""
@@ -170,7 +163,7 @@ class PlatformControl:
         finally:
             self.safety.unloading = False
             if tripped:
-                self.safety.clear_trip()
+                self.log.rig.clear_trip()
 
     def press(self, target_n: float, stop_reason_on_target: bool) -> str:
         """Press down at the contact point until Fz >= target_n; returns the stop reason."""
@@ -207,8 +200,7 @@ class PlatformControl:
             if reason == "loading":
                 reason = self.move(bottom, min(cfg.press.load_speed_mm_s, cfg.press.speed_mm_s), check)
         finally:
-            if on_target in rig.guards:
-                rig.guards.remove(on_target)
+            rig.remove_guard(on_target)
         reason = reason or "depth_limit"
         if reason != "target_reached" or stop_reason_on_target:
             fz = None if self.log.last_wrench is None else float(self.log.last_wrench.force_n[2])
@@ -271,9 +263,10 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict) -> list[
                           "calibration needs the platform setup")
     safety = Safety(cfg.safety, rig)
     ctl = PlatformControl(rig, safety, cfg)
-    root = Path(cfg.data_root) / PROTOCOL
+    root = Path(cfg.data_root) / PROTOCOL / design_id(metadata["config"])
     trials = plan_trials(cfg)
-    todo = [t for t in trials if not trial_is_complete(root / f"{t.name}.mcap")]
+    identity = {t.name: trial_identity(metadata["config"], t.labels) for t in trials}
+    todo = [t for t in trials if not trial_is_complete(root / f"{t.name}.mcap", identity[t.name])]
     results: list[TrialResult] = []
     with tqdm(total=len(trials), initial=len(trials) - len(todo), unit="trial", desc=PROTOCOL,
               disable=not cfg.progress, dynamic_ncols=True) as bar:
@@ -294,7 +287,8 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict) -> list[
                 (run_press if trial.kind == "press" else run_slide)(ctl, trial)
 
             meta = {**metadata, "protocol": PROTOCOL, "plan": trial.labels}
-            result = run_trial(rig, root / f"{trial.name}.mcap", trial.labels, meta, body)
+            result = run_trial(rig, root / f"{trial.name}.mcap", trial.labels, meta, body,
+                               identity=identity[trial.name])
             results.append(result)
             bar.update(1)
             if cfg.progress:

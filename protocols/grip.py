@@ -17,7 +17,9 @@ from scipy.spatial.transform import Rotation
 from hardware.interfaces import Rig
 from layerskin_exp.config import ConfigError
 from protocols.config import GripDepthConfig, TrajectoryConfig
-from protocols.runner import TrialLog, TrialResult, run_trial
+from protocols.identity import design_id, trial_identity
+from protocols.loop import ControlLoop, DeviceTimeout
+from protocols.runner import ProtocolError, TrialLog, TrialResult, run_trial
 from protocols.safety import Safety
 
 PROTOCOL = "grip_depth"
@@ -32,8 +34,9 @@ def trial_name(labels: dict) -> str:
     return f"g{labels['grip_depth_mm']:g}_{labels['motion']}_t{labels['trial']}"
 
 
-def trial_path(cfg: GripDepthConfig) -> Path:
-    return Path(cfg.data_root) / PROTOCOL / f"{trial_name(trial_labels(cfg))}.mcap"
+def trial_path(cfg: GripDepthConfig, config: dict) -> Path:
+    """Where the trial of `cfg` goes; config: the resolved config (its design names the folder)."""
+    return Path(cfg.data_root) / PROTOCOL / design_id(config) / f"{trial_name(trial_labels(cfg))}.mcap"
 
 
 def trajectory_poses(start_pose6: np.ndarray, traj: TrajectoryConfig) -> list[np.ndarray]:
@@ -57,80 +60,63 @@ def trajectory_poses(start_pose6: np.ndarray, traj: TrajectoryConfig) -> list[np
 
 
 class GripControl:
-    """Gripper and arm moves of one trial: safety-checked, clock-ticked, streams drained."""
+    """Gripper and arm moves of one trial: safety-checked, waited on through the control loop."""
 
     def __init__(self, log: TrialLog, safety: Safety, cfg: GripDepthConfig) -> None:
         self.log, self.safety, self.cfg = log, safety, cfg
         self.rig = log.rig
-        self.clock = log.rig.clock
-
-    def tick(self):
-        self.clock.sleep(self.cfg.control_period_s)
-        return self.log.drain()
-
-    def wait(self, busy, timeout_s: float, what: str) -> None:
-        deadline_ns = self.clock.now_ns() + int(timeout_s * 1e9)
-        while busy():
-            if self.clock.now_ns() > deadline_ns:
-                raise TimeoutError(f"{what} did not finish within {timeout_s:.1f} s")
-            self.tick()
-        self.log.drain()
-
-    def hold(self, duration_s: float) -> list:
-        """Let duration_s pass; returns the skin frames acquired meanwhile."""
-        frames = []
-        end_ns = self.clock.now_ns() + int(duration_s * 1e9)
-        while self.clock.now_ns() < end_ns:
-            frames += self.tick()[0]
-        return frames
+        self.loop = ControlLoop(log, cfg.control_period_s)
 
     def gripper_opening_mm(self, first_state_timeout_s: float = 0.5) -> float:
         """The last reported jaw opening; waits (ticking) for the gripper's first state report."""
         if self.log.last_gripper is None:
             self.log.drain()
-        deadline_ns = self.clock.now_ns() + int(first_state_timeout_s * 1e9)
-        while self.log.last_gripper is None and self.clock.now_ns() < deadline_ns:
-            self.tick()
         if self.log.last_gripper is None:
-            raise RuntimeError(f"gripper: no state received within {first_state_timeout_s} s; is the gripper "
-                               "streaming?")
+            self.loop.until(lambda *_: self.log.last_gripper is not None, first_state_timeout_s,
+                            "gripper's first state report (is the gripper streaming?)")
         return float(self.log.last_gripper.position_mm)
 
     def move_gripper(self, opening_mm: float, speed_mm_s: float, force_pct: float, min_opening_mm: float) -> None:
         self.safety.check_gripper_move(opening_mm, speed_mm_s, min_opening_mm)
         self.rig.gripper.move(opening_mm, speed_mm_s, force_pct)
-        self.tick()  # let the move start before asking whether it is moving
+        self.loop.tick()  # let the move start before asking whether it is moving
         travel_mm = abs(self.gripper_opening_mm() - opening_mm)
-        self.wait(self.rig.gripper.is_moving, 1.5 * travel_mm / speed_mm_s + 3.0, "gripper move")
+        self.loop.wait(self.rig.gripper.is_moving, 1.5 * travel_mm / speed_mm_s + 3.0, "gripper move")
 
     def approach(self) -> float:
         """Close until contact; returns the jaw opening (mm) where contact was declared."""
         a = self.cfg.approach
         self.log.event("phase", "approach")
         self.safety.check_gripper_move(a.min_opening_mm, a.speed_mm_s, a.min_opening_mm)
-        baseline_frames = self.hold(a.baseline_s)
+        baseline_frames = self.loop.hold(a.baseline_s)
         baseline = (float(np.mean([_total(f) for f in baseline_frames])) if baseline_frames else 0.0)
         self.rig.gripper.move(a.min_opening_mm, a.speed_mm_s, a.force_pct)
-        run = 0
-        deadline_ns = self.clock.now_ns() + int((a.start_opening_mm / a.speed_mm_s * 1.5 + 3.0) * 1e9)
-        started = False
-        while True:
-            frames, _ = self.tick()
+        state = {"run": 0, "started": False}
+
+        def contact_or_end(frames, _wrenches):
             for f in frames:
-                run = run + 1 if _total(f) - baseline > a.threshold_counts else 0
-                if run >= a.consecutive_frames:
-                    self.rig.gripper.stop()
-                    self.wait(self.rig.gripper.is_moving, 3.0, "gripper stop")
-                    opening = self.gripper_opening_mm()
-                    self.log.event("contact", "contact", opening_mm=opening, baseline_counts=baseline,
-                                   frame_seq=int(f.seq), total_counts=int(_total(f)))
-                    return opening
+                state["run"] = state["run"] + 1 if _total(f) - baseline > a.threshold_counts else 0
+                if state["run"] >= a.consecutive_frames:
+                    return "contact", f
             moving = self.rig.gripper.is_moving()
-            started |= moving
-            if (started and not moving) or self.clock.now_ns() > deadline_ns:
-                self.log.stop("no_contact", opening_mm=self.gripper_opening_mm())
-                raise RuntimeError(f"no contact before the jaws reached {self.gripper_opening_mm():.1f} mm "
-                                   "(approach.min_opening_mm); check the rod position or approach.threshold_counts")
+            state["started"] |= moving
+            return ("end", None) if state["started"] and not moving else None
+
+        try:
+            kind, frame = self.loop.until(contact_or_end, a.start_opening_mm / a.speed_mm_s * 1.5 + 3.0,
+                                          "gripper approach")
+        except DeviceTimeout:
+            kind, frame = "end", None
+        if kind == "end":
+            self.log.stop("no_contact", opening_mm=self.gripper_opening_mm())
+            raise ProtocolError(f"no contact before the jaws reached {self.gripper_opening_mm():.1f} mm "
+                                "(approach.min_opening_mm); check the rod position or approach.threshold_counts")
+        self.rig.gripper.stop()
+        self.loop.wait(self.rig.gripper.is_moving, 3.0, "gripper stop")
+        opening = self.gripper_opening_mm()
+        self.log.event("contact", "contact", opening_mm=opening, baseline_counts=baseline,
+                       frame_seq=int(frame.seq), total_counts=int(_total(frame)))
+        return opening
 
     def move_arm(self, pose6: np.ndarray, start_pose6: np.ndarray, traj: TrajectoryConfig) -> None:
         if traj.motion == "translation":
@@ -146,8 +132,8 @@ class GripControl:
             duration_s = float(np.degrees(rel.magnitude())) / traj.speed
         self.rig.arm.move_linear(pose6, speed_mm_s / 1000.0, traj.accel_mm_s2 / 1000.0,
                                  None if angular_deg_s is None else float(np.radians(angular_deg_s)))
-        self.tick()
-        self.wait(self.rig.arm.is_moving, 1.5 * duration_s + 5.0, "arm move")
+        self.loop.tick()
+        self.loop.wait(self.rig.arm.is_moving, 1.5 * duration_s + 5.0, "arm move")
 
 
 def _total(frame) -> int:
@@ -174,7 +160,7 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict) -> TrialResul
                   target_opening_mm=target_mm)
         ctl.move_gripper(target_mm, cfg.close.speed_mm_s, cfg.close.force_pct, a.min_opening_mm)
         log.event("phase", "hold", opening_mm=ctl.gripper_opening_mm())
-        ctl.hold(max(cfg.close.settle_s, cfg.hold_s))
+        ctl.loop.hold(max(cfg.close.settle_s, cfg.hold_s))
         start = np.asarray(rig.arm.tcp_pose6(), float)
         log.event("phase", "motion", motion=cfg.trajectory.motion, waypoints=list(cfg.trajectory.waypoints),
                   speed=cfg.trajectory.speed, start_pose6=start.tolist())
@@ -183,9 +169,10 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict) -> TrialResul
             ctl.move_arm(pose, start, cfg.trajectory)
         log.stop("target_reached")
         log.event("phase", "hold")
-        ctl.hold(cfg.hold_s)
+        ctl.loop.hold(cfg.hold_s)
         log.event("phase", "release")
         ctl.move_gripper(cfg.release.opening_mm, cfg.release.speed_mm_s, a.force_pct, a.min_opening_mm)
 
     meta = {**metadata, "protocol": PROTOCOL, "plan": labels}
-    return run_trial(rig, trial_path(cfg), labels, meta, body, save_images=cfg.save_images)
+    return run_trial(rig, trial_path(cfg, metadata["config"]), labels, meta, body,
+                     identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images)

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import os
 import zlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from hardware.interfaces import Rig
+from hardware.interfaces import DeviceError, Rig
 from layerskin_exp.log import SessionFileError, SessionWriter, load_session
 from layerskin_exp.types import (
     GripperState,
@@ -38,18 +38,26 @@ def trial_rng(seed: int, *keys: int | str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(entropy))
 
 
-def trial_is_complete(path: Path) -> bool:
-    """True when `path` is a readable session whose outcome is "complete"."""
-    if not path.exists():
+class ProtocolError(RuntimeError):
+    """The protocol could not carry out a trial as planned (e.g. no contact found)."""
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived (a process manager or SLURM ending the job): handled like Ctrl-C."""
+
+
+def trial_is_complete(path: Path, identity: str | None = None) -> bool:
+    """True when `path` is a readable, undamaged session whose outcome is "complete" and, when
+    `identity` is given, that was recorded with the same trial identity."""
+    if not path.is_file():
         return False
     try:
-        return bool(load_session(path).complete)
+        session = load_session(path)
     except SessionFileError:
         return False
-
-
-def count_complete(paths: Iterable[Path]) -> int:
-    return sum(trial_is_complete(p) for p in paths)
+    if not session.complete:
+        return False
+    return identity is None or session.metadata.get("identity") == identity
 
 
 @dataclass
@@ -164,7 +172,11 @@ class TrialLog:
 def _describe(exc: BaseException) -> str:
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted (Ctrl-C)"
+    if isinstance(exc, Terminated):
+        return "terminated (SIGTERM)"
     text = str(exc).strip().splitlines()
+    if isinstance(exc, DeviceError) and text:  # the message names the device and what happened
+        return text[0]
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
@@ -183,8 +195,10 @@ def _fsync_path(path: Path) -> None:
 
 
 def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
-              save_images: bool = False) -> TrialResult:
-    """Run one trial into `path` (skipped when already complete).
+              identity: str | None = None, save_images: bool = False) -> TrialResult:
+    """Run one trial into `path` (skipped when a complete file of the same identity is there).
+
+    identity: the trial identity (protocols.identity), stored in the file's metadata.
 
     body(log) drives the rig and calls log.drain() as the clock advances. If it raises (a device
     error, a refused command, Ctrl-C), motion is stopped first, the file is closed
@@ -192,8 +206,10 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     """
     path = Path(path)
     name = path.stem
-    if trial_is_complete(path):
+    if trial_is_complete(path, identity):
         return TrialResult(name, labels, str(path), "complete", skipped=True)
+    if identity is not None:
+        metadata = {**metadata, "identity": identity}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + PARTIAL_SUFFIX)
     rig.begin_trial(labels)
@@ -219,14 +235,3 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     _fsync_path(path.parent)
     return TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
                        peak_fz_n=log.peak_fz_n, peak_shear_n=log.peak_shear_n, stop_reason=log.stop_reason)
-
-
-def wait_until(log: TrialLog, done: Callable[[], bool], period_s: float, timeout_s: float, what: str) -> None:
-    """Advance the clock in ticks, draining the streams, until done() or the timeout (then raise)."""
-    clock = log.rig.clock
-    deadline_ns = clock.now_ns() + int(timeout_s * 1e9)
-    while not done():
-        if clock.now_ns() > deadline_ns:
-            raise TimeoutError(f"{what} did not finish within {timeout_s:.1f} s")
-        clock.sleep(period_s)
-        log.drain()

@@ -44,11 +44,6 @@ class Safety:
             return f"{FORCE_LIMIT}: Fz={fz_n:.3f} N exceeds {self.cfg.max_normal_force_n} N"
         return None
 
-    def clear_trip(self) -> str | None:
-        """Acknowledge a trip (after it was logged) so the next move may run; returns the reason."""
-        reason, self.rig.tripped = self.rig.tripped, None
-        return reason
-
     # ---- command checks -------------------------------------------------------------------
     def check_platform_move(self, target_mm: np.ndarray, speed_mm_s: float) -> None:
         target_mm = np.asarray(target_mm, float)

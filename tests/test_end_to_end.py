@@ -36,8 +36,8 @@ def sessions(tmp_path_factory) -> Path:
 
 
 def test_sessions_carry_their_streams_labels_and_outcomes(sessions):
-    cal = sorted((sessions / "force_calibration").glob("*.mcap"))
-    grip = sorted((sessions / "grip_depth").glob("*.mcap"))
+    cal = sorted((sessions / "force_calibration").glob("*/*.mcap"))
+    grip = sorted((sessions / "grip_depth").glob("*/*.mcap"))
     assert len(cal) == 8 and len(grip) == 4
     for p in cal:
         s = load_session(p, warn=False)

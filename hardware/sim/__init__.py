@@ -1,5 +1,5 @@
 """Simulated twins of every device, observing one simulated world (`layerskin_exp.sim.world`)."""
 
-from hardware.sim.build import build_sim_rig
+from hardware.sim.build import SimRig, build_sim_rig
 
-__all__ = ["build_sim_rig"]
+__all__ = ["SimRig", "build_sim_rig"]

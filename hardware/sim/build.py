@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass, field
 
 from hardware.interfaces import DeviceError, Rig
 from hardware.sim.arm import SimArm
@@ -21,19 +22,36 @@ from layerskin_exp.sim.world import World
 SETUPS = ("platform", "gripper")
 
 
+@dataclass
+class SimRig(Rig):
+    """The simulated rig: every twin observes one World; the clock is virtual.
+
+    extras["world"] is the World (for tests, benchmarks and the realtime emulators; protocols
+    must not use it). trial_hooks(labels) run at each begin_trial: the world draws the trial's
+    noise and bench variation from the seed and the labels.
+    """
+
+    extras: dict = field(default_factory=dict)
+    trial_hooks: list[Callable[[dict], None]] = field(default_factory=list)
+
+    def begin_trial(self, labels: dict) -> None:
+        for hook in self.trial_hooks:
+            hook(dict(labels))
+
+
 def _default_skin_model(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm):
     from layerskin_exp.sim.skin import SkinModel
 
     return SkinModel(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm=support_stiffness_n_per_mm)
 
 
-def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory: Callable | None = None) -> Rig:
+def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory: Callable | None = None) -> SimRig:
     """The simulated rig for `setup` ("platform" or "gripper"), deterministic under sim_cfg.seed.
 
     sim_cfg: SimConfig (seed, rig parameters, skin physics); skin_cfg: SkinConfig.
     skin_model_factory(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm) builds the
     skin mechanics (default: layerskin_exp.sim.skin.SkinModel).
-    Rig.extras["world"] is the World (for tests and benchmarks; protocols must not use it).
+    Returns a SimRig (rig.extras["world"] is the World).
     """
     if setup not in SETUPS:
         raise DeviceError(f"sim: unknown setup {setup!r}; choose one of {SETUPS}")
@@ -45,7 +63,10 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     world = World(rc, skin_cfg, sim_cfg.seed, scene, model)
     clock = SimClock(world)
     skin = SimSkinReader(world, rc.skin)
-    rig = Rig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup})
+    rig = SimRig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup})
+    # Skin guards act at the end of each world advance (at most one control tick late); F/T
+    # guards act on the very sample, rewinding the world to it (see SimForceTorque).
+    skin.on_frames = lambda frames: rig.watches("skin") and any(rig.check_guards(f, "skin") for f in frames)
     rig.trial_hooks.append(world.begin_trial)
     if setup == "platform":
         rig.ft = SimForceTorque(world, rc.ft, device_rng(sim_cfg.seed, "ft"), on_sample=rig.check_guards,

@@ -20,12 +20,17 @@ class SimSkinReader(SimStreamMixin, SkinReader):
         self.cfg = cfg
         period_s = world.skin_cfg.frame_period_ms * 1e-3
         self.stream = world.new_stream("skin", cfg.clock, period_s, cfg.period_jitter_ms * 1e-3)
+        # on_frames(frames) is called with each batch as it is acquired (the rig's skin guards)
+        self.on_frames = None
         world.add_producer(self.stream, self._produce)
 
     def _produce(self, world: World, t_s: np.ndarray, idx: np.ndarray) -> None:
         sup, deep = world.skin_model.frames_of_steps(world.records(idx), t_s)
         seq, dev_ns, host_ns = (a.tolist() for a in self.stream.stamp(t_s))
-        self.stream.push_many(host_ns, [TwoLayerFrame(*rec) for rec in zip(sup, deep, seq, dev_ns, host_ns, strict=True)])
+        frames = [TwoLayerFrame(*rec) for rec in zip(sup, deep, seq, dev_ns, host_ns, strict=True)]
+        self.stream.push_many(host_ns, frames)
+        if self.on_frames is not None:
+            self.on_frames(frames)
 
     def read_available(self) -> list[TwoLayerFrame]:
         return self._drain()

@@ -41,6 +41,13 @@ def popen_cli(module: str, args: list[str], cwd: Path) -> subprocess.Popen:
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
+def design_dir(protocol_root: Path) -> Path:
+    """The one design folder a run without design overrides writes under <data_root>/<protocol>/."""
+    dirs = [d for d in protocol_root.iterdir() if d.is_dir()]
+    assert len(dirs) == 1, f"expected one design folder in {protocol_root}, found {dirs}"
+    return dirs[0]
+
+
 @pytest.fixture
 def hydra_dirs(tmp_path):
     """Overrides that keep Hydra's run/sweep folders inside tmp_path."""

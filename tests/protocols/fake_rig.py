@@ -54,9 +54,19 @@ class _Stream:
 
 
 class FakeSkin(_Stream, SkinReader):
+    """Reports a stall like a real driver: nothing received for longer than stall_timeout_ns."""
+
+    stall_timeout_ns = 40_000_000
+
     def __init__(self) -> None:
         SkinReader.__init__(self)
         _Stream.__init__(self)
+        self.last_rx_ns: int | None = None
+
+    def fault(self, now_ns: int) -> str | None:
+        if self.last_rx_ns is not None and now_ns - self.last_rx_ns > self.stall_timeout_ns:
+            return f"skin stalled: no frame for {(now_ns - self.last_rx_ns) / 1e6:.0f} ms"
+        return None
 
     def calibration(self) -> dict:
         return {"fake": True}
@@ -78,6 +88,8 @@ class FakePlatform(_Stream, Platform):
         self.pos_mm = np.array([0.0, 0.0, 1.0])
         self.target_mm = self.pos_mm.copy()
         self.speed_mm_s = 0.0
+        self.stopped_at_ns: list[int] = []  # fake time of every stop() call
+        self.clock_ns = lambda: 0
 
     def move_to(self, target_mm, speed_mm_s) -> None:
         self._require_connected()
@@ -85,6 +97,7 @@ class FakePlatform(_Stream, Platform):
 
     def stop(self) -> None:
         self.target_mm = self.pos_mm.copy()
+        self.stopped_at_ns.append(self.clock_ns())
 
     def is_moving(self) -> bool:
         return bool(np.linalg.norm(self.target_mm - self.pos_mm) > 1e-9)
@@ -154,12 +167,13 @@ class FakeWorld:
 
     def __init__(self, k_n_per_mm: float = 4.0, k_t_per_mm: float = 2.0, mu: float = 0.8,
                  ft_hz: float = 1000.0, skin_hz: float = 424.0, rod_contact_mm: float = 20.0,
-                 fail_after_s: float | None = None) -> None:
+                 fail_after_s: float | None = None, skin_stalls_after_s: float | None = None) -> None:
         self.k_n, self.k_t, self.mu = k_n_per_mm, k_t_per_mm, mu
         self.ft_dt_ns = int(1e9 / ft_hz)
         self.skin_dt_ns = int(1e9 / skin_hz)
         self.rod_contact_mm = rod_contact_mm
         self.fail_after_ns = None if fail_after_s is None else int(fail_after_s * 1e9)
+        self.skin_stall_ns = None if skin_stalls_after_s is None else int(skin_stalls_after_s * 1e9)
         self.t_ns = 0
         self.rig: Rig | None = None
         self.contact_xy: np.ndarray | None = None
@@ -216,7 +230,12 @@ class FakeWorld:
             else:
                 level = max(0.0, self.rod_contact_mm - rig.gripper.opening_mm) * 40
             layer = np.full((16, 16), min(4095, int(level)), np.uint16)
-            rig.skin.buffer.append(TwoLayerFrame(layer, layer.copy(), seq, t, t))
+            if self.skin_stall_ns is not None and t > self.skin_stall_ns:
+                return  # the board stopped sending
+            frame = TwoLayerFrame(layer, layer.copy(), seq, t, t)
+            rig.skin.buffer.append(frame)
+            rig.skin.last_rx_ns = t
+            rig.check_guards(frame, "skin")
         else:
             self._next[kind] += 10_000_000
             if rig.platform is not None:
@@ -231,6 +250,7 @@ class FakeWorld:
 def platform_rig(**kw) -> Rig:
     world = FakeWorld(**kw)
     rig = Rig(backend="fake", clock=FakeClock(world), skin=FakeSkin(), ft=FakeFT(), platform=FakePlatform())
+    rig.platform.clock_ns = lambda: world.t_ns
     world.rig = rig
     return rig
 

@@ -14,7 +14,7 @@ import pytest
 from hardware import build_rig
 from layerskin_exp.log import load_session
 from protocols.calibration import plan_trials, run_campaign
-from tests.protocols.conftest import TINY_CALIBRATION, TINY_GRIP, compose_app, popen_cli, run_cli
+from tests.protocols.conftest import TINY_CALIBRATION, TINY_GRIP, compose_app, design_dir, popen_cli, run_cli
 
 LABEL_KEYS_CAL = {"protocol", "position_index", "position_mm", "kind", "repeat", "direction_rad", "z_offset_mm"}
 
@@ -29,12 +29,14 @@ def test_calibration_cli_writes_labelled_trials(tmp_path, hydra_dirs):
     assert r.returncode == 0, r.stderr[-2000:]
     cfg, typed = compose_app("force_calibration", [*TINY_CALIBRATION, f"data_root={data}"])
     plan = plan_trials(typed)
-    files = sorted((data / "force_calibration").iterdir())
+    folder = design_dir(data / "force_calibration")
+    files = sorted(folder.iterdir())
     assert [f.name for f in files] == sorted(f"{t.name}.mcap" for t in plan)
     rig_cfg = typed.sim.rig
     for trial in plan:
-        s = load_session(data / "force_calibration" / f"{trial.name}.mcap", warn=False)
+        s = load_session(folder / f"{trial.name}.mcap", warn=False)
         assert s.complete and set(s.labels) == LABEL_KEYS_CAL and s.labels == trial.labels
+        assert s.metadata["identity"]
         assert s.metadata["backend"] == "sim" and s.metadata["config"]["press"]["repeats"] == 1
         assert _rate_hz(s.streams["skin"]["t_ns"]) == pytest.approx(1000 / typed.skin.frame_period_ms, rel=0.05)
         assert _rate_hz(s.streams["wrench"]["t_ns"]) == pytest.approx(rig_cfg.ft.rate_hz, rel=0.05)
@@ -61,7 +63,7 @@ def test_resume_after_sigkill_runs_each_trial_once(tmp_path, hydra_dirs):
     proc = popen_cli("protocols.force_calibration", args, tmp_path)
     try:
         deadline = time.monotonic() + 200
-        while len(list(folder.glob("*.mcap"))) < 2 and proc.poll() is None and time.monotonic() < deadline:
+        while len(list(folder.glob("*/*.mcap"))) < 2 and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.02)
         assert proc.poll() is None, "the campaign ended before it could be killed; make it longer"
         os.kill(proc.pid, signal.SIGKILL)
@@ -69,6 +71,7 @@ def test_resume_after_sigkill_runs_each_trial_once(tmp_path, hydra_dirs):
     finally:
         if proc.poll() is None:
             proc.kill()
+    folder = design_dir(folder)
     done_before = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in folder.glob("*.mcap")}
     assert 2 <= len(done_before) < 8
     r = run_cli("protocols.force_calibration", args, tmp_path)
@@ -129,7 +132,7 @@ def test_grip_multirun_basic_launcher(tmp_path, hydra_dirs):
     assert r.returncode == 0, r.stderr[-3000:]
     _, typed = compose_app("grip_depth", [*TINY_GRIP])
     for trial in (0, 1):
-        s = load_session(data / "grip_depth" / f"g6_translation_t{trial}.mcap", warn=False)
+        s = load_session(design_dir(data / "grip_depth") / f"g6_translation_t{trial}.mcap", warn=False)
         assert s.complete
         assert s.labels == {"protocol": "grip_depth", "grip_depth_mm": 6.0, "motion": "translation", "trial": trial}
         rig = typed.sim.rig
@@ -162,3 +165,43 @@ def test_grip_multirun_basic_launcher(tmp_path, hydra_dirs):
     r2 = run_cli("protocols.grip_depth", ["-m", "trial=0,1", *TINY_GRIP, f"data_root={data}",
                                           f"hydra.sweep.dir={tmp_path}/multirun2"], tmp_path)
     assert r2.returncode == 0 and "0 ran, 2 already complete, 0 failed" in r2.stdout
+
+
+def test_design_sweep_writes_one_set_of_files_per_value(tmp_path, hydra_dirs):
+    # The README's design sweep: each spacer modulus gets its own folder, none is skipped.
+    data = tmp_path / "data"
+    r = run_cli("protocols.force_calibration", ["-m", "sim.spacer.modulus=20,60", "positions.count=1",
+                                                "press.repeats=1", "slide.repeats=0", "press.hold_s=0.05",
+                                                f"data_root={data}", "progress=false", *hydra_dirs], tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    designs = sorted(d for d in (data / "force_calibration").iterdir() if d.is_dir())
+    assert len(designs) == 2
+    moduli = set()
+    for d in designs:
+        (f,) = d.glob("*.mcap")
+        s = load_session(f, warn=False)
+        assert s.complete
+        moduli.add(s.metadata["config"]["sim"]["spacer"]["modulus"])
+    assert len(moduli) == 2
+    assert "2 ran, 0 already complete, 0 failed" in r.stdout
+
+
+def test_sigterm_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", f"data_root={data}", "progress=false",
+            *hydra_dirs]
+    proc = popen_cli("protocols.force_calibration", args, tmp_path)
+    try:
+        deadline = time.monotonic() + 200
+        while not list(data.glob("force_calibration/*/*.mcap")) and proc.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, "the campaign ended before SIGTERM could be sent"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=60) == 143
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    partials = list(data.glob("force_calibration/*/*.partial"))
+    assert len(partials) == 1
+    assert load_session(partials[0], warn=False).outcome == "aborted: terminated (SIGTERM)"

@@ -3,6 +3,8 @@ per-sample force guard, safe abort, planning from seed + labels, the safety chec
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from layerskin_exp.log import load_session
 from protocols.calibration import distance_to_edge_mm, plan_trials, run_campaign
 from protocols.config import ForceCalibrationConfig, GripDepthConfig
 from protocols.grip import run_grip_trial, trajectory_poses
+from protocols.identity import design_id
 from protocols.safety import Safety, SafetyError
 from tests.protocols.fake_rig import gripper_rig, platform_rig
 
@@ -78,10 +81,10 @@ def test_device_error_stops_motion_then_closes_aborted(tmp_path):
     with pytest.raises(DeviceError):
         run_campaign(cfg, rig, META)
     assert not rig.platform.is_moving()
-    partial = list((tmp_path / "force_calibration").glob("*.partial"))
-    assert len(partial) == 1 and not list((tmp_path / "force_calibration").glob("*.mcap"))
+    partial = list((tmp_path / "force_calibration").glob("*/*.partial"))
+    assert len(partial) == 1 and not list((tmp_path / "force_calibration").glob("*/*.mcap"))
     s = load_session(partial[0], warn=False)
-    assert s.outcome.startswith("aborted: DeviceError") and not s.complete
+    assert s.outcome == "aborted: fake: device stopped answering" and not s.complete
     assert "error" in s.streams["events"]["kind"]
 
 
@@ -136,7 +139,9 @@ def test_grip_trial_contact_then_depth(tmp_path):
     result = run_grip_trial(cfg, rig, META)
     s = load_session(result.path, warn=False)
     assert s.labels == {"protocol": "grip_depth", "grip_depth_mm": 6.0, "motion": "translation", "trial": 0}
-    assert result.path.endswith("grip_depth/g6_translation_t0.mcap")
+    path = Path(result.path)
+    assert path.name == "g6_translation_t0.mcap" and path.parent.parent.name == "grip_depth"
+    assert path.parent.name == design_id(META["config"])
     ev = s.streams["events"]
     contact = ev["detail"][ev["kind"].index("contact")]
     # fake skin: both layers 256 taxels x 40 counts/mm past 20 mm; > 500 counts from the first frame in contact
