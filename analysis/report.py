@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -35,7 +36,8 @@ from analysis.preprocess import layer_scale, two_layer_features
 from analysis.sessions import Campaign, load_campaign
 from analysis.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
 from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
-from layerskin_exp.config import SkinConfig, format_config_error, validate
+from layerskin_exp.cli import preflight, refuse
+from layerskin_exp.config import SkinConfig, validate
 
 AXES = ("Fx", "Fy", "Fz")
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
@@ -358,7 +360,7 @@ def main(cfg: DictConfig) -> None:
     try:
         rc: ReportConfig = validate(cfg)
     except ValueError as e:
-        raise SystemExit(format_config_error(e)) from None
+        refuse(e)
     if rc.analysis.cnn.torch_threads is None:
         rc.analysis.cnn.torch_threads = os.cpu_count()
     res = Analysis(rc).run()
@@ -366,4 +368,5 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
+    preflight("report", sys.argv[1:])
     main()

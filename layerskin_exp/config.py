@@ -9,6 +9,7 @@ device is touched.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from dataclasses import dataclass
 
@@ -80,12 +81,38 @@ def register_all() -> None:
                 raise
 
 
+def unknown_keys(node: DictConfig, prefix: str = "") -> list[tuple[str, str]]:
+    """(dotted key, schema name) of every key in `node` that its structured schema does not have.
+
+    Hydra's `+key=value` adds keys even to a structured config; to_object then drops them
+    silently, so a misspelled `+grip_dept=15` would run at the default. Values are not resolved.
+    """
+    out: list[tuple[str, str]] = []
+    schema = OmegaConf.get_type(node)
+    names = {f.name for f in dataclasses.fields(schema)} if dataclasses.is_dataclass(schema) else None
+    for k in node.keys():
+        if names is not None and k not in names:
+            out.append((f"{prefix}{k}", schema.__name__))
+            continue
+        child = node._get_node(k)
+        if isinstance(child, DictConfig) and not child._is_missing() and not child._is_none():
+            out += unknown_keys(child, f"{prefix}{k}.")
+    return out
+
+
 def validate(cfg: DictConfig, key: str | None = None):
     """Build the typed object tree from cfg (or cfg[key]); every schema's checks run.
 
-    Raises ConfigError with the offending key and value; nothing else escapes.
+    Raises ConfigError with the offending key and value; nothing else escapes. Keys the schema
+    does not have (added with `+`) are refused.
     """
     node = cfg if key is None else cfg[key]
+    if isinstance(node, DictConfig):
+        extra = unknown_keys(node)
+        if extra:
+            k, schema = extra[0]
+            raise ConfigError(f"{k}: Key '{k.rsplit('.', 1)[-1]}' not in '{schema}' (check the spelling; "
+                              "'+' cannot add a setting the schema does not have)")
     try:
         return OmegaConf.to_object(node)
     except ConfigError:

@@ -30,7 +30,7 @@ def _sweep_dir(config: DictConfig) -> Path:
 
 
 def count_jobs(overrides: list[str]) -> int:
-    from protocols.app import expand_sweep
+    from layerskin_exp.cli import expand_sweep
 
     return len(expand_sweep([o for o in overrides if not o.split("=", 1)[0].lstrip("+~").startswith("hydra")]))
 

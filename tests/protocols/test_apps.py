@@ -117,6 +117,9 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     ("protocols.force_calibration", "press.speed_mm_s=-1", "press.speed_mm_s"),
     ("protocols.force_calibration", "press.target_normal_n=7", "press.target_normal_n"),
     ("protocols.grip_depth", "-m grip_depth=6,25", "grip_depth"),
+    ("protocols.grip_depth", "+grip_dept=15", "Key 'grip_dept' not in 'GripDepthConfig'"),
+    ("protocols.grip_depth", "grip_dept=15", "Key 'grip_dept' not in 'GripDepthConfig'"),
+    ("protocols.grip_depth", "grip_depth=abc", "could not be converted to Float"),
 ])
 def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
     r = run_cli(app, [*override.split(), f"data_root={tmp_path}/data", *hydra_dirs], tmp_path)

@@ -1,0 +1,82 @@
+"""What every Hydra command line of the project shares: refusing a bad config before anything runs.
+
+`preflight(config_name, argv)` composes and validates the config of every job a command line
+asks for (a multirun's whole sweep) before Hydra starts, so a bad override ends the command
+with one readable line and exit code 2: nothing connected, nothing written.
+"""
+
+from __future__ import annotations
+
+import itertools
+import sys
+from pathlib import Path
+
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
+
+from layerskin_exp.config import ConfigError, format_config_error, validate
+
+CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+EXIT_CONFIG = 2
+
+
+def refuse(err: Exception) -> None:
+    print(format_config_error(err), file=sys.stderr)
+    sys.exit(EXIT_CONFIG)
+
+
+def one_line(err: Exception) -> str:
+    """One readable line: the error's first line and, for Hydra's override errors, the first
+    line of its cause (the explanation: "Key 'x' not in 'Schema'", "could not be converted")."""
+    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+    text = lines[0] if lines else type(err).__name__
+    cause = err.__cause__
+    if isinstance(err, HydraException) and cause is not None:
+        cause_lines = [ln.strip() for ln in str(cause).splitlines() if ln.strip()]
+        if cause_lines and cause_lines[0] not in text:
+            text = f"{text.rstrip('.')}: {cause_lines[0]}"
+    options = getattr(err, "options", None)  # hydra's MissingConfigException: the group's choices
+    if options:
+        text = f"{text} (available: {', '.join(o for o in options if not o.endswith('_schema'))})"
+    return text
+
+
+def expand_sweep(overrides: list[str]) -> list[list[str]]:
+    """The override lists of every job a basic-sweeper multirun would launch (cartesian product)."""
+    parsed = OverridesParser.create().parse_overrides(overrides)
+    choices = []
+    for o in parsed:
+        key = o.get_key_element()
+        values = list(o.sweep_string_iterator()) if o.is_sweep_override() else [o.get_value_element_as_str()]
+        choices.append([f"{key}={v}" for v in values])
+    return [list(combo) for combo in itertools.product(*choices)]
+
+
+def preflight(config_name: str, argv: list[str]) -> None:
+    """Compose and validate the config of every job the command line asks for, before Hydra runs.
+
+    Catches unknown group options (`hardware=foo`), type errors and range errors as one line and
+    exit code 2, so a sweep is refused as a whole rather than failing at job 37.
+    """
+    if any(a in ("--help", "-h", "--hydra-help", "--info", "-i", "--cfg", "-c", "--shell-completion", "-sc",
+                 "--config-path", "-cp", "--config-name", "-cn", "--config-dir", "-cd") for a in argv):
+        return  # Hydra's own modes and alternative configs: let Hydra handle them
+    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    multirun = "-m" in argv or "--multirun" in argv
+    try:
+        jobs = expand_sweep(overrides) if multirun else [overrides]
+    except HydraException as e:
+        refuse(ConfigError(f"override: {one_line(e)}"))
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        for job in jobs:
+            try:
+                cfg = compose(config_name=config_name, overrides=job)
+                validate(cfg)
+            except ConfigError as e:
+                refuse(e)
+            except HydraException as e:
+                refuse(ConfigError(one_line(e)))
+    GlobalHydra.instance().clear()
