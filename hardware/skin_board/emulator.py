@@ -14,7 +14,7 @@ Faults, drawn per frame from a numpy Generator seeded with `seed` or injected ex
   stalls            ((at_s, duration_ms), ...) after start(): nothing written meanwhile; the
                     frames produced during a stall are lost
   unplug_at_s       close the pty this long after start() (the driver's link is lost)
-and at run time `inject(kind, n)` (the next n frames get fault `kind`), `stall(duration_ms)`,
+and at run time `inject(*kinds)` (an explicit schedule for the next frames), `stall(duration_ms)`,
 `unplug()`. `sent` keeps the latest frames written intact; `counts` what was injected.
 """
 
@@ -71,7 +71,7 @@ class SkinBoardEmulator:
         self.counts: Counter = Counter()  # frames written, faults injected, frames lost to stalls/overflow
         self.path: str | None = None
         self._lock = threading.Lock()
-        self._forced: deque[str] = deque()
+        self._forced: deque[str | None] = deque()
         self._stall_until = 0.0
         self._unplug = threading.Event()
         self._stop = threading.Event()
@@ -114,12 +114,20 @@ class SkinBoardEmulator:
         self.stop()
 
     # ---- explicit faults ---------------------------------------------------------------------
-    def inject(self, kind: str, n: int = 1) -> None:
-        """Give the next n frames fault `kind` (one of FAULT_KINDS)."""
-        if kind not in FAULT_KINDS:
-            raise ValueError(f"fault kind {kind!r}: choose one of {FAULT_KINDS}")
+    def inject(self, *kinds: str | None) -> None:
+        """Schedule the next frames: one entry per frame, a fault kind (FAULT_KINDS) or None for an
+        intact frame; e.g. inject(*["bit_flip", None] * 5) corrupts every other frame of the next 10."""
+        for kind in kinds:
+            if kind is not None and kind not in FAULT_KINDS:
+                raise ValueError(f"fault kind {kind!r}: choose one of {FAULT_KINDS} or None")
         with self._lock:
-            self._forced.extend([kind] * n)
+            self._forced.extend(kinds)
+
+    @property
+    def scheduled(self) -> int:
+        """Entries of the inject() schedule not yet applied."""
+        with self._lock:
+            return len(self._forced)
 
     def stall(self, duration_ms: float) -> None:
         """Write nothing for duration_ms from now (frames produced meanwhile are lost)."""
@@ -159,6 +167,9 @@ class SkinBoardEmulator:
         with self._lock:
             if self._forced:
                 return self._forced.popleft()
+        return self._draw_fault()
+
+    def _draw_fault(self) -> str | None:
         for kind in FAULT_KINDS:
             p = self.p[kind]
             if p > 0 and self.rng.random() < p:

@@ -130,6 +130,7 @@ class FrameParser:
         self._lost = True
 
     def _reject(self) -> None:
+        self.skipped_bytes += 1  # the candidate's first byte; the search goes on after it
         if self._synced:
             self.corrupt += 1
         self._lost = True
