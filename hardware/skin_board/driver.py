@@ -60,14 +60,15 @@ class SkinBoardReader(SkinReader):
     # ---- Device ------------------------------------------------------------------------------
     def _connect(self) -> None:
         cfg = self.cfg
+        if self._thread is not None:  # connect() again without disconnect(): start afresh
+            self._shutdown()
         deadline = time.monotonic() + cfg.connect_timeout_s
         ser = self._open(deadline)
         if self._ever_connected:
             self.health.reconnects += 1
         self._ever_connected = True
+        # the unwrapper and the last seq carry over: frames missed while disconnected count as lost
         self.parser.reset()
-        self._unwrap.reset()
-        self._last_seq = None
         self._last_frame_ns = None
         self._link_error = None
         self._first_frame.clear()

@@ -144,6 +144,25 @@ def test_unplug_is_reported_as_link_lost(board):
         SkinBoardReader(SkinBoardConfig(port=emu.path, connect_timeout_s=0.2)).connect()
 
 
+def test_reconnect_continues_the_sequence(board):
+    emu, drv, c = board()
+    assert c.until(lambda: len(c.frames) >= 20)
+    drv.disconnect()
+    last = c.frames[-1].seq
+    n_sent = len(emu.sent)
+    deadline = time.monotonic() + 5.0
+    while len(emu.sent) < n_sent + 20 and time.monotonic() < deadline:  # the board streams on meanwhile
+        time.sleep(0.01)
+    drv.connect()
+    n = len(c.frames)
+    assert c.until(lambda: len(c.frames) >= n + 20)
+    after = c.seqs()[n:]
+    assert drv.health.reconnects == 1
+    assert after[0] > last + 10 and after == list(range(after[0], after[0] + len(after)))
+    assert drv.health.lost == after[0] - last - 1  # missed while disconnected
+    assert_matches_twin(c.frames, emu)
+
+
 def test_ring_keeps_the_newest_frames(board):
     emu, drv, c = board(ring_frames=64)  # not read for a while: the oldest frames go, counted
     deadline = time.monotonic() + 5.0
