@@ -199,7 +199,7 @@ def corrupt(data: bytes, ops) -> bytes:
     return bytes(buf)
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=400, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6), ops=st.lists(_op, max_size=8),
        chunks=st.lists(st.integers(1, 2 * FRAME_LEN), min_size=1, max_size=8))
 def test_fuzz_corruption_never_raises_nor_invents_frames(seed, n, ops, chunks):
