@@ -64,9 +64,6 @@ class SkinBoardReader(SkinReader):
             self._shutdown()
         deadline = time.monotonic() + cfg.connect_timeout_s
         ser = self._open(deadline)
-        if self._ever_connected:
-            self.health.reconnects += 1
-        self._ever_connected = True
         # the unwrapper and the last seq carry over: frames missed while disconnected count as lost
         self.parser.reset()
         self._last_frame_ns = None
@@ -85,6 +82,9 @@ class SkinBoardReader(SkinReader):
                 f"({self.bytes_received} bytes read, {p.crc_failures} CRC failures, {p.bad_version} frames of "
                 f"another protocol version{', ' + why if why else ''}); check that the board is powered and runs "
                 f"protocol version {VERSION} firmware, and that {cfg.port} is the board")
+        if self._ever_connected:
+            self.health.reconnects += 1
+        self._ever_connected = True
         log.info("skin board on %s streaming (first frame seq %s)", cfg.port, self._last_seq)
 
     def _open(self, deadline: float) -> serial.Serial:
