@@ -1,0 +1,210 @@
+"""Skin board driver against the pty emulator on the realtime simulated world, faults included."""
+
+import os
+import threading
+import time
+import tty
+
+import numpy as np
+import pytest
+
+from hardware.interfaces import DeviceError
+from hardware.skin_board import SkinBoardConfig, SkinBoardEmulator, SkinBoardReader
+from hardware.skin_board.wire import SEQ_MOD, encode_frame
+from layerskin_exp.config import ConfigError
+
+
+class Collector:
+    """Reads the driver until a condition holds (a generous deadline, never a timing assertion)."""
+
+    def __init__(self, drv):
+        self.drv = drv
+        self.frames = []
+
+    def until(self, cond, timeout_s=5.0):
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.frames += self.drv.read_available()
+            if cond():
+                return True
+            time.sleep(0.005)
+        return False
+
+    def seqs(self):
+        return [f.seq for f in self.frames]
+
+
+@pytest.fixture
+def board(realtime_world):
+    """Factory: (emulator, connected driver, collector) on a fresh realtime world."""
+    made = []
+
+    def make(seq_offset=0, ring_frames=8192, **faults):
+        rt = realtime_world("platform")
+        emu = SkinBoardEmulator(rt, seq_offset=seq_offset, **faults)
+        drv = SkinBoardReader(SkinBoardConfig(port=emu.start(), connect_timeout_s=3.0, ring_frames=ring_frames))
+        made.append((emu, drv))
+        drv.connect()
+        return emu, drv, Collector(drv)
+
+    yield make
+    for emu, drv in made:
+        drv.disconnect()
+        emu.stop()
+
+
+def assert_matches_twin(frames, emu, seq_offset=0):
+    sent = {f.seq + seq_offset: f for f in emu.sent}
+    for f in frames:
+        twin = sent[f.seq]
+        np.testing.assert_array_equal(f.superficial, twin.superficial)
+        np.testing.assert_array_equal(f.deep, twin.deep)
+        assert f.device_t_ns == twin.device_t_ns // 1000 * 1000  # µs on the wire
+
+
+def test_driver_reads_the_twins_frames(board):
+    emu, drv, c = board()
+    t0 = time.monotonic()
+    assert c.until(lambda: len(c.frames) >= 200)
+    elapsed = time.monotonic() - t0
+    assert emu.error is None
+    assert_matches_twin(c.frames, emu)
+    s = c.seqs()
+    assert s == list(range(s[0], s[0] + len(s)))  # contiguous, in order
+    assert len(s) <= 424 * elapsed * 1.5 + 50  # not more than the board can have sent
+    host = [f.host_t_ns for f in c.frames]
+    assert host == sorted(host) and host[-1] <= time.monotonic_ns()
+    dev = np.diff([f.device_t_ns for f in c.frames]) * 1e-6
+    assert 2.0 < np.median(dev) < 2.7  # one frame pair every ~2.36 ms of board time
+    assert drv.health.lost == drv.health.corrupt == drv.health.duplicate == drv.health.out_of_order == 0
+    assert drv.health.received >= len(s)
+    assert drv.fault(c.frames[-1].host_t_ns) is None
+    cal = drv.calibration()
+    assert cal["backend"] == "lab" and cal["n_taxels"] == 16 and cal["adc_bits"] == 12
+    assert cal["layers"] == ["superficial", "deep"] and cal["pitch_mm"] == 1.5
+
+
+def test_sequence_wrap_end_to_end(board):
+    offset = SEQ_MOD - 60  # the wire sequence number wraps after ~60 frames
+    emu, drv, c = board(seq_offset=offset)
+    assert c.until(lambda: len(c.frames) >= 150)
+    s = c.seqs()
+    assert s[0] < SEQ_MOD < s[-1]
+    assert s == list(range(s[0], s[0] + len(s)))
+    assert drv.health.lost == 0 and drv.health.out_of_order == 0
+    assert_matches_twin(c.frames, emu, seq_offset=offset)
+
+
+def test_injected_faults_are_counted(board):
+    emu, drv, c = board()
+    assert c.until(lambda: len(c.frames) >= 20)
+    schedule = ["bit_flip", None] * 4 + ["drop_byte", None] * 3 + ["insert_garbage", None] * 2 + \
+        ["drop_frame", None, "drop_frame", "drop_frame", None]
+    emu.inject(*schedule)
+    assert c.until(lambda: emu.scheduled == 0)
+    last = emu.sent[-1].seq
+    assert c.until(lambda: c.frames and c.frames[-1].seq >= last + 5)
+    # frames that never arrived intact show as sequence gaps, damage as corrupt events
+    assert drv.health.lost == 4 + 3 + 3
+    assert drv.health.corrupt == 4 + 3 + 2
+    assert drv.parser.crc_failures == 4 + 3  # a dropped byte shortens a frame: its CRC fails
+    assert_matches_twin(c.frames, emu)  # nothing damaged got through
+
+
+def test_random_faults_never_deliver_a_wrong_frame(board):
+    emu, drv, c = board(seed=3, p_bit_flip=0.05, p_drop_byte=0.05, p_insert_garbage=0.05, p_drop_frame=0.02)
+    assert c.until(lambda: len(c.frames) >= 300)
+    assert_matches_twin(c.frames, emu)
+    assert drv.health.corrupt > 0 and drv.health.lost > 0
+    s = c.seqs()
+    assert s == sorted(set(s))
+
+
+def test_stall_is_reported_then_clears(board):
+    emu, drv, c = board()
+    assert c.until(lambda: len(c.frames) >= 20)
+    emu.stall(300)
+    assert c.until(lambda: (drv.fault(time.monotonic_ns()) or "").startswith("skin stalled: no frame for"))
+    assert c.until(lambda: drv.fault(time.monotonic_ns()) is None and emu.counts["stalled_frames"] > 0)
+    n = len(c.frames)
+    assert c.until(lambda: len(c.frames) > n + 10)
+    assert drv.health.lost >= emu.counts["stalled_frames"] > 0  # frames of the stall never came
+
+
+def test_unplug_is_reported_as_link_lost(board):
+    emu, drv, c = board()
+    assert c.until(lambda: len(c.frames) >= 20)
+    emu.unplug()
+    assert c.until(lambda: "link lost" in (drv.fault(time.monotonic_ns()) or ""))
+    assert drv.fault(time.monotonic_ns()).startswith("skin: link lost (")
+    t0 = time.monotonic()
+    drv.disconnect()
+    assert time.monotonic() - t0 < 2.0 and not drv.is_connected
+    with pytest.raises(DeviceError, match=emu.path):  # the port went with the cable
+        SkinBoardReader(SkinBoardConfig(port=emu.path, connect_timeout_s=0.2)).connect()
+
+
+def test_reconnect_continues_the_sequence(board):
+    emu, drv, c = board()
+    assert c.until(lambda: len(c.frames) >= 20)
+    drv.disconnect()
+    last = c.frames[-1].seq
+    n_sent = len(emu.sent)
+    deadline = time.monotonic() + 5.0
+    while len(emu.sent) < n_sent + 20 and time.monotonic() < deadline:  # the board streams on meanwhile
+        time.sleep(0.01)
+    drv.connect()
+    n = len(c.frames)
+    assert c.until(lambda: len(c.frames) >= n + 20)
+    after = c.seqs()[n:]
+    assert drv.health.reconnects == 1
+    assert after[0] > last + 10 and after == list(range(after[0], after[0] + len(after)))
+    assert drv.health.lost == after[0] - last - 1  # missed while disconnected
+    assert_matches_twin(c.frames, emu)
+
+
+def test_ring_keeps_the_newest_frames(board):
+    emu, drv, c = board(ring_frames=64)  # not read for a while: the oldest frames go, counted
+    deadline = time.monotonic() + 5.0
+    while drv.ring_dropped == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    frames = drv.read_available()
+    assert len(frames) == 64 and drv.ring_dropped > 0
+    s = [f.seq for f in frames]
+    assert s == list(range(s[0], s[0] + 64))
+
+
+def test_connect_errors_name_the_port(tmp_path):
+    missing = str(tmp_path / "ttyACM9")
+    with pytest.raises(DeviceError, match="ttyACM9.*check the USB cable"):
+        SkinBoardReader(SkinBoardConfig(port=missing, connect_timeout_s=0.2)).connect()
+    master, slave = os.openpty()  # a port that sends only frames with a bad CRC
+    tty.setraw(slave)
+    sup = np.zeros((16, 16), np.uint16)
+    bad = b"noise" + encode_frame(0, 0, sup, sup)[:-1] + b"\x00"
+    done = threading.Event()
+
+    def babble():
+        while not done.wait(0.01):
+            os.write(master, bad)
+
+    t = threading.Thread(target=babble, daemon=True)
+    t.start()
+    try:
+        path = os.ttyname(slave)
+        drv = SkinBoardReader(SkinBoardConfig(port=path, connect_timeout_s=0.3))
+        with pytest.raises(DeviceError, match=f"{path}: no valid frame within 0.3 s .*[1-9][0-9]* CRC failures"):
+            drv.connect()
+        assert not drv.is_connected
+    finally:
+        done.set()
+        t.join()
+        os.close(master)
+        os.close(slave)
+
+
+@pytest.mark.parametrize("field,value", [("stall_timeout_s", 0.06), ("stall_timeout_s", 0.0), ("port", " "),
+                                         ("connect_timeout_s", 0), ("ring_frames", 10)])
+def test_config_rejects_bad_values(field, value):
+    with pytest.raises(ConfigError, match=f"hardware.skin_board.{field}"):
+        SkinBoardConfig(**{field: value})
