@@ -21,8 +21,9 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from layerskin_exp.sim.camera import MarkerImager, refine_marker_corners
+from layerskin_exp.sim.camera import MarkerImager
 from layerskin_exp.sim.rig_config import CameraConfig
+from layerskin_exp.vision import refine_marker_corners
 
 FACING = Rotation.from_rotvec([np.pi, 0.0, 0.0])
 

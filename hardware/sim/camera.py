@@ -14,19 +14,11 @@ from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.rig_config import CameraConfig
 from layerskin_exp.sim.world import World
 from layerskin_exp.types import MarkerDetection, Pose
+from layerskin_exp.vision import quat_xyzw
 
 # Camera axes in the skin frame at the home pose: looking down the skin normal onto the cover,
 # image x along skin x, image y along -skin y.
 R_SKIN_CAMERA = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
-
-
-def quat_xyzw(rvec: np.ndarray) -> np.ndarray:
-    """Unit quaternion (4,) x, y, z, w (w >= 0) of a rotation vector (3,) (angle up to pi)."""
-    x, y, z = float(rvec[0]), float(rvec[1]), float(rvec[2])
-    angle = math.sqrt(x * x + y * y + z * z)
-    # sin(angle / 2) / angle, by its series where the angle is tiny.
-    k = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(0.5 * angle) / angle
-    return np.array([x * k, y * k, z * k, math.cos(0.5 * angle)])
 
 
 class SimMarkerCamera(SimStreamMixin, MarkerCamera):

@@ -7,9 +7,10 @@ position axis, and the angle of R_est^T R_true.
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from layerskin_exp.sim import camera
-from layerskin_exp.sim.camera import MarkerImager, refine_marker_corners
+from layerskin_exp import vision
+from layerskin_exp.sim.camera import MarkerImager
 from layerskin_exp.sim.rig_config import CameraConfig
+from layerskin_exp.vision import refine_marker_corners
 
 FACING = Rotation.from_rotvec([np.pi, 0.0, 0.0])  # marker z toward the camera, marker y up in the image
 
@@ -171,7 +172,7 @@ def test_a_lost_track_falls_back_to_the_full_frame_and_a_missing_marker_is_reacq
     assert [d.marker_id for d in imager.detect(imager.render(one, None))] == [1]
     searches = imager.tracker.full_searches
     found_both = None
-    for k in range(camera.REACQUIRE_FRAMES + 1):
+    for k in range(vision.REACQUIRE_FRAMES + 1):
         if len(imager.detect(imager.render(jumped, None))) == 2:
             found_both = k
             break
@@ -284,8 +285,8 @@ def test_tracked_layer_pose_starts_from_the_last_frame_and_lands_where_a_fresh_s
     imager = MarkerImager(cfg)
     tracker = imager.tracker
     fresh_solves = []
-    ippe = camera.cv2.solvePnPGeneric
-    monkeypatch.setattr(camera.cv2, "solvePnPGeneric", lambda *a, **k: fresh_solves.append(1) or ippe(*a, **k))
+    ippe = vision.tracker.cv2.solvePnPGeneric
+    monkeypatch.setattr(vision.tracker.cv2, "solvePnPGeneric", lambda *a, **k: fresh_solves.append(1) or ippe(*a, **k))
     rng = np.random.default_rng(12)
     for poses in _moving_layer(cfg, 30, 12):
         dets = imager.detect(imager.render(poses, rng))

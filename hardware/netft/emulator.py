@@ -1,0 +1,194 @@
+"""A Net F/T box on loopback, backed by the simulated Mini40 (the SimForceTorque twin, 1 kHz).
+
+Covers: RDT requests (stop, real-time and buffered streaming, sample counts, software bias,
+latch reset accepted; the bias is the mean of the last BIAS_SAMPLES readings, taken here
+rather than by the twin, whose tare() would advance the world), one client at a time (the latest requester), records at the twin's rate
+with rdt_sequence from 1 per stream and ft_sequence from the twin's device clock at
+ft_sample_rate_hz, counts from a calibration, and optionally netftapi2.xml over HTTP.
+Not covered: the box's other settings (filters, output rate: the twin's rate is used),
+thresholds and the latch, TCP and EtherNet/IP interfaces.
+
+Fault injection (attributes, changeable while running): drop_every (drop every n-th record),
+stalled (stop sending while still accepting requests), status (status word put in every record).
+"""
+
+from __future__ import annotations
+
+import http.server
+import logging
+import socket
+import threading
+from collections import deque
+
+import numpy as np
+
+from hardware.netft import wire
+
+log = logging.getLogger(__name__)
+
+EMULATOR_SETUP = "platform"
+POLL_S = 0.001  # how often the emulator looks for requests and new twin samples
+BIAS_SAMPLES = 32  # the software bias takes the mean of the latest readings, as the twin's tare does
+DEFAULT_CALIBRATION = wire.Calibration(1_000_000.0, 1_000_000.0, "N", "N-m")
+
+
+class NetFTEmulator:
+    """rt: a started RealtimeWorld of the "platform" setup (its rig has the F/T twin).
+
+    http_port: None serves no calibration page; 0 picks a free port (see http_address).
+    records_per_packet: records per datagram in buffered mode (0x0003).
+    """
+
+    def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, http_port: int | None = None,
+                 calibration: wire.Calibration = DEFAULT_CALIBRATION, ft_sample_rate_hz: float = 7000.0,
+                 records_per_packet: int = 10, drop_every: int = 0, stalled: bool = False, status: int = 0) -> None:
+        self.rt = rt
+        self.host, self.port, self.http_port = host, port, http_port
+        self.calibration = calibration
+        self.ft_sample_rate_hz = float(ft_sample_rate_hz)
+        self.records_per_packet = int(records_per_packet)
+        self.drop_every, self.stalled, self.status = int(drop_every), bool(stalled), int(status)
+        self.http_address: str | None = None
+        self.requests: list[tuple[int, int]] = []  # (command, count) received, for tests
+        self._sock: socket.socket | None = None
+        self._http: http.server.HTTPServer | None = None
+        self._threads: list[threading.Thread] = []
+        self._stop = threading.Event()
+        # Stream state (emulator thread only).
+        self._client = None
+        self._mode: int | None = None  # CMD_START_REALTIME / CMD_START_BUFFERED while streaming
+        self._count = 0  # records asked for in this stream (0: endless)
+        self._rdt = 0  # rdt_sequence of the last record of this stream
+        self._made = 0  # records produced in this stream (dropped ones included)
+        self._pending: list[bytes] = []  # buffered-mode records not yet sent
+        self._bias = np.zeros(6, np.int64)
+        self._recent_raw: deque[np.ndarray] = deque(maxlen=BIAS_SAMPLES)  # unbiased counts, newest last
+
+    # ---- life cycle ------------------------------------------------------------------------
+    def start(self) -> str:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind((self.host, self.port))
+        sock.settimeout(POLL_S)
+        self._sock = sock
+        self.port = sock.getsockname()[1]
+        self._stop.clear()
+        if self.http_port is not None:
+            self._http = http.server.ThreadingHTTPServer((self.host, self.http_port), self._handler())
+            self.http_port = self._http.server_address[1]
+            self.http_address = f"{self.host}:{self.http_port}"
+            self._threads.append(threading.Thread(target=self._http.serve_forever, kwargs={"poll_interval": 0.05},
+                                                  name="netft-emu-http", daemon=True))
+        self._threads.append(threading.Thread(target=self._run, name="netft-emu", daemon=True))
+        for t in self._threads:
+            t.start()
+        return f"{self.host}:{self.port}"
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._http is not None:
+            self._http.shutdown()
+            self._http.server_close()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self._threads = []
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def __enter__(self) -> NetFTEmulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def _handler(self):
+        body = wire.calibration_xml(self.calibration, "Net F/T (emulated Mini40)").encode()
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_GET(self) -> None:  # noqa: N802 - http.server's name
+                if self.path.split("?")[0] != "/netftapi2.xml":
+                    self.send_error(404)
+                    return
+                self.send_response(200)
+                self.send_header("Content-Type", "text/xml")
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+            def log_message(self, *args) -> None:
+                pass
+
+        return Handler
+
+    # ---- serving ---------------------------------------------------------------------------
+    def _run(self) -> None:
+        sock = self._sock
+        while not self._stop.is_set():
+            try:
+                data, addr = sock.recvfrom(64)
+                self._request(data, addr)
+            except TimeoutError:
+                pass
+            except OSError as exc:
+                if self._stop.is_set():
+                    break
+                log.debug("netft emulator: %s", exc)  # e.g. a client gone (ICMP unreachable)
+            with self.rt.lock:
+                samples = self.rt.rig.ft.read_available()
+            for w in samples:
+                self._emit(w)
+            if self._mode == wire.CMD_START_BUFFERED and self._pending:
+                self._flush(force=False)
+
+    def _request(self, data: bytes, addr) -> None:
+        try:
+            command, count = wire.decode_request(data)
+        except wire.RDTError as exc:
+            log.warning("netft emulator: ignored request from %s: %s", addr, exc)
+            return
+        self.requests.append((command, count))
+        if command in (wire.CMD_START_REALTIME, wire.CMD_START_BUFFERED):
+            self._client, self._mode, self._count = addr, command, count
+            self._rdt = self._made = 0
+            self._pending = []
+        elif command == wire.CMD_STOP:
+            if addr == self._client:
+                self._mode = None
+        elif command == wire.CMD_BIAS:
+            if self._recent_raw:
+                self._bias = np.rint(np.mean(self._recent_raw, axis=0)).astype(np.int64)
+        elif command != wire.CMD_RESET_LATCH:
+            log.warning("netft emulator: unknown command 0x%04x from %s", command, addr)
+
+    def _emit(self, w) -> None:
+        raw = np.array(self.calibration.to_counts(w.force_n, w.torque_nm), np.int64)
+        self._recent_raw.append(raw)
+        if self._mode is None:
+            return
+        self._made += 1
+        self._rdt += 1
+        ft_seq = int(round(w.device_t_ns * self.ft_sample_rate_hz / 1e9))
+        counts = np.clip(raw - self._bias, -(1 << 31), (1 << 31) - 1).tolist()
+        record = wire.encode_record(self._rdt, ft_seq, self.status, counts)
+        dropped = self.drop_every > 0 and self._made % self.drop_every == 0
+        if not dropped and not self.stalled:
+            if self._mode == wire.CMD_START_BUFFERED:
+                self._pending.append(record)
+                self._flush(force=False)
+            else:
+                self._send(record)
+        if self._count and self._made >= self._count:  # a counted stream ends after its records
+            self._flush(force=True)
+            self._mode = None
+
+    def _flush(self, force: bool) -> None:
+        while len(self._pending) >= self.records_per_packet or (force and self._pending):
+            chunk, self._pending = self._pending[:self.records_per_packet], self._pending[self.records_per_packet:]
+            self._send(b"".join(chunk))
+
+    def _send(self, data: bytes) -> None:
+        try:
+            self._sock.sendto(data, self._client)
+        except OSError as exc:
+            log.debug("netft emulator: send to %s failed: %s", self._client, exc)
