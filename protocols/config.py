@@ -40,6 +40,9 @@ HARD = {
     # Robotiq Hand-E: 20-150 mm/s jaw speed, 50 mm stroke.
     "max_gripper_speed_mm_s": 150.0,
     "max_grip_depth_mm": 50.0,
+    # Summed counts of both layers near full scale mean most taxels are saturated: the sensor no
+    # longer measures what it carries.
+    "max_skin_load_fraction": 0.8,
 }
 # A 424 Hz rig: a loop faster than 1 ms drains nothing new; slower than 100 ms misses stops.
 CONTROL_PERIOD_S = (1e-3, 0.1)
@@ -68,6 +71,10 @@ class SafetyConfig:
     arm_max_rotation_deg: float = 40.0
     max_gripper_speed_mm_s: float = 50.0
     max_grip_depth_mm: float = 20.0
+    # The grip rig has no F/T sensor: its load guard is the skin's summed counts (both layers) as a
+    # fraction of full scale, checked on every frame. The study's deepest grip (15 mm) loads the
+    # simulated skin to ~0.2; 0.5 leaves room for it while stopping a closure that crushes the sensor.
+    max_skin_load_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         require(len(self.platform_min_mm) == 3 and len(self.platform_max_mm) == 3, "safety.platform_min_mm",
@@ -80,6 +87,8 @@ class SafetyConfig:
             value = getattr(self, key)
             require(0 < value <= HARD[key], f"safety.{key}", value,
                     f"must be > 0 and at most {HARD[key]} (a hard ceiling of this rig; no config can raise it)")
+        require(0 < self.max_skin_load_fraction <= HARD["max_skin_load_fraction"], "safety.max_skin_load_fraction",
+                self.max_skin_load_fraction, f"must be in (0, {HARD['max_skin_load_fraction']}] of full scale")
         for i, (lo, hi) in enumerate(zip(self.platform_min_mm, self.platform_max_mm, strict=True)):
             require(lo >= HARD["platform_min_mm"][i], "safety.platform_min_mm", self.platform_min_mm,
                     f"must stay within the platform's hard envelope {list(HARD['platform_min_mm'])} mm")

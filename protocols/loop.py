@@ -20,6 +20,10 @@ class DeviceFault(DeviceError):
     """A device failed, stalled or lost its link during a trial (motion has been stopped)."""
 
 
+class GuardTripped(RuntimeError):
+    """A safety guard stopped the motion and the protocol cannot go on with this trial."""
+
+
 class DeviceTimeout(DeviceError):
     """A device did not finish what it was told within the allowed time (motion has been stopped)."""
 
@@ -27,18 +31,24 @@ class DeviceTimeout(DeviceError):
 class ControlLoop:
     """Ticks of one trial: `period_s` of rig clock each, every sample drained into `log`."""
 
-    def __init__(self, log: TrialLog, period_s: float) -> None:
+    def __init__(self, log: TrialLog, period_s: float, trips_abort: bool = False) -> None:
+        """trips_abort: a guard trip ends the trial (raises GuardTripped) instead of being left to
+        the protocol to handle (the calibration protocol retracts and goes on)."""
+        self.trips_abort = trips_abort
         self.log = log
         self.rig = log.rig
         self.clock = log.rig.clock
         self.period_s = float(period_s)
 
     def check(self) -> None:
-        """Raise DeviceFault (after stopping all motion) if any device reports a fault."""
+        """Raise DeviceFault (after stopping all motion) if any device reports a fault, and
+        GuardTripped if a guard tripped and trips end the trial."""
         reason = self.rig.fault()
         if reason:
             self.rig.stop_motion()
             raise DeviceFault(reason)
+        if self.trips_abort and self.rig.tripped is not None:
+            raise GuardTripped(self.rig.tripped)
 
     def tick(self) -> tuple[list, list]:
         """One control period: sleep, drain, check faults. Returns the new (skin frames, wrenches)."""

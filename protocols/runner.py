@@ -146,7 +146,8 @@ class TrialLog:
         if rig.tripped is not None and rig.tripped is not self._noted_trip:  # whenever it happened
             self._noted_trip = rig.tripped
             # A limit trip is a safety event; a per-sample stop condition (press target) is not.
-            self.event("safety" if rig.tripped.startswith("force_limit") else "guard", rig.tripped)
+            self.event("safety" if rig.tripped.startswith(("force_limit", "skin_load_limit")) else "guard",
+                       rig.tripped)
         for dev in (rig.platform, rig.arm, rig.gripper):
             if dev is None:
                 continue
@@ -175,8 +176,9 @@ def _describe(exc: BaseException) -> str:
     if isinstance(exc, Terminated):
         return "terminated (SIGTERM)"
     text = str(exc).strip().splitlines()
-    if isinstance(exc, DeviceError) and text:  # the message names the device and what happened
-        return text[0]
+    if isinstance(exc, DeviceError) or type(exc).__name__ == "GuardTripped":
+        if text:  # the message names the device (or the guard) and what happened
+            return text[0]
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 

@@ -17,6 +17,8 @@ from layerskin_exp.types import Wrench
 from protocols.config import SafetyConfig
 
 FORCE_LIMIT = "force_limit"
+SKIN_LOAD_LIMIT = "skin_load_limit"
+SAFETY_TRIPS = (FORCE_LIMIT, SKIN_LOAD_LIMIT)
 
 
 class SafetyError(RuntimeError):
@@ -36,12 +38,22 @@ class Safety:
         self.unloading = False
         if rig.ft is not None:
             rig.add_guard(self._normal_force_guard)
+        else:  # no F/T sensor (the grip rig): the skin itself guards the load, on every frame
+            self._skin_full_scale = 2 * 256 * 4095
+            rig.add_guard(self._skin_load_guard, "skin")
 
     # ---- per-sample guard -----------------------------------------------------------------
     def _normal_force_guard(self, sample: Wrench) -> str | None:
         fz_n = float(sample.force_n[2])
         if fz_n > self.cfg.max_normal_force_n and not self.unloading:
             return f"{FORCE_LIMIT}: Fz={fz_n:.3f} N exceeds {self.cfg.max_normal_force_n} N"
+        return None
+
+    def _skin_load_guard(self, frame) -> str | None:
+        load = (int(frame.superficial.sum(dtype="int64")) + int(frame.deep.sum(dtype="int64"))) / self._skin_full_scale
+        if load > self.cfg.max_skin_load_fraction:
+            return (f"{SKIN_LOAD_LIMIT}: both layers at {100 * load:.1f} % of full scale exceed "
+                    f"safety.max_skin_load_fraction={self.cfg.max_skin_load_fraction}")
         return None
 
     # ---- command checks -------------------------------------------------------------------

@@ -53,6 +53,9 @@ class SkinBoardReader(SkinReader):
         self._link_error: str | None = None
         self._ever_connected = False
         self.bytes_received = 0
+        # on_frames(frames) is called in the receive thread with each batch as it arrives (the
+        # rig's skin guards); it must be quick and must not block.
+        self.on_frames = None
         self.ring_dropped = 0  # frames dropped because read_available() was not called for too long
         self._reported = (0, 0, 0)  # lost, corrupt, ring_dropped at the last log line
         self._last_log_ns = 0
@@ -185,6 +188,8 @@ class SkinBoardReader(SkinReader):
                 self.ring_dropped += overflow
             self._last_frame_ns = host_ns
             self._first_frame.set()
+            if self.on_frames is not None:
+                self.on_frames(frames)
         self._log_health(host_ns)
 
     def _log_health(self, now_ns: int) -> None:

@@ -164,3 +164,21 @@ def test_press_stops_on_the_sample_that_reaches_the_target(tmp_path):
     fz = s.streams["wrench"]["force_n"][:, 2]
     assert 4.0 <= fz.max() <= 4.0 + k * v / ft_hz + 1e-9
     assert "safety" not in s.streams["events"]["kind"]
+
+
+def test_grip_rig_skin_load_guard_aborts_a_crushing_grip(tmp_path):
+    # The fake skin reads 40 counts per mm of closure past the rod on every taxel: closing 20 mm past
+    # contact reaches 800/4095 ~ 0.195 of full scale, above a 0.15 limit; the guard stops the jaws.
+    cfg = GripDepthConfig(hardware={}, skin={}, data_root=str(tmp_path), grip_depth=20.0, progress=False)
+    cfg.safety.max_skin_load_fraction = 0.15
+    rig = _connected(gripper_rig(rod_contact_mm=30.0))
+    with pytest.raises(Exception, match="skin_load_limit"):
+        run_grip_trial(cfg, rig, META)
+    assert not rig.gripper.is_moving()
+    (partial,) = Path(tmp_path).glob("grip_depth/*/*.partial")
+    s = load_session(partial, warn=False)
+    assert s.outcome.startswith("aborted: skin_load_limit") and "safety" in s.streams["events"]["kind"]
+    # the jaws stopped within one skin frame of the first frame over the limit
+    level = s.streams["skin"]["superficial"][:, 0, 0] / 4095
+    over = np.flatnonzero(level > 0.15)
+    assert len(over) >= 1 and rig.gripper.opening_mm >= 30.0 - (level[over[0]] * 4095 / 40) - 0.2
