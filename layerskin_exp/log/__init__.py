@@ -18,14 +18,15 @@ host timeline, "host_t_ns", "device_t_ns", "seq"; all (N,) int64):
 Poses written with write_pose(p, topic) on other topics appear under their topic name.
 """
 
+from layerskin_exp.log.errors import SessionFileError, SessionInUseError
 from layerskin_exp.log.reader import Session, SessionWarning, load_session
-from layerskin_exp.log.scan import SessionFileError
 from layerskin_exp.log.writer import SessionClosedError, SessionWriter
 
 __all__ = [
     "Session",
     "SessionClosedError",
     "SessionFileError",
+    "SessionInUseError",
     "SessionWarning",
     "SessionWriter",
     "load_session",

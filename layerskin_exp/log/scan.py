@@ -26,6 +26,8 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Metadata, Schema
 from numpy.lib.stride_tricks import sliding_window_view
 
+from layerskin_exp.log.errors import SessionFileError
+
 MAGIC = b"\x89MCAP0\r\n"
 
 # Message record layout inside a chunk: opcode u8, length u64, channel u16, sequence u32,
@@ -43,10 +45,6 @@ MESSAGE_HEADER = np.dtype(
 HEADER_BYTES = MESSAGE_HEADER.itemsize  # 31
 _THREADS = max(1, min(4, os.cpu_count() or 1))  # for chunk decompression
 _BYTES_PER_THREAD = 4 << 20  # smaller files decompress in the calling thread
-
-
-class SessionFileError(Exception):
-    """The file is not a readable layerskin session (not MCAP, empty, or foreign content)."""
 
 
 @dataclass
