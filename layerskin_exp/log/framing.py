@@ -160,14 +160,29 @@ def resync(buf, start: int, limit: int, hints=()) -> int | None:
 
 @dataclass
 class Summary:
-    """The summary section, trusted only when its CRC (if any) matches and every record parses."""
+    """The summary section, trusted only when its CRC (if any) matches and every record parses.
+
+    Chunk indexes (one per chunk, the bulk of the summary) are parsed when first asked for:
+    an intact file never needs them.
+    """
 
     start: int
+    buf: object = None
     channels: dict[int, Channel] = field(default_factory=dict)
     schemas: dict[int, Schema] = field(default_factory=dict)
-    chunk_indexes: list[ChunkIndex] = field(default_factory=list)
     statistics: Statistics | None = None
     metadata_indexes: list[MetadataIndex] = field(default_factory=list)
+    data_end: int | None = None  # position of the DataEnd record, just before the summary
+    data_crc: int = 0
+    _chunk_index_at: list[tuple[int, int]] = field(default_factory=list)
+    _chunk_indexes: list[ChunkIndex] | None = None
+
+    @property
+    def chunk_indexes(self) -> list[ChunkIndex]:
+        if self._chunk_indexes is None:
+            parsed = [parse_record(ChunkIndex, self.buf, p + 9, n) for p, n in self._chunk_index_at]
+            self._chunk_indexes = [ci for ci in parsed if ci is not None]
+        return self._chunk_indexes
 
 
 def read_footer(buf) -> tuple[int, int, int] | None:
@@ -194,25 +209,42 @@ def read_summary(buf, footer: tuple[int, int, int] | None, warnings: list[str]) 
     if crc and zlib.crc32(buf[start : pos + 25]) != crc:
         warnings.append("the summary section fails its CRC: summary ignored, the data section read in order")
         return None
-    out = Summary(start)
+    out = Summary(start, buf)
     p = start
     while p < pos:
-        rec = check_record(buf, p, pos)
-        if rec is None:
+        if crc:  # CRC-checked: the record framing is as written, chunk indexes can wait
+            if p + 9 > pos:
+                break
+            op, length = RECORD_HEAD.unpack_from(buf, p)
+            if p + 9 + length > pos:
+                warnings.append(f"summary record at byte {p} overruns the summary: summary ignored")
+                return None
+            if op == Opcode.CHUNK_INDEX:
+                out._chunk_index_at.append((p, length))
+                p += 9 + length
+                continue
+            parsed = parse_record(_PARSERS[op], buf, p + 9, length) if op in _PARSERS else True
+        else:
+            rec = check_record(buf, p, pos)
+            op, length, parsed = rec if rec is not None else (None, 0, None)
+        if parsed is None:
             warnings.append(f"summary record at byte {p} is malformed: summary ignored")
             return None
-        op, length, parsed = rec
         if op == Opcode.SCHEMA:
             out.schemas[parsed.id] = parsed
         elif op == Opcode.CHANNEL:
             out.channels[parsed.id] = parsed
         elif op == Opcode.CHUNK_INDEX:
-            out.chunk_indexes.append(parsed)
+            out._chunk_index_at.append((p, length))
         elif op == Opcode.STATISTICS:
             out.statistics = parsed
         elif op == Opcode.METADATA_INDEX:
             out.metadata_indexes.append(parsed)
         p += 9 + length
+    d = start - 13  # DataEnd: opcode, length 4, data-section CRC
+    if d >= 8 and RECORD_HEAD.unpack_from(buf, d) == (Opcode.DATA_END, 4):
+        out.data_end = d
+        (out.data_crc,) = struct.unpack_from("<I", buf, d + 9)
     return out
 
 

@@ -28,7 +28,7 @@ import lz4.frame
 import numpy as np
 import zstandard
 from mcap.opcode import Opcode
-from mcap.records import Channel, Schema
+from mcap.records import Channel, Metadata, Schema
 from numpy.lib.stride_tricks import sliding_window_view
 
 from layerskin_exp.log.errors import SessionFileError
@@ -37,6 +37,7 @@ from layerskin_exp.log.framing import (
     ChunkHead,
     Summary,
     check_record,
+    parse_chunk_head,
     parse_record,
     read_footer,
     read_summary,
@@ -160,14 +161,30 @@ class _Walk:
     cut_off: bool = False
 
 
-def _walk(buf, limit: int, hints: list[int], warnings: list[str]) -> _Walk:
+def _trusted_record(buf, pos: int, limit: int):
+    """Record at pos in a data section whose CRC matched: framing as written, parse what is used."""
+    if pos + 9 > limit:
+        return None
+    op, length = struct.unpack_from("<BQ", buf, pos)
+    if op == Opcode.CHUNK:
+        parsed = parse_chunk_head(buf, pos, length)
+    elif op in (Opcode.METADATA, Opcode.CHANNEL, Opcode.SCHEMA):
+        parsed = parse_record({Opcode.METADATA: Metadata, Opcode.CHANNEL: Channel, Opcode.SCHEMA: Schema}[op],
+                              buf, pos + 9, length)
+    else:
+        parsed = True
+    return None if parsed is None else (op, length, parsed)
+
+
+def _walk(buf, limit: int, hints, warnings: list[str], trusted: bool = False) -> _Walk:
     w = _Walk()
     pos = 8
     CHUNK, MINDEX, META = Opcode.CHUNK, Opcode.MESSAGE_INDEX, Opcode.METADATA
+    check = _trusted_record if trusted else check_record
     while pos < limit:
-        rec = check_record(buf, pos, limit)
+        rec = check(buf, pos, limit)
         if rec is None:
-            nxt = resync(buf, pos + 1, limit, hints)
+            nxt = resync(buf, pos + 1, limit, hints())
             w.bad.append((pos, nxt))
             if nxt is None:
                 head = struct.unpack_from("<BQ", buf, pos) if pos + 9 <= limit else None
@@ -218,12 +235,18 @@ def _scan(path, buf) -> McapScan:
     summary = read_summary(buf, footer, warnings)
     damaged = footer is not None and footer[1] != 0 and summary is None
     limit = summary.start if summary else n
-    by_offset = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes} if summary else {}
-    w = _walk(buf, limit, sorted(by_offset), warnings)
+    # A data section whose CRC matches is exactly as written: its records need no checking.
+    intact = bool(summary and summary.data_end is not None and summary.data_crc
+                  and zlib.crc32(buf[: summary.data_end]) == summary.data_crc)
+
+    def hints():
+        return sorted(ci.chunk_start_offset for ci in summary.chunk_indexes) if summary else []
+
+    w = _walk(buf, limit, hints, warnings, trusted=intact)
     damaged |= bool(w.bad) and not (w.cut_off and footer is None)
     if footer is None and not w.cut_off:
         warnings.append("file ends without the MCAP footer (writer did not finish)")
-    if w.data_end is not None and w.data_end[1] and zlib.crc32(buf[: w.data_end[0]]) != w.data_end[1]:
+    if not intact and w.data_end is not None and w.data_end[1] and zlib.crc32(buf[: w.data_end[0]]) != w.data_end[1]:
         damaged = True
         warnings.append("the data section fails its CRC: a record outside the chunks (metadata or "
                         "message indexes) is damaged")
@@ -238,7 +261,8 @@ def _scan(path, buf) -> McapScan:
     # the chunk header. A chunk the index lists but the walk never reached is lost.
     lost: list[Lost] = []
     found = {c.offset for c in w.chunks}
-    for ci in summary.chunk_indexes if summary else []:
+    by_offset = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes} if summary and not intact else {}
+    for ci in by_offset.values():
         if ci.chunk_start_offset not in found:
             lost.append(Lost(ci.message_start_time, ci.message_end_time, None,
                              f"chunk at byte {ci.chunk_start_offset} lies in damaged bytes"))
@@ -250,6 +274,8 @@ def _scan(path, buf) -> McapScan:
             damaged = True
 
     data, base, good, why = _decompress_all(buf, w.chunks)
+    if intact and not good.all():  # chunk data damaged inside an intact section: cannot be, but say so
+        by_offset = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
     index_counts = _index_counts(w.index)
     for i in np.flatnonzero(~good).tolist():
         c = w.chunks[i]
@@ -523,14 +549,11 @@ def _message_tables(data, base, good, index, buf, channels, schemas, warnings):
     """
     n = len(good)
     mv = memoryview(buf)
-    entries = [(c, cid, s, ln) for c, cid, s, ln in index if good[c]]
-    offs, cids = [], []
-    for c, cid, s, ln in entries:
-        pairs = np.frombuffer(mv[s : s + ln], "<u8").reshape(-1, 2)
-        offs.append(base[c] + pairs[:, 1].astype(np.int64))
-        cids.append(np.full(pairs.shape[0], cid, np.int64))
-    off = np.concatenate(offs) if offs else np.zeros(0, np.int64)
-    cid = np.concatenate(cids) if cids else np.zeros(0, np.int64)
+    entries = [(c, k, s, ln) for c, k, s, ln in index if good[c]]
+    pairs = np.frombuffer(b"".join([mv[s : s + ln] for _, _, s, ln in entries]), "<u8").reshape(-1, 2)
+    counts = np.array([ln // 16 for *_, ln in entries], np.int64)
+    off = np.repeat(base[np.array([c for c, *_ in entries], np.int64)], counts) + pairs[:, 1].astype(np.int64)
+    cid = np.repeat(np.array([k for _, k, *_ in entries], np.int64), counts)
     # Offsets are read from the file: anything outside the good chunks' data is damage.
     chunk_of = np.searchsorted(base, off, side="right") - 1
     inside = (off >= 0) & (chunk_of >= 0) & (chunk_of < n)
