@@ -33,10 +33,10 @@ from analysis.linear import LinearForceModel, linear_features
 from analysis.markdown import write_markdown
 from analysis.metrics import mae, r2_score, split_trials
 from analysis.preprocess import layer_scale, two_layer_features
-from analysis.sessions import Campaign, load_campaign
+from analysis.sessions import Campaign, load_campaign, sessions_problem
 from analysis.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
 from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
-from layerskin_exp.cli import preflight, refuse
+from layerskin_exp.cli import EXIT_CONFIG, preflight, refuse
 from layerskin_exp.config import SkinConfig, validate
 
 AXES = ("Fx", "Fy", "Fz")
@@ -83,7 +83,9 @@ class Analysis:
         self.results["inputs"] = {"sessions_dir": str(self.cfg.sessions), "files": camp.n_files,
                                   "calibration_trials": len(camp.calibration), "press_trials": n_press,
                                   "slide_trials": len(camp.calibration) - n_press, "grip_trials": len(camp.grip),
-                                  "skipped": dict(camp.skipped)}
+                                  "skipped": dict(camp.skipped),
+                                  "skipped_files": [{"file": f.name, "reason": f.reason, "detail": f.detail}
+                                                    for f in camp.skipped_files]}
         # Per-layer scale from the calibration campaign (else the grip sessions), applied to all.
         src = [t.maps for t in camp.calibration] or [t.maps for t in camp.grip]
         if not src:
@@ -334,6 +336,11 @@ class Analysis:
         self.results["figures"] = self.figures
         (self.out / "results.json").write_text(json.dumps(_clean(self.results), indent=1))
         write_markdown(self.out / "report.md", _clean(self.results), self.figures)
+        skipped = self.results["inputs"].get("skipped_files")
+        if skipped:
+            with open(self.out / "report.md", "a") as fh:
+                fh.write("\n## Skipped files\n\n" + "".join(
+                    f"- `{f['file']}`: {f['reason']}{': ' + f['detail'] if f['detail'] else ''}\n" for f in skipped))
 
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
@@ -355,18 +362,47 @@ def run_report(sessions, out, analysis: AnalysisConfig | None = None, skin: Skin
                                  skin=skin or SkinConfig())).run()
 
 
+def _out_problem(out) -> str:
+    """Why out= cannot hold the report ('' if it can); creates the folder."""
+    try:
+        Path(out).mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        return f"out={out}: exists and is not a folder; point out= at a folder for the report"
+    except OSError as exc:
+        return f"out={out}: cannot create the report folder ({exc.strerror or exc})"
+    if not os.access(out, os.W_OK):
+        return f"out={out}: not writable"
+    return ""
+
+
 @hydra.main(version_base=None, config_path=CONF_DIR, config_name="report")
 def main(cfg: DictConfig) -> None:
     try:
         rc: ReportConfig = validate(cfg)
     except ValueError as e:
         refuse(e)
+    problem = sessions_problem(rc.sessions) or _out_problem(rc.out)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        sys.exit(EXIT_CONFIG)
     if rc.analysis.cnn.torch_threads is None:
         rc.analysis.cnn.torch_threads = os.cpu_count()
     res = Analysis(rc).run()
     print(f"report written to {Path(rc.out) / 'report.md'} ({len(res['skipped'])} section(s) skipped)")
 
 
+def _check_command_line(argv: list[str]) -> None:
+    """sessions=/out= given on the command line are checked before Hydra starts (Hydra makes
+    its run folder under out= first and would fail there with a traceback)."""
+    for arg in argv:
+        key, _, value = arg.partition("=")
+        problem = {"sessions": sessions_problem, "out": _out_problem}.get(key.lstrip("+"), lambda v: "")(value)
+        if problem:
+            print(f"error: {problem}", file=sys.stderr)
+            sys.exit(EXIT_CONFIG)
+
+
 if __name__ == "__main__":
+    _check_command_line(sys.argv[1:])
     preflight("report", sys.argv[1:])
     main()

@@ -6,6 +6,8 @@ downsampled skin timeline), so a whole campaign fits in memory.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import multiprocessing
 import os
 import warnings
@@ -33,6 +35,7 @@ class CalibrationTrial:
     t_s: np.ndarray
     maps: np.ndarray
     force_n: np.ndarray
+    identity: str = ""
 
 
 @dataclass
@@ -52,6 +55,7 @@ class GripTrial:
     vision_ref: np.ndarray
     vision_t_s: np.ndarray
     vision_sig: np.ndarray
+    identity: str = ""
 
     @property
     def grip_depth_mm(self) -> float:
@@ -63,19 +67,60 @@ class GripTrial:
 
 
 @dataclass
+class Skipped:
+    """A file the analysis did not use: a short reason (counted) and the detail (reported)."""
+
+    name: str
+    reason: str
+    detail: str = ""
+
+
+@dataclass
 class Campaign:
+    """skipped: reason -> count; skipped_files: every file not used, by name, with the detail
+    (the reader's error, the damage, the trial it duplicates)."""
+
     calibration: list[CalibrationTrial] = field(default_factory=list)
     grip: list[GripTrial] = field(default_factory=list)
-    skipped: Counter = field(default_factory=Counter)  # reason -> count
+    skipped: Counter = field(default_factory=Counter)
+    skipped_files: list[Skipped] = field(default_factory=list)
     n_files: int = 0
 
 
+def sessions_problem(sessions) -> str:
+    """Why `sessions=` cannot be read ('' if it can): a folder of .mcap files, or one .mcap file."""
+    p = Path(sessions)
+    if not p.exists():
+        return f"sessions={p}: no such file or folder; point sessions= at a folder of .mcap files or one .mcap file"
+    if p.is_file() and p.suffix != ".mcap":
+        return f"sessions={p}: a file that is not a .mcap session; point sessions= at a folder or a .mcap file"
+    if not os.access(p, os.R_OK):
+        return f"sessions={p}: not readable (permissions)"
+    return ""
+
+
 def discover(root) -> list[Path]:
-    """Every *.mcap under root, recursively, sorted."""
+    """Every *.mcap under root, recursively, sorted; root itself if it is a .mcap file."""
     root = Path(root)
-    if not root.exists():
-        raise FileNotFoundError(f"sessions={root}: no such folder; point sessions= at a folder of .mcap files")
+    problem = sessions_problem(root)
+    if problem:
+        raise FileNotFoundError(problem)
+    if root.is_file():
+        return [root]
     return sorted(root.rglob("*.mcap"))
+
+
+def trial_identity(metadata: dict, labels: dict) -> str:
+    """What makes two files the same trial: metadata["identity"] when the protocol stored one,
+    else the protocol, the labels and a hash of the resolved config."""
+    if metadata.get("identity"):
+        return f"identity:{metadata['identity']}"
+    config = json.dumps(metadata.get("config", {}), sort_keys=True, default=str)
+    return "|".join((
+        str(labels.get("protocol")),
+        json.dumps(labels, sort_keys=True, default=str),
+        hashlib.sha256(config.encode()).hexdigest()[:16],
+    ))
 
 
 def _skin_counts(skin: dict) -> np.ndarray:
@@ -170,27 +215,40 @@ def _grip_trial(s, name, pp: PreprocessConfig) -> GripTrial | str:
 STREAMS = ("skin", "wrench", "tcp", "markers", "events")
 
 
-def load_trial(path, root, pp: PreprocessConfig) -> CalibrationTrial | GripTrial | str:
-    """Read one session file and reduce it to a trial, or return why it is skipped."""
+def load_trial(path, root, pp: PreprocessConfig) -> CalibrationTrial | GripTrial | Skipped:
+    """Read one session file and reduce it to a trial, or say why it is skipped. Never raises on
+    a bad file: one bad input must not stop a whole report."""
     path = Path(path)
+    root = Path(root)
+    name = str(path.relative_to(root if root.is_dir() else root.parent))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SessionWarning)
             s = load_session(path, streams=STREAMS, warn=False)
-    except SessionFileError:
-        return "unreadable file"
-    if s.outcome != "complete":
-        return "outcome not complete"
+    except SessionFileError as exc:
+        return Skipped(name, "unreadable file", str(exc))
+    if s.damaged:
+        lost = "; ".join(x.describe() for x in s.lost[:3]) or "; ".join(s.warnings[:2])
+        return Skipped(name, "damaged file", f"{s.chunks_skipped} chunk(s) skipped: {lost}")
+    if not s.complete:
+        return Skipped(name, "outcome not complete", f"outcome {s.outcome!r}")
     skin = s.streams.get("skin")
     if skin is None or len(skin["t_ns"]) < 2 * pp.downsample + pp.ma_window:
-        return "no or too short skin stream"
+        return Skipped(name, "no or too short skin stream")
     proto = s.labels.get("protocol")
-    name = str(path.relative_to(root))
-    if proto == "force_calibration":
-        return _calibration_trial(s, name, pp)
-    if proto == "grip_depth":
-        return _grip_trial(s, name, pp)
-    return f"unknown protocol {proto!r}"
+    try:
+        if proto == "force_calibration":
+            trial = _calibration_trial(s, name, pp)
+        elif proto == "grip_depth":
+            trial = _grip_trial(s, name, pp)
+        else:
+            return Skipped(name, f"unknown protocol {proto!r}")
+    except Exception as exc:  # noqa: BLE001 - the report carries on without this trial, saying why
+        return Skipped(name, "cannot be analysed", f"{type(exc).__name__}: {exc}")
+    if isinstance(trial, str):
+        return Skipped(name, trial)
+    trial.identity = trial_identity(s.metadata, s.labels)
+    return trial
 
 
 def idle_cores() -> int:
@@ -215,7 +273,10 @@ def _pool_workers(workers: int | None, n_files: int) -> int:
 
 def load_campaign(root, pp: PreprocessConfig | None = None, progress: bool = True,
                   workers: int | None = None) -> Campaign:
-    """Read and reduce every complete session under root; count what was skipped and why.
+    """Read and reduce every complete session under root (a folder, or one .mcap file); count
+    what was skipped and why, and name each skipped file. A trial present more than once (a
+    copy in another folder) is used once: the first in sorted order; the others are skipped as
+    duplicates (see trial_identity).
 
     workers: processes reading files in parallel (None: one per idle core, see idle_cores; 1: in
     this process). Trials keep the sorted file order whatever the number of workers.
@@ -233,12 +294,18 @@ def load_campaign(root, pp: PreprocessConfig | None = None, progress: bool = Tru
         # spawn, not fork: the parent may hold torch/OpenMP threads that a forked child would inherit.
         pool = ProcessPoolExecutor(n_workers, mp_context=multiprocessing.get_context("spawn"))
         results = pool.map(load_trial, paths, repeat(root), repeat(pp), chunksize=4)
+    seen: dict[str, str] = {}
     try:
         for trial in results:
             bar.update()
-            if isinstance(trial, str):
-                camp.skipped[trial] += 1
-            elif isinstance(trial, CalibrationTrial):
+            if not isinstance(trial, Skipped) and trial.identity in seen:
+                trial = Skipped(trial.name, "duplicate trial", f"same trial as {seen[trial.identity]}")
+            if isinstance(trial, Skipped):
+                camp.skipped[trial.reason] += 1
+                camp.skipped_files.append(trial)
+                continue
+            seen[trial.identity] = trial.name
+            if isinstance(trial, CalibrationTrial):
                 camp.calibration.append(trial)
             else:
                 camp.grip.append(trial)

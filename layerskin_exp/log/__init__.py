@@ -16,16 +16,26 @@ host timeline, "host_t_ns", "device_t_ns", "seq"; all (N,) int64):
     camera   image (N, H, W) uint8 (or a list if sizes differ)
     events   kind, message list[str], detail list[dict]  (t_ns = host_t_ns, no seq)
 Poses written with write_pose(p, topic) on other topics appear under their topic name.
+
+One live writer per file: SessionWriter holds an OS lock on its file until close; a second
+writer raises SessionInUseError naming the first (pid, host, start time).
+
+A damaged file is read around the damage: Session.lost lists what could not be read (time span,
+messages per stream, why), Session.damaged says any damage was found, and Session.complete is
+true only for a finished, undamaged file whose outcome is "complete". Anything that cannot be
+read at all raises SessionFileError naming the file.
 """
 
-from layerskin_exp.log.reader import Session, SessionWarning, load_session
-from layerskin_exp.log.scan import SessionFileError
+from layerskin_exp.log.errors import SessionFileError, SessionInUseError
+from layerskin_exp.log.reader import LostRange, Session, SessionWarning, load_session
 from layerskin_exp.log.writer import SessionClosedError, SessionWriter
 
 __all__ = [
+    "LostRange",
     "Session",
     "SessionClosedError",
     "SessionFileError",
+    "SessionInUseError",
     "SessionWarning",
     "SessionWriter",
     "load_session",

@@ -19,6 +19,21 @@ def describe(s: Session) -> str:
         f"{s.path}",
         f"  outcome: {s.outcome or 'none (writer did not close the file)'}   complete: {s.complete}",
     ]
+    if s.damaged:
+        known = [x for x in s.lost if x.messages is not None]
+        n_lost = sum(sum(x.messages.values()) for x in known)
+        more = " (and an unknown number more)" if len(known) < len(s.lost) else ""
+        lines.append(
+            f"  DAMAGED: {s.chunks_skipped} chunk(s) skipped, {n_lost} message(s) lost{more} in "
+            f"{len(s.lost)} range(s); everything else was read. `recover` rewrites the file around it."
+        )
+        firsts = [a["host_t_ns"][0] for a in s.streams.values() if len(a["host_t_ns"])]
+        for x in s.lost:
+            at = ""
+            if firsts and x.start_ns is not None and x.end_ns is not None:
+                t0 = int(min(firsts))
+                at = f" [{(x.start_ns - t0) / 1e9:.3f} .. {(x.end_ns - t0) / 1e9:.3f} s into the session]"
+            lines.append(f"  lost: {x.describe()}{at}")
     if "recovered" in s.metadata:
         lines.append(f"  recovered: {s.metadata['recovered']}")
     lines.append(f"  labels: {s.labels}")
@@ -72,7 +87,7 @@ def main(argv=None) -> int:
             else:
                 n = recover(args.input, args.output)
                 print(f"recovered {n} messages from {args.input} into {args.output} (marked incomplete)")
-    except (SessionFileError, FileExistsError, FileNotFoundError, ValueError) as exc:
+    except (SessionFileError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     return 0

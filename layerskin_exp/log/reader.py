@@ -12,7 +12,8 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from layerskin_exp.log import schema as S
-from layerskin_exp.log.scan import ChannelMessages, McapScan, SessionFileError, scan
+from layerskin_exp.log.errors import SessionFileError
+from layerskin_exp.log.scan import ChannelMessages, Lost, McapScan, scan
 from layerskin_exp.sync import ClockMap, estimate_clock_map
 from layerskin_exp.types import SKIN_SHAPE
 
@@ -21,14 +22,45 @@ class SessionWarning(UserWarning):
     """A session file was damaged or incomplete; what could be read was read."""
 
 
+@dataclass(frozen=True)
+class LostRange:
+    """Data a damaged file did not give back.
+
+    start_ns / end_ns: host (log) time span the lost messages lie in, the timeline of every
+        stream's "host_t_ns" (None where nothing in the file bounds it);
+    messages: messages lost per stream ("skin" counts both layers' messages), None if unknown;
+    reason: what was damaged and where (byte offset).
+    """
+
+    start_ns: int | None
+    end_ns: int | None
+    messages: dict[str, int] | None
+    reason: str
+
+    def describe(self) -> str:
+        span = (
+            f"{self.start_ns} .. {self.end_ns} ns ({(self.end_ns - self.start_ns) / 1e6:.1f} ms)"
+            if self.start_ns is not None and self.end_ns is not None
+            else f"{self.start_ns if self.start_ns is not None else '?'} .. "
+            f"{self.end_ns if self.end_ns is not None else '?'} ns"
+        )
+        msgs = "unknown messages" if self.messages is None else f"messages {self.messages}"
+        return f"{span}, {msgs}: {self.reason}"
+
+
 @dataclass
 class Session:
     """One trial read back.
 
     streams: {name: {field: array}}; every stream has "t_ns" (N,) int64 on the common host
     timeline, "host_t_ns" and (except events) "device_t_ns" and "seq". See layerskin_exp.log.
-    complete: the writer finished the file and recorded outcome "complete".
+    complete: the writer finished the file, recorded outcome "complete", and nothing in the
+        file is damaged (a damaged trial is never complete, whatever its outcome says).
     clock_sync: {stream: ClockMap} used for t_ns (from the file, or estimated on reading).
+    lost: the data a damaged file did not give back (skipped chunks, records), see LostRange;
+        everything else was read.
+    damaged: any damage found, including damage that lost no messages (metadata, indexes).
+    chunks_skipped: chunks that could not be read.
     """
 
     path: Path
@@ -39,6 +71,9 @@ class Session:
     clock_sync: dict[str, ClockMap]
     streams: dict[str, dict]
     warnings: list[str] = field(default_factory=list)
+    lost: list[LostRange] = field(default_factory=list)
+    damaged: bool = False
+    chunks_skipped: int = 0
 
 
 def _decode_meta(values: dict) -> dict:
@@ -58,64 +93,103 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
     streams: names of the streams to decode (e.g. {"skin", "wrench"}); None decodes all. Streams
     not asked for are left out of Session.streams (names absent from the file are too).
 
-    Raises SessionFileError for an empty file, a non-MCAP file, or an MCAP file that is not a
-    layerskin session.
+    A damaged file is read around the damage: skipped chunks and records are listed in
+    Session.lost with their time ranges, and the session is not complete.
+
+    Raises SessionFileError (naming the file and the problem) for a missing, empty or non-MCAP
+    file, an MCAP file that is not a layerskin session, or one with nothing readable in it.
     """
     path = Path(path)
-    if not path.exists():
-        raise SessionFileError(f"{path}: no such session file")
     sc = scan(path)
     records = {name: _decode_meta(values) for name, values in sc.metadata}
     session_meta = records.get(S.META_SESSION, {})
+    ours = any(c.metadata.get("stream") for c in sc.channels.values())
     if session_meta.get("format") != S.FORMAT and not sc.has_footer and not sc.channels:
         raise SessionFileError(
-            f"{path}: cut off ({path.stat().st_size} bytes) before any session metadata or data; "
-            f"there is nothing to read"
+            f"{path}: cut off or damaged ({path.stat().st_size} bytes) before any session metadata or "
+            f"data; there is nothing to read"
         )
-    if session_meta.get("format") != S.FORMAT:
+    if session_meta.get("format") != S.FORMAT and not (ours and sc.damaged):
         topics = sorted({c.topic for c in sc.channels.values()})[:6]
         raise SessionFileError(
             f"{path}: an MCAP file but not a layerskin session (no '{S.META_SESSION}' metadata with "
             f"format={S.FORMAT!r}; topics {topics}). Open it with Foxglove or the mcap library instead."
         )
     msgs = list(sc.warnings)
+    if session_meta.get("format") != S.FORMAT:
+        msgs.append("the session metadata record is damaged; its channels are read without it")
     metadata = {k: v for k, v in session_meta.items() if k not in ("format", "format_version")}
     for name, values in records.items():
         if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC):
             metadata[name] = values
     outcome = records.get(S.META_OUTCOME, {}).get("outcome")
+    if outcome is not None and not isinstance(outcome, str):
+        msgs.append(f"outcome record holds {outcome!r}, not a string; treated as absent")
+        outcome = None
+    labels = records.get(S.META_LABELS, {})
     wanted = None if streams is None else ({streams} if isinstance(streams, str) else set(streams))
-    streams = _decode_streams(sc, msgs, wanted)
+    lost = [_lost_range(x, sc) for x in sc.lost]
+    streams = _decode_streams(sc, msgs, wanted, lost)
     stored = records.get(S.META_CLOCK_SYNC, {})
     clock_sync = {}
     for name, arrays in streams.items():
         if name == "events":
             arrays["t_ns"] = arrays["host_t_ns"].copy()
             continue
+        cmap = None
         if name in stored and isinstance(stored[name], dict):
-            cmap = ClockMap.from_dict(stored[name])
-        elif arrays["host_t_ns"].size:
+            try:
+                cmap = ClockMap.from_dict(stored[name])
+            except (KeyError, TypeError, ValueError) as exc:
+                msgs.append(f"stored clock map of {name} unreadable ({exc}); estimated from the data")
+        if cmap is None and arrays["host_t_ns"].size:
             cmap = estimate_clock_map(arrays["device_t_ns"], arrays["host_t_ns"])
-        else:
+        if cmap is None:
             arrays["t_ns"] = arrays["host_t_ns"].copy()
             continue
         clock_sync[name] = cmap
         arrays["t_ns"] = cmap.to_host(arrays["device_t_ns"])
-    complete = sc.has_footer and outcome == "complete"
+    damaged = sc.damaged or bool(lost)
+    complete = sc.has_footer and outcome == "complete" and not damaged
     if outcome is None:
         msgs.append("no outcome recorded: the writer did not close this session (crash or kill?)")
+    if damaged:
+        msgs.append(
+            f"damaged: {len(lost)} lost range(s), {sc.chunks_skipped} chunk(s) skipped; everything else "
+            f"was read" + (" (the file says complete; this copy is not)" if outcome == "complete" else "")
+        )
     if msgs and warn:
         _warnings.warn(f"{path}: " + "; ".join(msgs), SessionWarning, stacklevel=2)
     return Session(
         path=path,
         metadata=metadata,
-        labels=records.get(S.META_LABELS, {}),
+        labels=labels if isinstance(labels, dict) else {},
         outcome=outcome,
         complete=complete,
         clock_sync=clock_sync,
         streams=streams,
         warnings=msgs,
+        lost=lost,
+        damaged=damaged,
+        chunks_skipped=sc.chunks_skipped,
     )
+
+
+def _stream_of(sc: McapScan, cid: int) -> str:
+    c = sc.channels.get(cid)
+    if c is None:
+        return f"channel {cid}"
+    return c.metadata.get("stream") or c.topic
+
+
+def _lost_range(x: Lost, sc: McapScan) -> LostRange:
+    per = None
+    if x.messages is not None:
+        per = {}
+        for cid, k in x.messages.items():
+            name = _stream_of(sc, cid)
+            per[name] = per.get(name, 0) + int(k)
+    return LostRange(x.start_ns, x.end_ns, per, x.reason)
 
 
 # ------------------------------------------------------------------------------ per-stream decoding
@@ -130,12 +204,9 @@ def _times(m: ChannelMessages) -> dict:
     }
 
 
-def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None = None) -> dict[str, dict]:
+def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None, lost: list[LostRange]) -> dict:
     groups: dict[str, list[ChannelMessages]] = {}
-    for cid, m in sc.messages.items():
-        if m.channel is None:
-            msgs.append(f"channel {cid} has no channel record; its {m.count} messages are skipped")
-            continue
+    for _cid, m in sc.messages.items():
         stream = m.channel.metadata.get("stream")
         if stream is None:
             msgs.append(f"topic {m.channel.topic} is not a layerskin stream; skipped")
@@ -144,17 +215,27 @@ def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None = Non
             groups.setdefault(stream, []).append(m)
     streams = {}
     for stream, chans in groups.items():
-        if stream == "skin":
-            streams[stream] = _decode_skin(sc, chans, msgs)
-        elif stream == "markers":
-            streams[stream] = _decode_markers(sc, chans)
-        elif stream == "camera":
-            streams[stream] = _decode_camera(sc, chans[0])
-        elif chans[0].channel.message_encoding == "protobuf":
-            streams[stream] = _decode_poses(sc, chans[0])
-        else:
-            streams[stream] = _decode_json(sc, chans[0], stream)
+        try:
+            streams[stream] = _decode_stream(sc, stream, chans, msgs)
+        except Exception as exc:  # noqa: BLE001 - a damaged payload can fail any decoder; keep the rest
+            t = np.concatenate([m.header["log_time"] for m in chans]).astype(np.int64)
+            lost.append(LostRange(int(t.min()) if t.size else None, int(t.max()) if t.size else None,
+                                  {stream: int(t.size)}, f"stream {stream!r} cannot be decoded "
+                                  f"({type(exc).__name__}: {exc})"))
+            msgs.append(f"stream {stream!r} left out: its messages cannot be decoded ({type(exc).__name__}: {exc})")
     return streams
+
+
+def _decode_stream(sc: McapScan, stream: str, chans: list[ChannelMessages], msgs: list[str]) -> dict:
+    if stream == "skin":
+        return _decode_skin(sc, chans, msgs)
+    if stream == "markers":
+        return _decode_markers(sc, chans)
+    if stream == "camera":
+        return _decode_camera(sc, chans[0])
+    if chans[0].channel.message_encoding == "protobuf":
+        return _decode_poses(sc, chans[0])
+    return _decode_json(sc, chans[0], stream)
 
 
 def _gather_rows(data: np.ndarray, start: np.ndarray, nbytes: int) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Rewrite a session whose writer died (no footer) into a valid, indexed MCAP marked incomplete."""
+"""Rewrite a session whose writer died (no footer), or a damaged one, into a valid, indexed MCAP
+marked incomplete, keeping every message that can be read."""
 
 from __future__ import annotations
 
@@ -15,8 +16,10 @@ from layerskin_exp.log.scan import SessionFileError, scan
 def recover(src, dst) -> int:
     """Copy every readable record of `src` into a new MCAP file `dst`. Returns messages copied.
 
-    The outcome stays absent (the trial did not finish); a "recovered" metadata record names the
-    source and the number of messages saved. `dst` must not exist.
+    The outcome stays absent (the trial did not finish, or its file was damaged); a "recovered"
+    metadata record names the source, the number of messages saved, the damage found and the
+    lost time ranges. `dst` must not exist. Raises SessionFileError for a source with nothing
+    readable or that is not a layerskin session.
     """
     src, dst = Path(src), Path(dst)
     if dst.exists():
@@ -24,7 +27,8 @@ def recover(src, dst) -> int:
     if src.resolve() == dst.resolve():
         raise ValueError("recover writes a new file; give an output path different from the input")
     sc = scan(src)
-    if not any(name == S.META_SESSION for name, _ in sc.metadata):
+    ours = sc.damaged and any(c.metadata.get("stream") for c in sc.channels.values())
+    if not any(name == S.META_SESSION for name, _ in sc.metadata) and not ours:
         raise SessionFileError(f"{src}: not a layerskin session; nothing to recover")
     order = []  # (offset in data, old channel id, index within channel)
     for cid, m in sc.messages.items():
@@ -64,6 +68,9 @@ def recover(src, dst) -> int:
                 "messages": str(len(rows)),
                 "source": S.dumps(str(src)).decode(),
                 "damage": S.dumps(note).decode(),
+                "lost": S.dumps(
+                    [{"start_ns": x.start_ns, "end_ns": x.end_ns, "reason": x.reason} for x in sc.lost]
+                ).decode(),
             },
         )
         w.finish()

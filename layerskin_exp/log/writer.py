@@ -17,6 +17,7 @@ from mcap.writer import CompressionType, Writer
 
 import layerskin_exp
 from layerskin_exp.log import schema as S
+from layerskin_exp.log.lock import WriterLock
 from layerskin_exp.sync import estimate_clock_map
 from layerskin_exp.types import (
     SKIN_SHAPE,
@@ -136,7 +137,11 @@ class SessionClosedError(RuntimeError):
 class SessionWriter:
     """Write one trial to an MCAP file.
 
-    path: the .mcap file to create (refused if it exists, unless overwrite=True).
+    path: the .mcap file to create (refused if it exists, unless overwrite=True). The writer
+        holds an exclusive OS lock on it until close: a second SessionWriter on the same path
+        raises SessionInUseError naming the live owner (pid, host, start time), even with
+        overwrite=True. overwrite=True replaces only a file no live writer holds (e.g. the
+        .partial left by a crashed run).
     metadata: {"config": dict, "backend": str, "calibration": dict, ...}; dict values become
         their own MCAP metadata records, other values go into the "session" record.
     labels: trial labels (position index, direction, grip depth, motion, trial index, ...).
@@ -163,17 +168,37 @@ class SessionWriter:
         if compression not in _COMPRESSION:
             raise ValueError(f"compression={compression!r}: use one of {sorted(_COMPRESSION)}")
         self.path = Path(path)
-        if self.path.exists() and not overwrite:
-            raise FileExistsError(
-                f"session file {self.path} already exists; refusing to overwrite recorded data "
-                f"(choose another path or pass overwrite=True)"
-            )
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb")
+        # Exclusive: a live writer holds an OS lock on its file; a second one is refused before it
+        # can truncate anything (see lock.py). A stale file nobody holds is replaced if overwrite.
+        self._lock = WriterLock.acquire(self.path, overwrite=overwrite)
+        # The file object owns the locked descriptor: closing it (or losing it) drops the lock.
+        self._file = os.fdopen(self._lock.fd, "wb")
+        try:
+            self._start(metadata or {}, labels or {}, compression, chunk_span_ns, chunk_bytes)
+        except BaseException:
+            # Refused metadata, or a failing disk: give the file and its lock back at once.
+            self._lock.forget_owner()
+            self._file.close()
+            raise
+        self._dispatch = {
+            TwoLayerFrame: self.write_frame,
+            Wrench: self.write_wrench,
+            StagePosition: self.write_stage,
+            Pose: self.write_pose,
+            GripperState: self.write_gripper,
+            MarkerDetection: self.write_marker,
+            ProtocolEvent: self.write_event,
+        }
+
+    def _start(self, metadata: dict, labels: dict, compression: str, chunk_span_ns: int, chunk_bytes: int) -> None:
         self._mcap = Writer(
             self._file,
             chunk_size=1 << 40,  # chunks are closed here, by span and size, not by the library
             compression=_COMPRESSION[compression],
+            # The data-section CRC lets the reader tell an intact file from one whose metadata or
+            # indexes (outside the CRC-checked chunks) were damaged.
+            enable_data_crcs=True,
         )
         self._mcap.start(profile="", library=f"layerskin-exp/{layerskin_exp.__version__}")
         self._chunk_span_ns = int(chunk_span_ns)
@@ -191,22 +216,13 @@ class SessionWriter:
         self._channels: dict[str, int] = {}
         # Per-stream (device_t, host_t) pairs for the clock map computed at close.
         self._clock_pairs: dict[str, tuple[list[int], list[int]]] = {}
-        self._write_metadata(metadata or {}, labels or {})
+        self._write_metadata(metadata, labels)
         skin = {
             layer: self._channel(topic, RawImage, {"stream": "skin", "layer": layer})
             for layer, topic in S.SKIN_TOPICS.items()
         }
         self._skin_sup, self._skin_deep = skin["superficial"], skin["deep"]
         self._skin_dev, self._skin_host = self._clock("skin")
-        self._dispatch = {
-            TwoLayerFrame: self.write_frame,
-            Wrench: self.write_wrench,
-            StagePosition: self.write_stage,
-            Pose: self.write_pose,
-            GripperState: self.write_gripper,
-            MarkerDetection: self.write_marker,
-            ProtocolEvent: self.write_event,
-        }
 
     # ------------------------------------------------------------------ set-up
 
@@ -511,9 +527,13 @@ class SessionWriter:
             if d
         }
 
-    def close(self, outcome: str = "complete") -> None:
+    def close(self, outcome: str = "complete", *, move_to=None) -> None:
         """Record the clock sync and the outcome ("complete" or "aborted: <reason>"), write the
-        MCAP summary and close the file. Closing twice is a no-op."""
+        MCAP summary and close the file. Closing twice is a no-op.
+
+        move_to: rename the finished file to this path (atomically, fsynced) while the lock is
+        still held, so no other writer can claim the old name between closing and renaming.
+        """
         if self._closed:
             return
         if not (outcome == "complete" or outcome.startswith("aborted")):
@@ -529,8 +549,11 @@ class SessionWriter:
             self._mcap.finish()
             self._file.flush()
             os.fsync(self._file.fileno())
+            if move_to is not None:
+                self.path = self._lock.move(move_to)
         finally:
-            self._file.close()
+            self._lock.forget_owner()
+            self._file.close()  # drops the lock
             self._closed = True
             self.outcome = outcome
 

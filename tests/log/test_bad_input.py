@@ -53,3 +53,109 @@ def test_cli_prints_one_line_and_exits_2(tmp_path):
     )
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "not an MCAP file" in r.stderr and "Traceback" not in r.stderr
+
+
+# ---------------------------------------------------------------------------- damaged sessions
+# The ways issue 15 found a file could crash the reader: each now reads around the damage or
+# ends in one SessionFileError naming the file.
+
+
+def _session_file(tmp_path, compression="lz4"):
+    from log_records import frame
+    from mcap.reader import make_reader
+
+    from layerskin_exp.log import SessionWriter
+
+    path = tmp_path / "s.mcap"
+    with SessionWriter(path, labels={"trial": 1}, compression=compression) as w:
+        for i in range(300):
+            w.write(frame(i))
+    with open(path, "rb") as fh:
+        chunks = make_reader(fh).get_summary().chunk_indexes
+    return path, bytearray(path.read_bytes()), chunks
+
+
+def test_directory_named_like_a_session(tmp_path):
+    from layerskin_exp.log.recover import recover
+
+    d = tmp_path / "x.mcap"
+    d.mkdir()
+    with pytest.raises(SessionFileError, match="is a directory"):
+        load_session(d)
+    with pytest.raises(SessionFileError, match=str(d)):
+        recover(d, tmp_path / "out.mcap")
+    r = subprocess.run([sys.executable, "-m", "layerskin_exp.log", "inspect", str(d)], capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "is a directory" in r.stderr
+
+
+def test_flipped_bit_in_the_mcap_header_is_damage_not_a_crash(tmp_path):
+    path, raw, _ = _session_file(tmp_path)
+    raw[8 + 9 + 4 + 3] ^= 0x80  # inside the header's library string: invalid UTF-8
+    path.write_bytes(bytes(raw))
+    s = load_session(path, warn=False)
+    assert not s.complete and s.damaged and len(s.streams["skin"]["seq"]) == 300
+    raw[9] ^= 0x40  # the header's record length
+    path.write_bytes(bytes(raw))
+    s = load_session(path, warn=False)
+    assert not s.complete and len(s.streams["skin"]["seq"]) == 300
+
+
+def _chunk_field(raw, chunk, field_offset):
+    return chunk.chunk_start_offset + 9 + field_offset
+
+
+def test_corrupted_compression_name_skips_that_chunk(tmp_path):
+    path, raw, chunks = _session_file(tmp_path)
+    bad = chunks[3]
+    raw[_chunk_field(raw, bad, 32 + 4)] ^= 0x01  # "lz4" -> "mz4"
+    path.write_bytes(bytes(raw))
+    s = load_session(path, warn=False)
+    assert not s.complete and s.chunks_skipped == 1
+    assert (s.lost[0].start_ns, s.lost[0].end_ns) == (bad.message_start_time, bad.message_end_time)
+    assert 0 < 300 - len(s.streams["skin"]["seq"]) < 100
+
+
+def test_huge_uncompressed_size_is_not_allocated(tmp_path):
+    from layerskin_exp.log.scan import scan
+
+    path, raw, chunks = _session_file(tmp_path)
+    for c in chunks[2:4]:
+        raw[_chunk_field(raw, c, 16 + 5)] ^= 0x01  # uncompressed size += 1 TiB
+    path.write_bytes(bytes(raw))
+    sc = scan(path)
+    assert sc.data.nbytes < 10 * len(raw)
+    s = load_session(path, warn=False)
+    # The summary's chunk index (CRC-checked) still has the true sizes: nothing is lost.
+    assert len(s.streams["skin"]["seq"]) == 300 and s.damaged and not s.complete
+
+
+def test_inspect_shows_the_damage(tmp_path):
+    path, raw, chunks = _session_file(tmp_path)
+    bad = chunks[len(chunks) // 2]
+    raw[bad.chunk_start_offset + bad.chunk_length // 2 : bad.chunk_start_offset + bad.chunk_length // 2 + 8] = bytes(8)
+    path.write_bytes(bytes(raw))
+    r = subprocess.run([sys.executable, "-m", "layerskin_exp.log", "inspect", str(path)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "complete: False" in r.stdout and "DAMAGED: 1 chunk(s) skipped" in r.stdout
+    assert f"lost: {bad.message_start_time} .. {bad.message_end_time} ns" in r.stdout
+    assert "outcome: complete" in r.stdout
+
+
+def test_recover_rewrites_around_a_damaged_chunk(tmp_path):
+    from mcap.reader import make_reader
+
+    from layerskin_exp.log.recover import recover
+
+    path, raw, chunks = _session_file(tmp_path)
+    bad = chunks[len(chunks) // 2]
+    raw[bad.chunk_start_offset + bad.chunk_length - 100] ^= 0xFF
+    path.write_bytes(bytes(raw))
+    damaged = load_session(path, warn=False)
+    out = tmp_path / "fixed.mcap"
+    n = recover(path, out)
+    with open(out, "rb") as fh:
+        assert sum(1 for _ in make_reader(fh).iter_messages()) == n
+    r = load_session(out, warn=False)
+    assert not r.complete and r.outcome is None and not r.damaged
+    assert r.streams["skin"]["seq"].tolist() == damaged.streams["skin"]["seq"].tolist()
+    assert r.metadata["recovered"]["lost"][0]["start_ns"] == bad.message_start_time

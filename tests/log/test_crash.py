@@ -145,9 +145,12 @@ def test_recover_cli(tmp_path, capsys):
 
 @pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
 @pytest.mark.parametrize("threads", [1, 3])
-def test_damaged_chunk_reads_up_to_it(tmp_path, monkeypatch, compression, threads):
-    """A corrupted byte inside a middle chunk: frames of the chunks before it come back exactly,
-    with a warning naming the chunk; never an error. Also with chunks split over threads."""
+@pytest.mark.parametrize("with_summary", [True, False])
+def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compression, threads, with_summary):
+    """A corrupted byte inside a middle chunk of a closed file: only that chunk's frames are
+    missing, every other frame comes back exactly, the lost range is that chunk's time span
+    (from the summary's chunk index, or from the neighbouring chunks when the summary is gone),
+    and the session is not complete although the file's outcome says so."""
     from mcap.reader import make_reader
 
     from layerskin_exp.log import scan as scan_module
@@ -160,22 +163,36 @@ def test_damaged_chunk_reads_up_to_it(tmp_path, monkeypatch, compression, thread
         for f in frames:
             w.write(f)
     with open(path, "rb") as fh:
-        chunk_indexes = make_reader(fh).get_summary().chunk_indexes
+        summary = make_reader(fh).get_summary()
+    chunk_indexes = summary.chunk_indexes
     skin_chunks = [c for c in chunk_indexes if c.message_start_time >= frames[0].host_t_ns]
     assert len(skin_chunks) >= 6
     bad = skin_chunks[len(skin_chunks) // 2]
     raw = bytearray(path.read_bytes())
     raw[bad.chunk_start_offset + bad.chunk_length - 200] ^= 0x5A  # inside the chunk's records
+    if not with_summary:  # a damaged summary: the reader must find its way without the index
+        raw[len(raw) - 8 - 29 - 40] ^= 0xFF
     path.write_bytes(bytes(raw))
 
     with pytest.warns(SessionWarning, match="chunk"):
         s = load_session(path)
-    kept = [f for f in frames if f.host_t_ns < bad.message_start_time]
-    assert 0 < len(kept) < len(frames)
+    gone = [f for f in frames if bad.message_start_time <= f.host_t_ns <= bad.message_end_time]
+    kept = [f for f in frames if not bad.message_start_time <= f.host_t_ns <= bad.message_end_time]
+    assert 0 < len(gone) < 100 and kept[-1] is frames[-1]
     skin = s.streams["skin"]
     np.testing.assert_array_equal(skin["seq"], [f.seq for f in kept])
     np.testing.assert_array_equal(skin["superficial"], np.stack([f.superficial for f in kept]))
     np.testing.assert_array_equal(skin["deep"], np.stack([f.deep for f in kept]))
+    assert s.outcome == "complete" and not s.complete and s.damaged and s.chunks_skipped == 1
+    assert len(s.lost) == 1
+    lost = s.lost[0]
+    assert str(bad.chunk_start_offset) in lost.reason
+    if with_summary:
+        assert (lost.start_ns, lost.end_ns) == (bad.message_start_time, bad.message_end_time)
+        assert lost.messages == {"skin": 2 * len(gone)}
+    else:  # bounded by the good chunks either side, and containing the lost frames
+        assert lost.start_ns <= gone[0].host_t_ns and gone[-1].host_t_ns <= lost.end_ns
+        assert lost.start_ns >= kept[len([f for f in kept if f.host_t_ns < gone[0].host_t_ns]) - 1].host_t_ns
 
 
 def test_multithreaded_decompression_matches_single(tmp_path, monkeypatch):

@@ -1,0 +1,126 @@
+"""The report's loading path never dies on one bad input: it skips the file, names it and the
+reason, and carries on; a trial present twice is used once; sessions= may be one file."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from analysis.sessions import load_campaign
+from layerskin_exp.log import SessionFileError, load_session
+
+sys.path.insert(0, str(Path(__file__).parent))
+from synthetic import calibration_trial  # noqa: E402
+
+
+def _campaign(root: Path, n: int = 3) -> list[Path]:
+    rng = np.random.default_rng(11)
+    paths = []
+    for i in range(n):
+        p = root / f"cal{i}.mcap"
+        calibration_trial(p, i, "press", 0, rng, n=120)
+        paths.append(p)
+    return paths
+
+
+def _flip_middle(src: Path, dst: Path) -> None:
+    raw = bytearray(src.read_bytes())
+    for k in range(8):
+        raw[len(raw) // 2 + k] ^= 0xA5
+    dst.write_bytes(bytes(raw))
+
+
+def test_bad_files_are_named_and_skipped_duplicates_used_once(tmp_path):
+    root = tmp_path / "sessions"
+    root.mkdir()
+    good = _campaign(root)
+    (root / "copy").mkdir()
+    shutil.copy(good[0], root / "copy" / "cal0.mcap")  # the same trial in another folder
+    _flip_middle(good[1], root / "damaged.mcap")
+    (root / "dir.mcap").mkdir()
+    header = bytearray(good[2].read_bytes())
+    header[20] ^= 0x80
+    (root / "header.mcap").write_bytes(bytes(header))
+    (root / "text.mcap").write_text("notes")
+    camp = load_campaign(root, progress=False, workers=1)
+    assert sorted(t.name for t in camp.calibration) == ["cal0.mcap", "cal1.mcap", "cal2.mcap"]
+    skipped = {f.name: f for f in camp.skipped_files}
+    assert skipped["copy/cal0.mcap"].reason == "duplicate trial" and "cal0.mcap" in skipped["copy/cal0.mcap"].detail
+    assert skipped["damaged.mcap"].reason == "damaged file" and "chunk" in skipped["damaged.mcap"].detail
+    assert skipped["dir.mcap"].reason == "unreadable file" and "directory" in skipped["dir.mcap"].detail
+    assert skipped["text.mcap"].reason == "unreadable file" and "not an MCAP file" in skipped["text.mcap"].detail
+    assert skipped["header.mcap"].reason == "damaged file"
+    assert camp.n_files == 8 and sum(camp.skipped.values()) == 5
+
+
+def test_sessions_may_be_a_single_file(tmp_path):
+    (p,) = _campaign(tmp_path, n=1)
+    camp = load_campaign(p, progress=False, workers=1)
+    assert camp.n_files == 1 and [t.name for t in camp.calibration] == ["cal0.mcap"]
+
+
+def test_identity_in_metadata_decides_duplicates(tmp_path):
+    """Two files with the same stored identity are one trial even if their labels differ; the
+    same labels under different identities are two trials."""
+    from layerskin_exp.log import SessionWriter
+
+    root = tmp_path / "s"
+    src = _campaign(tmp_path / "src", n=1)[0]
+    s = load_session(src)
+    for name, identity in (("a.mcap", "cfg1/pos0"), ("b.mcap", "cfg1/pos0"), ("c.mcap", "cfg2/pos0")):
+        with SessionWriter(root / name, metadata={**s.metadata, "identity": identity},
+                           labels={**s.labels, "note": name}) as w:
+            _copy_streams(s, w)
+    camp = load_campaign(root, progress=False, workers=1)
+    assert sorted(t.name for t in camp.calibration) == ["a.mcap", "c.mcap"]
+    assert [(f.name, f.reason) for f in camp.skipped_files] == [("b.mcap", "duplicate trial")]
+
+
+def _copy_streams(s, w):
+    from layerskin_exp.types import TwoLayerFrame, Wrench
+
+    sk, wr = s.streams["skin"], s.streams["wrench"]
+    for i in range(len(sk["seq"])):
+        w.write(TwoLayerFrame(sk["superficial"][i], sk["deep"][i], int(sk["seq"][i]), int(sk["device_t_ns"][i]),
+                              int(sk["host_t_ns"][i])))
+    for i in range(len(wr["seq"])):
+        w.write(Wrench(wr["force_n"][i], wr["torque_nm"][i], int(wr["seq"][i]), int(wr["device_t_ns"][i]),
+                       int(wr["host_t_ns"][i])))
+
+
+def test_random_damage_through_the_report_loading_path(tmp_path):
+    src = _campaign(tmp_path / "clean", n=1)[0]
+    raw = src.read_bytes()
+    root = tmp_path / "damaged"
+    root.mkdir()
+    rng = np.random.default_rng(7)
+    for case in range(24):
+        out = bytearray(raw)
+        for _ in range(int(rng.integers(1, 4))):
+            out[int(rng.integers(0, len(raw)))] ^= int(rng.integers(1, 256))
+        (root / f"d{case:02d}.mcap").write_bytes(bytes(out))
+    camp = load_campaign(root, progress=False, workers=1)
+    used = {t.name for t in camp.calibration}
+    for f in camp.skipped_files:
+        assert f.name not in used and f.reason in ("unreadable file", "damaged file", "duplicate trial",
+                                                   "outcome not complete", "no or too short skin stream")
+    for name in used:  # used only if it reads back complete, i.e. undamaged
+        try:
+            assert load_session(root / name, warn=False).complete
+        except SessionFileError as exc:
+            raise AssertionError(f"{name} used although unreadable: {exc}") from exc
+    assert len(used) <= 1  # every copy is the same trial: at most one is used
+    assert len(camp.skipped_files) + len(used) == 24
+
+
+def test_bad_sessions_or_out_is_one_line_exit_2(tmp_path):
+    for args in ([f"sessions={tmp_path / 'nope'}", f"out={tmp_path / 'o'}"],
+                 [f"sessions={tmp_path}", f"out={Path(__file__)}"]):
+        r = subprocess.run([sys.executable, "-m", "analysis.report", *args], capture_output=True, text=True,
+                           cwd=Path(__file__).parents[2])
+        assert r.returncode == 2, r.stderr[-2000:]
+        assert "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0 and "error:" in r.stderr
