@@ -9,7 +9,6 @@ complete is read back from the file itself.
 
 from __future__ import annotations
 
-import os
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -182,20 +181,6 @@ def _describe(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
-def _fsync_path(path: Path) -> None:
-    """Flush a file (or a folder's entry list) to disk, so a power loss keeps the rename."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
               identity: str | None = None, save_images: bool = False) -> TrialResult:
     """Run one trial into `path` (skipped when a complete file of the same identity is there).
@@ -231,9 +216,6 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
             pass
         writer.close(f"aborted: {reason}")
         raise
-    writer.close("complete")
-    _fsync_path(tmp)
-    os.replace(tmp, path)
-    _fsync_path(path.parent)
+    writer.close("complete", move_to=path)  # renamed under the writer's lock, fsynced
     return TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
                        peak_fz_n=log.peak_fz_n, peak_shear_n=log.peak_shear_n, stop_reason=log.stop_reason)
