@@ -1,0 +1,89 @@
+"""Loopback soak: the skin board driver reading the pty emulator at 424 frame pairs/s for minutes.
+
+Checks that acquisition keeps up indefinitely: every frame the emulator wrote is received (no
+unexplained drops: a drop must show as a sequence gap counted in the stream's health), and
+reports the CPU share of the driver's receive thread (per-thread CPU clock) against the frame
+period, with the emulator and the simulated world running in the same process as on
+`hardware=loopback`. Baseline: the same figures for the emulator + world alone (the load the
+bench adds, which a real board does not put on the host).
+
+    python -m benchmarks.run loopback_soak          # 10 minutes (LSX_SOAK_S=600)
+    LSX_SOAK_S=30 python -m benchmarks.run loopback_soak
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+
+def _thread_cpu_s(thread) -> float:
+    return time.clock_gettime(time.pthread_getcpuclockid(thread.ident))
+
+
+def run() -> dict:
+    from hydra import compose, initialize_config_dir
+
+    from hardware.sim.realtime import RealtimeWorld
+    from hardware.skin_board import SkinBoardConfig, SkinBoardEmulator, SkinBoardReader
+    from hardware.skin_board.wire import FRAME_LEN
+    from layerskin_exp.cli import CONF_DIR
+    from layerskin_exp.config import register_all, validate
+
+    seconds = float(os.environ.get("LSX_SOAK_S", "600"))
+    register_all()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose(config_name="force_calibration")
+    rt = RealtimeWorld.from_config(validate(cfg.sim), validate(cfg.skin), "platform")
+    rt.start()
+    emulator = SkinBoardEmulator(rt)
+    path = emulator.start()
+    reader = SkinBoardReader(SkinBoardConfig(port=path), validate(cfg.skin))
+    reader.connect()
+    received, seq_errors, last_seq, fault, in_flight = 0, 0, None, None, 0
+
+    def drain() -> None:
+        nonlocal received, seq_errors, last_seq
+        for f in reader.read_available():
+            if last_seq is not None and f.seq != last_seq + 1:
+                seq_errors += 1
+            last_seq = f.seq
+            received += 1
+
+    cpu0_world, cpu0_emu = _thread_cpu_s(rt._thread), _thread_cpu_s(emulator._thread)
+    cpu0_drv, t0 = _thread_cpu_s(reader._thread), time.monotonic()
+    try:
+        while time.monotonic() - t0 < seconds and fault is None:
+            time.sleep(0.01)
+            drain()
+            fault = reader.fault(time.monotonic_ns())
+        wall = time.monotonic() - t0
+        cpu_drv = _thread_cpu_s(reader._thread) - cpu0_drv
+        cpu_bench = (_thread_cpu_s(rt._thread) - cpu0_world) + (_thread_cpu_s(emulator._thread) - cpu0_emu)
+        emulator.stop()  # then take what reached the pty; frames still queued in the emulator never left it
+        in_flight = -(-len(emulator._pending) // FRAME_LEN)
+        time.sleep(0.1)
+        drain()
+    finally:
+        reader.disconnect()
+        emulator.stop()
+        rt.stop()
+    written = emulator.counts["frames"] - in_flight
+    h = reader.health
+    return {
+        "soak_s": round(wall, 1),
+        "ended_by_fault": fault,
+        "world_worst_lag_ms": round(1e3 * rt.lag_s, 1),
+        "frames_received": received,
+        "frame_rate_hz": round(received / wall, 1),
+        "frames_written_by_emulator": written,
+        "lost_counted": h.lost,
+        "corrupt_counted": h.corrupt,
+        "ring_dropped": reader.ring_dropped,
+        "unexplained_drops": int(written - received - h.lost - reader.ring_dropped),
+        "sequence_breaks_seen": seq_errors,
+        "driver_thread_cpu_share": round(cpu_drv / wall, 4),
+        "baseline_bench_cpu_share (world + emulator)": round(cpu_bench / wall, 4),
+        "driver_cpu_per_frame_us": round(1e6 * cpu_drv / max(received, 1), 1),
+        "frame_period_us": 2360,
+    }
