@@ -38,7 +38,9 @@ class HandEConfig:
         require(0 < self.reply_timeout_s <= 10, f"{k}.reply_timeout_s", self.reply_timeout_s, "must be 0..10 s")
         require(0 < self.stall_timeout_s <= 0.05, f"{k}.stall_timeout_s", self.stall_timeout_s,
                 "must be > 0 and <= 0.05 s")
-        require(1 <= self.poll_rate_hz <= 500, f"{k}.poll_rate_hz", self.poll_rate_hz, "must be 1..500 Hz")
+        require(1 <= self.poll_rate_hz <= 500 and 1.0 / self.poll_rate_hz < self.stall_timeout_s,
+                f"{k}.poll_rate_hz", self.poll_rate_hz,
+                "must be 1..500 Hz with a poll period shorter than stall_timeout_s")
         require(0 < self.activation_timeout_s <= 60, f"{k}.activation_timeout_s", self.activation_timeout_s,
                 "must be 0..60 s")
         require(self.stroke_mm > 0, f"{k}.stroke_mm", self.stroke_mm, "must be > 0 (Hand-E: 50 mm)")

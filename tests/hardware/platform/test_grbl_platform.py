@@ -21,6 +21,12 @@ def warm(rt):
         time.sleep(0.01)
 
 
+def healthy(drv):
+    """No fault, allowing a stall on a loaded machine to clear with the next fresh reply
+    (a latched error, alarm or lost link never clears)."""
+    return wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 0.5)
+
+
 def wait_for(pred, timeout_s=3.0):
     t0 = time.monotonic()
     while not pred():
@@ -78,8 +84,8 @@ def test_move_reaches_target_and_position_stream_follows(bench):
     seqs = [r.seq for r in recs]
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
     assert all(r.device_t_ns == r.host_t_ns for r in recs)  # GRBL has no clock: host receive time
-    assert all(b.host_t_ns > a.host_t_ns for a, b in zip(recs, recs[1:], strict=False))
-    assert drv.fault(time.monotonic_ns()) is None
+    assert all(b.host_t_ns >= a.host_t_ns for a, b in zip(recs, recs[1:], strict=False))
+    assert healthy(drv)
     assert emu.rx_overflow_bytes == 0 and drv.health.corrupt == 0
 
 
@@ -98,7 +104,7 @@ def test_stop_mid_move_holds_then_resets_without_alarm(bench):
     time.sleep(0.1)  # the planner was flushed: nothing resumes
     with rt.lock:
         assert abs(rt.rig.platform.position_mm()[2] - z_stop) < 1e-9
-    assert drv.fault(time.monotonic_ns()) is None
+    assert healthy(drv)
     drv.move_to(HOME, 20.0)  # the machine takes moves again
     assert wait_for(lambda: not drv.is_moving())
     assert np.allclose(drv.read_available()[-1].position_mm, HOME, atol=0.002)
@@ -111,7 +117,7 @@ def test_stop_from_another_thread_while_idle_leaves_no_alarm(bench):
     t.join(1.0)
     assert not t.is_alive()
     assert wait_for(lambda: not drv.is_moving())
-    assert emu.state == "Idle" and drv.fault(time.monotonic_ns()) is None
+    assert emu.state == "Idle" and healthy(drv)
 
 
 def test_move_beyond_soft_limits_raises_a_clear_alarm(bench):
@@ -126,7 +132,7 @@ def test_move_beyond_soft_limits_raises_a_clear_alarm(bench):
     with rt.lock:
         assert np.allclose(rt.rig.platform.position_mm(), HOME)  # nothing moved
     drv.recover(unlock=True)
-    assert drv.fault(time.monotonic_ns()) is None
+    assert healthy(drv)
     drv.move_to(np.array([0.0, 0.0, 5.5]), 20.0)
     assert wait_for(lambda: not drv.is_moving())
     assert np.allclose(drv.read_available()[-1].position_mm, [0.0, 0.0, 5.5], atol=0.002)
@@ -147,7 +153,7 @@ def test_alarm_at_power_up_needs_permission_to_unlock(bench):
     drv2.connect()
     try:
         assert emu.state == "Idle"
-        assert drv2.fault(time.monotonic_ns()) is None
+        assert healthy(drv2)
     finally:
         drv2.disconnect()
 
@@ -178,7 +184,7 @@ def test_character_counting_never_overflows_the_receive_buffer(bench):
 
 def test_stall_and_link_loss_become_faults(bench):
     drv, emu, rt = bench()
-    assert drv.fault(time.monotonic_ns()) is None
+    assert healthy(drv)
     emu.freeze()
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is not None, 1.0)
     assert "stalled" in drv.fault(time.monotonic_ns())
@@ -196,7 +202,7 @@ def test_noise_is_counted_and_the_stream_goes_on(bench):
     assert wait_for(lambda: drv.health.corrupt >= 2)
     drv.read_available()
     assert wait_for(lambda: len(drv.read_available()) > 0)
-    assert drv.fault(time.monotonic_ns()) is None
+    assert healthy(drv)
 
 
 def test_connect_errors_name_the_port(tmp_path):
