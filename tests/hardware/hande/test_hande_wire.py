@@ -62,3 +62,14 @@ def test_calibration_maps_mm_speed_and_force_to_counts():
     assert c2.mm_to_count(50.0) == 3 and c2.mm_to_count(0.0) == 230
     assert c2.count_to_mm(3) == 50.0 and c2.count_to_mm(240) == 0.0  # past closed: clamped
     assert "overcurrent" in wire.describe_fault(0x0E)
+
+
+@pytest.mark.parametrize("kw, key", [({"stall_timeout_s": 0.2}, "stall_timeout_s"), ({"port": 0}, "port"),
+                                     ({"open_count": 200, "closed_count": 100}, "open_count"),
+                                     ({"poll_rate_hz": 10.0}, "poll_rate_hz")])
+def test_config_names_the_bad_key(kw, key):
+    from hardware.hande import HandEConfig
+    from layerskin_exp.config import ConfigError
+
+    with pytest.raises(ConfigError, match=f"hardware.hande.{key}"):
+        HandEConfig(**kw)

@@ -107,3 +107,15 @@ def test_char_counter_follows_the_interface_md_example():
         cc.acked()  # a response with nothing in flight
     with pytest.raises(ValueError):
         cc.sent(129)  # can never fit
+
+
+@pytest.mark.parametrize("kw, key", [({"stall_timeout_s": 0.1}, "stall_timeout_s"), ({"units": "cm"}, "units"),
+                                     ({"status_rate_hz": 10.0}, "status_rate_hz"),
+                                     ({"offset_mm": (0.0, float("nan"), 0.0)}, "offset_mm")])
+def test_config_names_the_bad_key(kw, key):
+    from hardware.platform import GrblPlatformConfig
+    from layerskin_exp.config import ConfigError
+
+    with pytest.raises(ConfigError, match=f"hardware.platform.{key}"):
+        GrblPlatformConfig(**kw)
+    assert GrblPlatformConfig(units="inch").mm_per_unit == 25.4
