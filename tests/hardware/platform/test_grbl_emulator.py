@@ -128,3 +128,23 @@ def test_soft_limit_alarm_blocks_until_reset(grbl):
     port.send(b"\x18")
     port.read_until(b"unlock]\r\n")
     assert emu.state == "Alarm"
+
+
+def test_feed_above_max_rate_is_clamped_and_dwell_waits(grbl):
+    emu, port = grbl
+    port.send(b"$110=300\n")  # X max rate 300 mm/min = 5 mm/s
+    assert port.read_until(b"\r\n") == b"ok\r\n"
+    port.send(b"G21G90G1X1Y0Z5F1200\n")  # along X at 1200 mm/min requested
+    assert port.read_until(b"\r\n") == b"ok\r\n"
+    t0 = time.monotonic()
+    while True:
+        port.send(b"?")
+        rep = port.read_until(b">\r\n")
+        if rep.startswith(b"<Run"):
+            break
+        assert time.monotonic() - t0 < 2
+    assert b"|FS:300,0" in rep
+    port.send(b"G4P0.05\n")  # answered once the move (1 mm at 5 mm/s) is done and 50 ms passed
+    assert port.read_until(b"\r\n", timeout_s=3.0) == b"ok\r\n"
+    port.send(b"?")
+    assert port.read_until(b">\r\n").startswith(b"<Idle|MPos:1.000,0.000,5.000")
