@@ -1,0 +1,257 @@
+"""The Robotiq URCap gripper socket over TCP, driving the simulated Hand-E of a RealtimeWorld.
+
+What it models: `SET VAR val ...` answered `ack` (no line end, as the URCap), `GET VAR` answered
+`VAR value\\n`; registers ACT GTO ATR ADR POS SPE FOR (writable) and STA PRE OBJ FLT COU; the
+activation sequence (ACT 0 -> 1: STA 0 -> 1 -> 3 after `activation_time_s`; ACT 0 resets and
+clears faults); GTO 1 starts a move of the twin to POS at SPE with FOR (and a POS/SPE/FOR change
+while GTO is 1 redirects it); GTO 0 stops the jaws; a GTO 1 before activation sets FLT 0x07 (ACT 0)
+or 0x05 (still activating) as the gripper does; POS is the twin's latest reported opening, PRE the
+position request taken by the last GTO; OBJ 0 while moving (or GTO 0), 2/1 when the jaws stopped
+short of the request closing/opening (an object: the rod), 3 at the request.
+
+Not modelled: the activation's full open/close stroke, auto-release (ATR/ADR are stored only),
+motor current (COU reads 0), temperature/voltage faults unless injected, several clients at once
+(one connection is served at a time; the next waits in the listen backlog). What the URCap
+answers to an unknown variable is not publicly documented; this answers `?\\n`.
+
+Fault injection: freeze() (keeps the connection, answers nothing), drop_connection() (closes the
+client's socket), inject_fault(code) (FLT reads code until ACT 0 -> 1), reply_delay_s (slow
+replies), start_active (skip the need to activate).
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+import time
+
+from hardware.hande import wire
+from hardware.interfaces import DeviceError
+
+log = logging.getLogger(__name__)
+
+EMULATOR_SETUP = "gripper"
+
+
+class HandEEmulator:
+    """URCap socket on host:port (0 = any free port) backed by `rt.rig.gripper`."""
+
+    def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, activation_time_s: float = 0.05,
+                 start_active: bool = False, reply_delay_s: float = 0.0) -> None:
+        self.rt = rt
+        self.host, self.port = host, int(port)
+        self.activation_time_s = float(activation_time_s)
+        self.reply_delay_s = float(reply_delay_s)
+        gcfg = rt.rig.gripper.cfg
+        self.cal = wire.Calibration(gcfg.stroke_mm, 0, 255, gcfg.min_speed_mm_s, gcfg.max_speed_mm_s)
+        self._opening_mm = float(gcfg.initial_opening_mm)
+        self._object = False
+        self._moving = False
+        self.regs: dict[str, int] = {"ACT": 0, "GTO": 0, "ATR": 0, "ADR": 0, "POS": 0, "SPE": 0, "FOR": 0,
+                                     "STA": 0, "PRE": 0, "FLT": 0}
+        self._act_t0 = 0.0
+        if start_active:
+            self.regs.update(ACT=1, STA=wire.STA_ACTIVE)
+        self.requests = 0
+        self.bad_requests = 0
+        self._listener: socket.socket | None = None
+        self._client: socket.socket | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._frozen = threading.Event()
+        self._drop = threading.Event()
+
+    # ---- life cycle ----------------------------------------------------------------------------
+    def start(self) -> str:
+        if self._thread is not None:
+            return f"{self.host}:{self.port}"
+        ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        ls.bind((self.host, self.port))
+        ls.listen(1)
+        ls.settimeout(0.02)
+        self._listener = ls
+        self.port = ls.getsockname()[1]
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._serve, name="hande-emulator", daemon=True)
+        self._thread.start()
+        return f"{self.host}:{self.port}"
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+        if self._listener is not None:
+            self._listener.close()
+            self._listener = None
+
+    def __enter__(self) -> HandEEmulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # ---- fault injection -----------------------------------------------------------------------
+    def freeze(self) -> None:
+        """Keep the connection but answer nothing."""
+        self._frozen.set()
+
+    def unfreeze(self) -> None:
+        self._frozen.clear()
+
+    def drop_connection(self) -> None:
+        """Close the current client connection (the URCap or the controller went away)."""
+        self._drop.set()
+
+    def inject_fault(self, code: int) -> None:
+        """FLT reads `code` (e.g. 0x0E overcurrent) until the gripper is reset (ACT 0 -> 1)."""
+        self.regs["FLT"] = int(code)
+        if code >= 0x08:
+            self._halt()
+
+    # ---- serving -------------------------------------------------------------------------------
+    def _serve(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            conn.settimeout(0.02)
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._drop.clear()
+            self._client = conn
+            try:
+                self._serve_client(conn)
+            finally:
+                self._client = None
+                conn.close()
+
+    def _serve_client(self, conn: socket.socket) -> None:
+        buf = b""
+        while not self._stop.is_set():
+            if self._drop.is_set():
+                return
+            if self._frozen.is_set():
+                time.sleep(0.005)
+                continue
+            i = buf.find(b"\n")
+            if i < 0:
+                try:
+                    chunk = conn.recv(4096)
+                except TimeoutError:
+                    continue
+                except OSError:
+                    return
+                if not chunk:
+                    return
+                buf += chunk
+                continue
+            line, buf = buf[:i].strip(b"\r"), buf[i + 1:]
+            if not line.strip():
+                continue
+            reply = self._answer(line)
+            if self.reply_delay_s:
+                time.sleep(self.reply_delay_s)
+            try:
+                conn.sendall(reply)
+            except OSError:
+                return
+
+    def _answer(self, line: bytes) -> bytes:
+        self.requests += 1
+        try:
+            req = wire.parse_request(line)
+        except wire.HandEProtocolError as exc:
+            self.bad_requests += 1
+            log.warning("Hand-E emulator: %s", exc)
+            return b"?\n"
+        self._tick()
+        if isinstance(req, wire.GetRequest):
+            if req.var not in wire.READABLE:
+                self.bad_requests += 1
+                return b"?\n"
+            return wire.encode_value(req.var, self._read(req.var))
+        if any(var not in wire.WRITABLE for var, _ in req.pairs):
+            self.bad_requests += 1
+            return b"?\n"
+        self._write(req.pairs)
+        return wire.ACK
+
+    # ---- the gripper ---------------------------------------------------------------------------
+    def _tick(self) -> None:
+        """Advance the activation and refresh the jaw state from the twin's latest record."""
+        r = self.regs
+        if r["STA"] == wire.STA_ACTIVATING and time.monotonic() - self._act_t0 >= self.activation_time_s:
+            r["STA"] = wire.STA_ACTIVE
+        with self.rt.lock:
+            recs = self.rt.rig.gripper.read_available()
+            self._moving = self.rt.rig.gripper.is_moving()
+        if recs:
+            self._opening_mm = recs[-1].position_mm
+            self._object = recs[-1].object_detected
+
+    def _read(self, var: str) -> int:
+        r = self.regs
+        if var == "POS":
+            return self.cal.mm_to_count(self._opening_mm)
+        if var == "OBJ":
+            if r["GTO"] != 1 or r["STA"] != wire.STA_ACTIVE or self._moving:
+                return wire.OBJ_MOVING
+            pos = self.cal.mm_to_count(self._opening_mm)
+            if not self._object and abs(pos - r["PRE"]) <= 3:
+                return wire.OBJ_AT_POSITION
+            return wire.OBJ_CLOSING_CONTACT if r["PRE"] > pos else wire.OBJ_OPENING_CONTACT
+        if var == "COU":
+            return 0
+        return r[var]
+
+    def _write(self, pairs) -> None:
+        r = self.regs
+        redirect = False
+        for var, val in pairs:
+            val = min(max(int(val), 0), 255)
+            if var == "ACT":
+                if val == 0:
+                    r.update(ACT=0, STA=wire.STA_RESET, GTO=0, FLT=0)
+                    self._halt()
+                elif r["ACT"] == 0:
+                    r.update(ACT=1, STA=wire.STA_ACTIVATING, FLT=0)
+                    self._act_t0 = time.monotonic()
+            elif var == "GTO":
+                if val == 0:
+                    r["GTO"] = 0
+                    self._halt()
+                elif r["ACT"] == 0:
+                    r["FLT"] = 0x07
+                elif r["STA"] != wire.STA_ACTIVE:
+                    r["FLT"] = 0x05
+                elif r["FLT"] < 0x08:
+                    r.update(GTO=1, FLT=0)
+                    self._go()
+            else:
+                redirect |= var in ("POS", "SPE", "FOR") and r[var] != val
+                r[var] = val
+        if redirect and r["GTO"] == 1 and r["STA"] == wire.STA_ACTIVE and not any(v == "GTO" for v, _ in pairs):
+            self._go()
+
+    def _go(self) -> None:
+        r = self.regs
+        r["PRE"] = r["POS"]
+        cal = self.cal
+        try:
+            with self.rt.lock:
+                self.rt.rig.gripper.move(cal.count_to_mm(r["POS"]), cal.count_to_speed(r["SPE"]),
+                                         cal.count_to_force(r["FOR"]))
+                self._moving = self.rt.rig.gripper.is_moving()
+        except DeviceError as exc:
+            log.warning("Hand-E emulator: twin refused the move: %s", exc)
+
+    def _halt(self) -> None:
+        with self.rt.lock:
+            if self.rt.rig.gripper.is_connected:
+                self.rt.rig.gripper.stop()

@@ -1,0 +1,171 @@
+"""HandEGripper driver against the URCap socket emulator, backed by the simulated gripper and rod."""
+
+import socket
+import threading
+import time
+
+import pytest
+
+from hardware.hande import HandEConfig, HandEGripper, wire
+from hardware.hande.emulator import HandEEmulator
+from hardware.interfaces import DeviceError
+
+CONTACT_MM = 36.0  # opening at which the skin cover meets the rod (sim.rig.gripper.contact_opening_mm)
+COUNT_MM = 50.0 / 255
+
+
+def warm(rt):
+    """Let the world's first advance (kernel compilation) pass before timing anything."""
+    t0 = time.monotonic()
+    while rt.world.t_s < 0.05 and time.monotonic() - t0 < 60:
+        time.sleep(0.01)
+
+
+def healthy(drv):
+    """No fault, allowing a stall on a loaded machine to clear with the next fresh reply
+    (a latched error, alarm or lost link never clears)."""
+    return wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 0.5)
+
+
+def wait_for(pred, timeout_s=3.0):
+    t0 = time.monotonic()
+    while not pred():
+        if time.monotonic() - t0 > timeout_s:
+            return False
+        time.sleep(0.003)
+    return True
+
+
+@pytest.fixture
+def bench(realtime_world):
+    """(driver, emulator, world). A rigid rod stand (support_stiffness null) lets the jaws reach
+    the Hand-E's minimum grip force on the rod, so a closing move stops on it."""
+    made = []
+
+    def make(connect=True, cfg_kw=None, **emu_kw):
+        rt = realtime_world("gripper", gripper__support_stiffness_n_per_mm=None)
+        warm(rt)
+        emu = HandEEmulator(rt, **emu_kw)
+        host, port = emu.start().split(":")
+        drv = HandEGripper(HandEConfig(host=host, port=int(port), **(cfg_kw or {})))
+        made.append((drv, emu))
+        if connect:
+            drv.connect()
+        return drv, emu, rt
+
+    yield make
+    for drv, emu in made:
+        drv.disconnect()
+        emu.stop()
+
+
+def exchange(sock, request: bytes) -> bytes:
+    sock.sendall(request)
+    reply = b""
+    while not (reply.endswith(b"\n") or reply == b"ack"):
+        reply += sock.recv(1024)
+    return reply
+
+
+def test_captured_exchanges_with_the_emulator(bench):
+    drv, emu, rt = bench(connect=False, activation_time_s=0.05)
+    with socket.create_connection(("127.0.0.1", emu.port), timeout=1.0) as s:
+        assert exchange(s, b"GET STA\n") == b"STA 0\n"
+        assert exchange(s, b"SET POS 100 GTO 1\n") == b"ack"  # before activation...
+        assert exchange(s, b"GET FLT\n") == b"FLT 7\n"  # ...the activation bit must be set first
+        assert exchange(s, b"SET ACT 1\n") == b"ack"
+        assert exchange(s, b"GET STA\n") == b"STA 1\n"  # activating
+        time.sleep(0.06)
+        assert exchange(s, b"GET STA\n") == b"STA 3\n"
+        assert exchange(s, b"GET FOO\n") == b"?\n"
+        assert exchange(s, b"GET POS\n") == b"POS 0\n"  # fully open
+        assert exchange(s, b"GET PRE\n") == b"PRE 0\n"
+
+
+def test_activation_then_move_to_an_opening(bench):
+    drv, emu, rt = bench()
+    assert emu.regs["ACT"] == 1 and emu.regs["STA"] == wire.STA_ACTIVE
+    assert healthy(drv)
+    drv.read_available()
+    drv.move(40.0, 150.0, 50.0)
+    assert drv.is_moving()
+    assert wait_for(lambda: not drv.is_moving())
+    recs = drv.read_available()
+    assert abs(recs[-1].position_mm - 40.0) <= COUNT_MM
+    assert abs(recs[-1].requested_mm - 40.0) <= COUNT_MM
+    assert not recs[-1].object_detected and recs[-1].fault == 0
+    assert recs[-1].speed == 255 and recs[-1].force == 128
+    assert any(40.0 + COUNT_MM < r.position_mm < 50.0 - COUNT_MM for r in recs)  # seen on the way
+    seqs = [r.seq for r in recs]
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+    assert all(r.device_t_ns == r.host_t_ns for r in recs)  # no device clock: host receive time
+    assert emu.bad_requests == 0 and drv.health.corrupt == 0
+
+
+def test_closing_on_the_rod_stops_with_an_object(bench):
+    drv, emu, rt = bench()
+    drv.move(0.0, 150.0, 0.0)
+    assert wait_for(lambda: not drv.is_moving())
+    rec = drv.read_available()[-1]
+    assert rec.object_detected
+    assert rec.requested_mm == 0.0
+    assert 12.0 < rec.position_mm < CONTACT_MM  # pressed into the skin, short of the request
+    assert drv._snapshot["OBJ"] == wire.OBJ_CLOSING_CONTACT
+    drv.move(50.0, 150.0, 0.0)  # release
+    assert wait_for(lambda: not drv.is_moving())
+    assert not drv.read_available()[-1].object_detected
+
+
+def test_stop_from_another_thread_halts_the_jaws(bench):
+    drv, emu, rt = bench()
+    drv.move(40.0, 20.0, 0.0)  # 10 mm at 20 mm/s: half a second
+    assert wait_for(lambda: any(r.position_mm < 48.0 for r in drv.read_available()))
+    t = threading.Thread(target=drv.stop)
+    t.start()
+    t.join(1.0)
+    assert not t.is_alive()
+    assert not drv.is_moving()
+    assert emu.regs["GTO"] == 0
+    time.sleep(0.1)
+    recs = drv.read_available()
+    assert recs and all(r.position_mm > 40.0 + 2 * COUNT_MM for r in recs)
+    assert max(r.position_mm for r in recs[-3:]) - min(r.position_mm for r in recs[-3:]) == 0.0
+
+
+def test_bad_moves_are_refused_before_anything_is_sent(bench):
+    drv, emu, rt = bench()
+    for args in ((60.0, 50.0, 0.0), (20.0, 10.0, 0.0), (20.0, 50.0, 120.0)):
+        with pytest.raises(DeviceError, match="gripper"):
+            drv.move(*args)
+    assert emu.regs["GTO"] == 0 and emu.regs["POS"] == 0 and not drv.is_moving()
+
+
+def test_device_fault_stall_and_link_loss(bench):
+    drv, emu, rt = bench()
+    emu.inject_fault(0x0E)
+    assert wait_for(lambda: drv.fault(time.monotonic_ns()) is not None, 1.0)
+    assert "0x0E" in drv.fault(time.monotonic_ns()) and "overcurrent" in drv.fault(time.monotonic_ns())
+    with pytest.raises(DeviceError, match="0x0E"):
+        drv.move(30.0, 100.0, 0.0)
+    emu.regs["FLT"] = 0
+    assert wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 1.0)
+    emu.freeze()
+    assert wait_for(lambda: "stalled" in (drv.fault(time.monotonic_ns()) or ""), 1.0)
+    emu.unfreeze()
+    assert wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 1.0)
+    emu.drop_connection()
+    assert wait_for(lambda: "link lost" in (drv.fault(time.monotonic_ns()) or ""), 2.0)
+    with pytest.raises(DeviceError, match="link lost"):
+        drv.move(30.0, 100.0, 0.0)
+
+
+def test_connect_and_activation_errors(bench):
+    with socket.socket() as s:  # a free port with nothing listening
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(DeviceError, match=f"127.0.0.1:{port}"):
+        HandEGripper(HandEConfig(host="127.0.0.1", port=port, connect_timeout_s=0.5)).connect()
+    drv, emu, rt = bench(connect=False, activation_time_s=10.0, cfg_kw={"activation_timeout_s": 0.2})
+    with pytest.raises(DeviceError, match="did not activate"):
+        drv.connect()
+    assert not drv.is_connected
