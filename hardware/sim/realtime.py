@@ -23,6 +23,8 @@ import time
 
 from hardware.interfaces import Rig
 
+WARM_UP_S = 0.01
+
 
 class RealtimeWorld:
     """A simulated rig (world + twins) advanced in real time by a background thread.
@@ -61,6 +63,12 @@ class RealtimeWorld:
             return
         with self.lock:
             self.rig.connect()
+            # The first advance loads (or compiles) the compiled kernels, which takes seconds:
+            # take it before wall time starts counting, not while emulators wait on the lock.
+            self.world.advance(WARM_UP_S)
+            self.rig.clock.now_ns()
+            for d in self.rig.devices():  # nothing acquired during the warm-up is served
+                d.read_available()
             self._origin_ns = time.monotonic_ns() - int(round(self.world.t_s * 1e9))
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="realtime-world", daemon=True)
