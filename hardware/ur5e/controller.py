@@ -247,8 +247,14 @@ class URController:
             if self.safety_mode == SAFETY_MODE_PROTECTIVE_STOP:
                 self.safety_mode = SAFETY_MODE_NORMAL
 
-    def drop_connections(self) -> None:
-        """Close every client connection (a cable pulled and put back); the program keeps running."""
+    def drop_connections(self, refuse_s: float = 0.0) -> None:
+        """Close every client connection (a cable pulled); for refuse_s the ports refuse new
+        connections too, then it listens again. The program keeps running."""
+        if refuse_s > 0:
+            self._close_listeners()
+            timer = threading.Timer(refuse_s, self._reopen)
+            timer.daemon = True
+            timer.start()
         with self._lock:
             conns, self._conns, self._sessions = list(self._conns), [], []
         for c in conns:
@@ -257,6 +263,10 @@ class URController:
             except OSError:
                 pass
             c.close()
+
+    def _reopen(self) -> None:
+        if not self._stop.is_set() and not self._listeners:
+            self._open_listeners()
 
     # ---- controller cycle -----------------------------------------------------------------------
     def _controller_loop(self) -> None:
@@ -534,7 +544,7 @@ def main(argv: list[str]) -> int:
             if kind == "state":
                 arm.on_state(*msg[1:])
             elif kind == "fault":
-                getattr(ctl, msg[1])()
+                getattr(ctl, msg[1])(*msg[2:])
             elif kind == "set":
                 setattr(ctl, msg[1], msg[2])
             elif kind == "quit":

@@ -208,27 +208,38 @@ class UR5eArm(Arm):
             self._link_error = why
             self._torsion_cancel.set()
             self._move_kind = None  # a move in progress is not resumed after the link returns
-            self._next_reconnect = time.monotonic()
+            # The control client reconnects by itself from its receive thread when it can; give it
+            # one interval before reconnecting whatever is still down.
+            self._next_reconnect = time.monotonic() + self.cfg.reconnect_interval_s
 
     def _try_reconnect(self) -> None:
+        """Replace both clients with new ones. Not RTDEControlInterface.reconnect(): in ur_rtde
+        1.6.5 the control client's receive thread, once it has lost the link, keeps reconnecting
+        on every loop turn (its should_reconnect flag is never cleared), so the old client is shut
+        down (disconnect() ends that thread) and a new one uploads the control script again."""
         if time.monotonic() < self._next_reconnect:
             return
         self._next_reconnect = time.monotonic() + self.cfg.reconnect_interval_s
-        try:
-            with self._io:
-                if not self._recv.isConnected():
-                    self._recv.reconnect()
-                if not self._ctrl.isConnected():
-                    self._ctrl.reconnect()
-                ok = self._recv.isConnected() and self._ctrl.isConnected()
-        except Exception as exc:  # noqa: BLE001 - try again after the interval
-            log.info("ur5e: reconnect to %s failed (%s)", self.cfg.host, exc)
-            return
-        if ok:
-            self.health.reconnects += 1
-            self._link_error = None
-            self._last_rx_ns = time.monotonic_ns()
-            log.warning("ur5e: reconnected to %s", self.cfg.host)
+        import rtde_control
+        import rtde_receive
+
+        with self._io:
+            old, self._ctrl = self._ctrl, None
+            if old is not None:
+                _quiet(old.disconnect)
+            if self._recv is not None:
+                _quiet(self._recv.disconnect)
+            try:
+                self._recv = rtde_receive.RTDEReceiveInterface(self.cfg.host, self.cfg.rtde_frequency_hz)
+                self._ctrl = rtde_control.RTDEControlInterface(self.cfg.host)
+                self._read_state()
+            except Exception as exc:  # noqa: BLE001 - try again after the interval
+                log.info("ur5e: reconnect to %s failed (%s)", self.cfg.host, exc)
+                return
+        self.health.reconnects += 1
+        self._last_rx_ns = time.monotonic_ns()
+        self._link_error = None
+        log.warning("ur5e: reconnected to %s", self.cfg.host)
 
     # ---- state ---------------------------------------------------------------------------------------
     def read_available(self) -> list[Pose]:
@@ -262,6 +273,10 @@ class UR5eArm(Arm):
         self._require_connected()
         kind = self._move_kind
         if kind is None:
+            return False
+        if self._safety_bits & (SAFETY_PROTECTIVE_STOPPED | SAFETY_EMERGENCY_STOPPED) \
+                or self._runtime_state != RUNTIME_PLAYING:
+            self._move_kind = None  # the safety system stopped the arm; the script's registers froze
             return False
         if kind == "speedl":
             return self._torsion is not None and self._torsion.is_alive()
@@ -380,10 +395,8 @@ class UR5eArm(Arm):
                 else:
                     self._op_before = async_status(self._async_word())[1]
                     self._op_sent_ns = time.monotonic_ns()
-                    if self._ctrl.stopL(self.cfg.stop_decel_m_s2, True):
-                        self._move_kind = "stopl"
-                    else:
-                        self._move_kind = None  # refused: protective stop or program not running
+                    self._move_kind = "stopl"  # ur_rtde's stopL returns nothing; is_moving() watches
+                    self._ctrl.stopL(self.cfg.stop_decel_m_s2, True)
         except Exception as exc:  # noqa: BLE001 - stop must never raise into a guard's thread
             log.warning("ur5e: stop failed: %s", exc)
 

@@ -127,9 +127,11 @@ class UR5eEmulator:
         """Safety back to normal (what the pendant's unlock does); the program stays paused."""
         self._send(("fault", "unlock_protective_stop"))
 
-    def drop_connections(self) -> None:
-        """Close every client connection; the controller keeps listening and the program running."""
-        self._send(("fault", "drop_connections"))
+    def drop_connections(self, refuse_s: float = 0.0) -> None:
+        """Close every client connection (a cable pulled); for refuse_s the ports also refuse new
+        connections. The program keeps running. With refuse_s = 0 the ur_rtde 1.6.5 control
+        client's own reconnect succeeds at once and then loops (see driver._try_reconnect)."""
+        self._send(("fault", "drop_connections", float(refuse_s)))
 
     def pause_output(self, paused: bool) -> None:
         """Stop (or resume) sending RTDE data while the connections stay open."""
