@@ -1,0 +1,250 @@
+"""What the emulated controller runs in place of the `rtde_control` URScript that ur_rtde uploads.
+
+The ur_rtde client (1.6.5) sends its control script to port 30003 and then drives it through
+RTDE registers: a command number in `input_int_register_0`, arguments in
+`input_int_register_1..` and `input_double_register_0..`; the script answers in
+`output_int_register_0` (1 = ready for a command, 2 = done with it), `output_int_register_1`
+(boolean results such as is_steady) and `output_int_register_2` (asynchronous operation status).
+`ControlScript.tick()` is one 2 ms cycle of the script's main loop, written after the script the
+client sends (captured in the tests):
+
+    cmd = read_input_integer_reg(0)
+    if cmd is a realtime command (speedl, servoj, ...): process it; signal_ready()
+    elif cmd == 0: executing = False; signal_ready()
+    elif not executing: process it (blocking commands finish first); executing = True
+                        and signal_done_with_cmd() unless cmd == 255 (stop script)
+
+Commands acted on: moveL (3, synchronous or asynchronous), stopL (33) / stopJ (34), speedL (10),
+speedStop (15), servoStop (16), isSteady (47), stop script (255). Commands that only set state
+the emulator does not model (setPayload 17, setTcp 29, setWatchdog 35, ...) are acknowledged
+like the script would without effect; any other command is acknowledged and recorded in
+`unsupported` so a test can see the driver asked for something not emulated.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Protocol
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+log = logging.getLogger(__name__)
+
+# Command numbers of the control script (ur_rtde 1.6.5, RTDE::RobotCommand::Type).
+CMD_NONE = 0
+CMD_MOVEL = 3
+CMD_SPEEDL = 10
+CMD_SPEED_STOP = 15
+CMD_SERVO_STOP = 16
+CMD_SET_PAYLOAD = 17
+CMD_SET_TCP = 29
+CMD_STOPL = 33
+CMD_STOPJ = 34
+CMD_SET_WATCHDOG = 35
+CMD_IS_STEADY = 47
+CMD_STOP_SCRIPT = 255
+# Processed every cycle and answered with "ready", never "done" (the script's list).
+REALTIME_CMDS = frozenset({24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71})
+ACKNOWLEDGED_ONLY = frozenset({CMD_SET_PAYLOAD, CMD_SET_TCP, CMD_SET_WATCHDOG, 20, 21})
+
+SIGNAL_READY = 1
+SIGNAL_DONE = 2
+
+# How far ahead a speedl twist is turned into a move of the twin (the twin only takes targets).
+SPEED_HORIZON_S = 30.0
+MAX_HORIZON_ANGLE_RAD = 1.0
+
+
+class ArmAccess(Protocol):
+    """The simulated arm as the script reaches it (the emulator takes the world lock)."""
+
+    def move_linear(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
+                    angular_speed_rad_s: float | None) -> None: ...
+    def stop(self) -> None: ...
+    def is_moving(self) -> bool: ...
+    def tcp_pose6(self) -> np.ndarray: ...
+
+
+class Registers:
+    """The controller's general-purpose RTDE registers (48 int and 48 double each way)."""
+
+    def __init__(self) -> None:
+        self.input_int = [0] * 48
+        self.input_double = [0.0] * 48
+        self.output_int = [0] * 48
+        self.output_double = [0.0] * 48
+
+
+class ControlScript:
+    """One running instance of the uploaded control script.
+
+    arm: access to the twin. regs: the shared registers. Call tick() every 2 ms; `running`
+    turns False once the script ends (stop-script command).
+    """
+
+    def __init__(self, arm: ArmAccess, regs: Registers) -> None:
+        self.arm, self.regs = arm, regs
+        self.running = True
+        self.executing = False
+        self.unsupported: list[int] = []
+        self.commands: list[int] = []  # every command started, in order (tests read it)
+        self._async_wr_count = 0
+        self._async_op_id = 0
+        self._move_active = False  # the script's move_thrd / stop_thrd
+        self._speeding = False
+        self._speed_twist = np.zeros(6)
+        self._speed_accel = 0.5
+        self._pending: Callable[[], bool] | None = None  # blocking command: done when it returns True
+        self._reset_async_progress()
+        self._signal(SIGNAL_READY)
+
+    # ---- the script's helpers ----------------------------------------------------------------
+    def _signal(self, value: int) -> None:
+        self.regs.output_int[0] = value
+
+    def _write_async_progress(self, value: int) -> None:
+        self._async_wr_count += 1
+        if self._async_wr_count > 127:
+            self._async_wr_count = 0
+        if value == 0:
+            self._async_op_id += 1
+            if self._async_op_id > 127:
+                self._async_op_id = 0
+        reg = self._async_wr_count * 65536 + self._async_op_id * 16777216
+        if value >= 0:
+            reg += min(value, 32767) + 32768
+        self.regs.output_int[2] = reg
+
+    def _reset_async_progress(self) -> None:
+        self._write_async_progress(-1)
+
+    def _stop_async_move(self) -> None:
+        if self._move_active:
+            self._move_active = False
+            self._write_async_progress(-1)
+
+    def _pose_in(self, index: int = 0) -> np.ndarray:
+        return np.asarray(self.regs.input_double[index:index + 6], float)
+
+    # ---- main loop -----------------------------------------------------------------------------
+    def tick(self) -> None:
+        """One cycle of the main loop, plus the progress of what the script's threads run."""
+        if not self.running:
+            return
+        if self._move_active and not self.arm.is_moving():
+            self._move_active = False  # move_thread / stop_thread finished
+            self._write_async_progress(-1)
+        if self._pending is not None:
+            if not self._pending():
+                return  # a blocking command is still executing: no signal this cycle
+            self._pending = None
+            self._signal(SIGNAL_DONE)
+            return
+        cmd = int(self.regs.input_int[0])
+        if cmd in REALTIME_CMDS:
+            self._process(cmd)
+            self._signal(SIGNAL_READY)
+        elif cmd == CMD_NONE:
+            self.executing = False
+            self._signal(SIGNAL_READY)
+        elif not self.executing:
+            self.executing = True
+            keep_running = self._process(cmd)
+            if not keep_running:
+                self.running = False
+                log.info("ur5e emulator: control script terminated (stop script command)")
+            elif self._pending is None:
+                self._signal(SIGNAL_DONE)
+
+    def halt(self) -> None:
+        """The program was stopped or paused from outside (protective stop, dashboard stop)."""
+        self._move_active = False
+        self._speeding = False
+        self._pending = None
+
+    # ---- commands -----------------------------------------------------------------------------
+    def _process(self, cmd: int) -> bool:
+        """Act on one command; False when the script must end."""
+        if cmd != CMD_NONE and (not self.commands or self.commands[-1] != cmd or cmd not in REALTIME_CMDS):
+            self.commands.append(cmd)
+        r = self.regs
+        if cmd == CMD_MOVEL:
+            pose, v, a, is_async = self._pose_in(0), r.input_double[6], r.input_double[7], r.input_int[1]
+            self._stop_async_move()
+            self.arm.move_linear(pose, v, a, None)
+            if is_async == 1:
+                self._move_active = True
+                self._write_async_progress(0)
+            else:
+                self._pending = lambda: not self.arm.is_moving()
+        elif cmd in (CMD_STOPL, CMD_STOPJ):
+            is_async = r.input_int[1]
+            self._stop_async_move()
+            self.arm.stop()
+            if is_async == 1:
+                self._move_active = True  # stop_thread
+                self._write_async_progress(0)
+            else:
+                self._pending = lambda: not self.arm.is_moving()
+        elif cmd == CMD_SPEEDL:
+            twist = np.asarray(r.input_double[0:6], float)
+            self._speed_accel = float(r.input_double[6])
+            if not self._speeding or not np.array_equal(twist, self._speed_twist):
+                self._speed_twist = twist
+                self._speeding = True
+                self._command_twist(twist, self._speed_accel)
+        elif cmd in (CMD_SPEED_STOP, CMD_SERVO_STOP):
+            self._speeding = False
+            self._speed_twist = np.zeros(6)
+            self.arm.stop()
+            self._pending = lambda: not self.arm.is_moving()
+        elif cmd == CMD_IS_STEADY:
+            r.output_int[1] = 0 if self.arm.is_moving() else 1
+        elif cmd == CMD_STOP_SCRIPT:
+            log.info("ur5e emulator: Received stop script!")
+            return False
+        elif cmd in ACKNOWLEDGED_ONLY:
+            pass
+        else:
+            self.unsupported.append(cmd)
+            log.warning("ur5e emulator: control script command %d is not emulated (acknowledged only)", cmd)
+        return True
+
+    def _command_twist(self, twist: np.ndarray, accel: float) -> None:
+        """speedl(twist, a): TCP velocity [vx, vy, vz, wx, wy, wz] (m/s, rad/s, base frame).
+
+        The twin takes targets, so a twist becomes a linear move toward where the twist leads
+        (far ahead, at the twist's speeds); a zero twist decelerates at `accel` to rest, i.e. a move
+        to the point where that deceleration stops the current motion.
+        """
+        here = np.asarray(self.arm.tcp_pose6(), float)
+        v, w = twist[:3], twist[3:]
+        speed, ang = float(np.linalg.norm(v)), float(np.linalg.norm(w))
+        if speed == 0.0 and ang == 0.0:
+            self._decelerate(here, accel)
+            return
+        horizon_s = SPEED_HORIZON_S if ang == 0.0 else min(SPEED_HORIZON_S, MAX_HORIZON_ANGLE_RAD / ang)
+        self._last_twist = twist.copy()
+        target = _advance(here, v, w, horizon_s)
+        self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None)
+
+    def _decelerate(self, here: np.ndarray, accel: float) -> None:
+        last = getattr(self, "_last_twist", None)
+        if last is None or accel <= 0:
+            self.arm.stop()
+            return
+        v, w = last[:3], last[3:]
+        speed, ang = float(np.linalg.norm(v)), float(np.linalg.norm(w))
+        # Time to stop at `accel` from the larger of the two (speedl's aRot defaults to a).
+        t_stop = max(speed, ang) / accel
+        target = _advance(here, v, w, t_stop / 2.0)  # distance of a linear ramp to zero
+        self._last_twist = None
+        self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None)
+
+
+def _advance(pose6: np.ndarray, v: np.ndarray, w: np.ndarray, dt_s: float) -> np.ndarray:
+    """The pose reached from pose6 moving at twist (v, w) for dt_s (w in the base frame)."""
+    rot = Rotation.from_rotvec(w * dt_s) * Rotation.from_rotvec(pose6[3:])
+    return np.concatenate((pose6[:3] + v * dt_s, rot.as_rotvec()))

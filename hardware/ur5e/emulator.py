@@ -1,0 +1,203 @@
+"""Loopback UR5e: a controller process serving the ur_rtde client, moving the simulated arm.
+
+    with UR5eEmulator(rt, host="127.0.0.2") as emu:      # rt: a started "gripper" RealtimeWorld
+        arm = UR5eArm(UR5eConfig(host="127.0.0.2")); arm.connect()
+        emu.protective_stop()                            # fault injection
+
+The ur_rtde client reaches fixed ports (dashboard 29999, RTDE 30004, script 30003), so
+instances are told apart by host: give each its own loopback address (127.0.0.2, 127.0.0.3, ...;
+all of 127/8 is loopback on Linux). The controller itself runs in a child process
+(`hardware.ur5e.controller`, which says why); this object starts it and runs the bridge thread
+that, every 2 ms, hands it the twin's TCP pose (taken under `rt.lock`) and applies the moves and
+stops the control script commands to `rt.rig.arm`.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from multiprocessing.connection import Connection
+from pathlib import Path
+
+import numpy as np
+
+from hardware.interfaces import DeviceError
+from hardware.ur5e import wire
+
+log = logging.getLogger(__name__)
+
+EMULATOR_SETUP = "gripper"
+
+PERIOD_S = 0.002
+START_TIMEOUT_S = 20.0
+_ROOT = Path(__file__).resolve().parents[2]
+
+
+class UR5eEmulator:
+    """A UR5e controller on `host`, backed by `rt` (a started "gripper" RealtimeWorld).
+
+    port: 0 or 30004 (the client knows no other RTDE port). Keyword options go to the controller
+    (controller_version, polyscope_version, serial_number, remote_control).
+    Fault injection: protective_stop(), emergency_stop(), unlock_protective_stop(),
+    drop_connections(), pause_output(True/False) (links stay open, no data flows).
+    """
+
+    def __init__(self, rt, host: str = "127.0.0.2", port: int = 0, **controller_options) -> None:
+        if port not in (0, wire.PORT_RTDE):
+            raise ValueError(f"port={port}: the ur_rtde client only reaches RTDE on {wire.PORT_RTDE}; "
+                             "give each emulator its own loopback host instead")
+        if controller_options:
+            raise ValueError(f"unknown options {sorted(controller_options)}")
+        self.rt, self.host = rt, host
+        self.info: dict = {}  # the controller's latest read-out (commands seen, runtime state, ...)
+        self._proc: subprocess.Popen | None = None
+        self._conn: Connection | None = None
+        self._send_lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._applied_id = 0
+        self._error: str | None = None
+        self._ready = threading.Event()
+        self._where: str | None = None
+        self._start_error: str | None = None
+
+    # ---- life cycle ----------------------------------------------------------------------------
+    def start(self) -> str:
+        """Start the controller process and the bridge; returns "host:30004" once it listens."""
+        if self._proc is not None:
+            return self._where
+        parent, child = socket.socketpair()
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(_ROOT), os.environ.get("PYTHONPATH", "")]))
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "hardware.ur5e.controller", str(child.fileno()), self.host,
+             repr(float(self.rt.world_time_s()))], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
+        child.close()
+        self._conn = Connection(parent.detach())
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._bridge, name="ur5e-emu-bridge", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(START_TIMEOUT_S) or self._start_error is not None:
+            why = self._start_error or f"no answer within {START_TIMEOUT_S} s"
+            self.stop()
+            raise DeviceError(f"ur5e emulator: the controller process did not start on {self.host} ({why})")
+        return self._where
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._conn is not None:
+            try:
+                self._send(("quit",))
+            except OSError:
+                pass
+        if self._proc is not None:
+            try:
+                self._proc.wait(timeout=3.0)
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+                self._proc.wait()
+            self._proc = None
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+    def __enter__(self) -> UR5eEmulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # ---- fault injection -------------------------------------------------------------------------
+    def protective_stop(self) -> None:
+        """The arm stops, safety mode PROTECTIVE_STOP, the control program pauses."""
+        self._send(("fault", "protective_stop"))
+
+    def emergency_stop(self) -> None:
+        self._send(("fault", "emergency_stop"))
+
+    def unlock_protective_stop(self) -> None:
+        """Safety back to normal (what the pendant's unlock does); the program stays paused."""
+        self._send(("fault", "unlock_protective_stop"))
+
+    def drop_connections(self, refuse_s: float = 0.0) -> None:
+        """Close every client connection (a cable pulled); for refuse_s the ports also refuse new
+        connections. The program keeps running. With refuse_s = 0 the ur_rtde 1.6.5 control
+        client's own reconnect succeeds at once and then loops (see driver._try_reconnect)."""
+        self._send(("fault", "drop_connections", float(refuse_s)))
+
+    def pause_output(self, paused: bool) -> None:
+        """Stop (or resume) sending RTDE data while the connections stay open."""
+        self._send(("set", "output_paused", bool(paused)))
+
+    def wait_info(self, predicate, timeout_s: float = 5.0) -> dict:
+        """Wait until predicate(info) holds (info: the controller's read-out); returns it."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            info = self.info
+            if info and predicate(info):
+                return info
+            time.sleep(0.005)
+        raise TimeoutError(f"ur5e emulator: condition not reached in {timeout_s} s; last read-out {self.info}")
+
+    # ---- bridge ----------------------------------------------------------------------------------
+    def _send(self, msg: tuple) -> None:
+        if self._conn is None:
+            raise DeviceError("ur5e emulator: not started")
+        with self._send_lock:
+            self._conn.send(msg)
+
+    def _bridge(self) -> None:
+        k, origin = 0, time.monotonic()
+        try:
+            while not self._stop.is_set():
+                while self._conn.poll():
+                    self._handle(self._conn.recv())
+                with self.rt.lock:
+                    arm = self.rt.rig.arm
+                    pose = np.asarray(arm.tcp_pose6(), float).tolist()
+                    moving = bool(arm.is_moving())
+                    t_s = float(self.rt.world.t_s)
+                error, self._error = self._error, None
+                self._send(("state", t_s, pose, moving, self._applied_id, error))
+                k += 1
+                delay = origin + k * PERIOD_S - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                elif delay < -0.1:
+                    k = int((time.monotonic() - origin) / PERIOD_S)
+        except (EOFError, OSError) as exc:
+            if not self._stop.is_set():
+                log.warning("ur5e emulator: controller process went away (%s)", exc)
+                self._start_error = self._start_error or str(exc)
+                self._ready.set()
+
+    def _handle(self, msg: tuple) -> None:
+        kind, msg_id = msg[0], msg[1]
+        if kind == "move":
+            pose, v, a, w = msg[2:]
+            try:
+                with self.rt.lock:
+                    self.rt.rig.arm.move_linear(np.asarray(pose), v, a, w)
+            except DeviceError as exc:
+                self._error = str(exc)
+                log.warning("ur5e emulator: %s", exc)
+        elif kind == "stop":
+            with self.rt.lock:
+                self.rt.rig.arm.stop()
+        elif kind == "info":
+            self.info = msg[2]
+        elif kind == "ready":
+            self._where = msg[2]
+            self._ready.set()
+        elif kind == "error":
+            self._start_error = msg[2]
+            self._ready.set()
+        self._applied_id = max(self._applied_id, msg_id)

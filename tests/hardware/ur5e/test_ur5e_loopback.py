@@ -1,0 +1,167 @@
+"""The real ur_rtde client (through UR5eArm) against the emulated controller on a RealtimeWorld.
+
+Each test serves on its own loopback address: the client's ports are fixed. Connecting takes
+~0.05 s against the emulator (dashboard, RTDE set-up, script upload); disconnecting ~2 s (the
+client's disconnect sleeps). No assertion depends on timing beyond generous waits.
+"""
+
+import time
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from hardware.interfaces import DeviceError
+from hardware.ur5e import UR5eArm, UR5eConfig
+from hardware.ur5e.control_script import CMD_IS_STEADY, CMD_MOVEL, CMD_SPEED_STOP, CMD_SPEEDL, CMD_STOPL
+from hardware.ur5e.emulator import UR5eEmulator
+
+pytest.importorskip("rtde_control")
+
+
+def wait_for(cond, timeout_s=5.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+@pytest.fixture
+def bench(realtime_world):
+    """(rt, emulator, connected arm) on a fresh loopback host."""
+    made = []
+
+    def make(host: str, **cfg):
+        rt = realtime_world("gripper")
+        emu = UR5eEmulator(rt, host=host)
+        emu.start()
+        arm = UR5eArm(UR5eConfig(host=host, **cfg))
+        made.append((emu, arm))
+        arm.connect()
+        return rt, emu, arm
+
+    yield make
+    for emu, arm in made:
+        arm.disconnect()
+        emu.stop()
+
+
+def twin_pose(rt):
+    with rt.lock:
+        return np.asarray(rt.rig.arm.tcp_pose6(), float)
+
+
+def test_connect_streams_poses_and_moves_the_world(bench):
+    rt, emu, arm = bench("127.0.0.21")
+    info = emu.wait_info(lambda i: i["scripts_received"] == 1 and i["runtime_state"] == 2)
+    assert info["dashboard_requests"][:2] == ["PolyscopeVersion", "get serial number"]
+    assert arm.fault(time.monotonic_ns()) is None
+    np.testing.assert_allclose(arm.tcp_pose6(), twin_pose(rt), atol=1e-9)
+    assert wait_for(lambda: arm.health.received > 50)
+    poses = arm.read_available()
+    assert poses and all(p.frame_id == "base" for p in poses)
+    dev = [p.device_t_ns for p in poses]
+    assert dev == sorted(dev) and len(set(dev)) == len(dev)
+    assert all(p.seq == round(p.device_t_ns / 2e6) for p in poses)
+
+    # A 3 mm moveL, asynchronous: the call returns while the world moves.
+    start = arm.tcp_pose6()
+    target = start + [0.0, 0.0, 0.003, 0.0, 0.0, 0.0]
+    arm.move_linear(target, 0.01, 0.1)
+    assert arm.is_moving()
+    assert wait_for(lambda: not arm.is_moving())
+    np.testing.assert_allclose(twin_pose(rt)[:3], target[:3], atol=1e-6)
+    assert wait_for(lambda: abs(arm.tcp_pose6()[2] - target[2]) < 1e-6)
+
+    # A 1.5 degree torsion about the tool axis at 1.5 deg/s (speedL with the driver's profile).
+    here = arm.tcp_pose6()
+    goal = Rotation.from_rotvec(here[3:]) * Rotation.from_rotvec([0, 0, np.radians(1.5)])
+    arm.move_linear(np.concatenate((here[:3], goal.as_rotvec())), 0.001, 0.1, np.radians(1.5))
+    assert arm.is_moving()
+    t0 = time.monotonic()
+    assert wait_for(lambda: not arm.is_moving(), 10.0)
+    took = time.monotonic() - t0
+    final = twin_pose(rt)
+    err_deg = np.degrees((Rotation.from_rotvec(final[3:]).inv() * goal).magnitude())
+    assert err_deg < 0.05
+    np.testing.assert_allclose(final[:3], here[:3], atol=1e-5)
+    assert took > 0.9  # 1.5 deg at 1.5 deg/s is a second; moveL at the tool speed would take far less
+    commands = emu.wait_info(lambda i: CMD_SPEED_STOP in i["commands"])["commands"]
+    assert commands[:3] == [CMD_MOVEL, CMD_SPEEDL, CMD_SPEED_STOP] or CMD_IS_STEADY in commands
+    assert emu.info["unsupported"] == []
+
+
+def test_stop_mid_move_and_from_another_thread(bench):
+    import threading
+
+    rt, emu, arm = bench("127.0.0.22")
+    start = arm.tcp_pose6()
+    arm.move_linear(start + [0.02, 0, 0, 0, 0, 0], 0.01, 0.1)
+    assert wait_for(lambda: twin_pose(rt)[0] - start[0] > 0.001)
+    t = threading.Thread(target=arm.stop)
+    t.start()
+    t.join(1.0)
+    assert not t.is_alive()
+    assert wait_for(lambda: not arm.is_moving())
+    with rt.lock:
+        assert not rt.rig.arm.is_moving()
+    stopped_x = twin_pose(rt)[0]
+    assert 0.001 < stopped_x - start[0] < 0.015
+    assert CMD_STOPL in emu.wait_info(lambda i: CMD_STOPL in i["commands"])["commands"]
+
+
+def test_protective_stop_is_a_fault_and_nothing_resumes(bench):
+    rt, emu, arm = bench("127.0.0.23")
+    start = arm.tcp_pose6()
+    arm.move_linear(start + [0, 0.02, 0, 0, 0, 0], 0.01, 0.1)
+    assert wait_for(lambda: twin_pose(rt)[1] - start[1] > 0.001)
+    emu.protective_stop()
+    assert wait_for(lambda: arm.fault(time.monotonic_ns()) is not None)
+    assert "protective stop" in arm.fault(time.monotonic_ns())
+    assert wait_for(lambda: not arm.is_moving())
+    with pytest.raises(DeviceError, match="protective stop"):
+        arm.move_linear(start, 0.01, 0.1)
+    arm.stop()  # refused by the controller, but never raises
+    emu.unlock_protective_stop()
+    assert wait_for(lambda: "not running" in (arm.fault(time.monotonic_ns()) or ""))
+    held = twin_pose(rt)
+    time.sleep(0.2)
+    np.testing.assert_allclose(twin_pose(rt), held, atol=1e-9)  # no motion resumed
+    arm.restart_program()
+    assert wait_for(lambda: arm.fault(time.monotonic_ns()) is None)
+
+
+def test_link_loss_reconnects_and_stall_is_reported(bench):
+    rt, emu, arm = bench("127.0.0.24", reconnect_interval_s=0.3)
+    emu.drop_connections(refuse_s=0.5)
+    assert wait_for(lambda: "link lost" in (arm.fault(time.monotonic_ns()) or ""))
+    assert wait_for(lambda: arm.health.reconnects == 1 and arm.fault(time.monotonic_ns()) is None, 10.0)
+    received = arm.health.received
+    assert wait_for(lambda: arm.health.received > received + 20)
+    start = arm.tcp_pose6()
+    arm.move_linear(start + [0.002, 0, 0, 0, 0, 0], 0.01, 0.1)
+    assert wait_for(lambda: not arm.is_moving())
+    np.testing.assert_allclose(twin_pose(rt)[0], start[0] + 0.002, atol=1e-6)
+
+    emu.pause_output(True)  # connections open, no data: a stall within the stall timeout
+    assert wait_for(lambda: "stalled" in (arm.fault(time.monotonic_ns()) or ""), 1.0)
+    emu.pause_output(False)
+    assert wait_for(lambda: arm.fault(time.monotonic_ns()) is None)
+
+
+def test_no_controller_is_a_clear_error():
+    arm = UR5eArm(UR5eConfig(host="127.0.0.29", connect_timeout_s=3.0))
+    with pytest.raises(DeviceError, match=r"127\.0\.0\.29.*hardware.ur5e.host"):
+        arm.connect()
+    assert not arm.is_connected
+
+
+def test_config_validates():
+    from layerskin_exp.config import ConfigError
+
+    with pytest.raises(ConfigError, match="stall_timeout_s"):
+        UR5eConfig(stall_timeout_s=0.2)
+    with pytest.raises(ConfigError, match="host"):
+        UR5eConfig(host="")
