@@ -13,8 +13,9 @@ def build_rig(cfg, setup: str) -> Rig:
     """The rig for `setup` on the configured backend.
 
     cfg: the composed app config (DictConfig with `hardware`, `skin`, `sim` nodes) or any object
-    with those attributes already typed. Config errors raise ConfigError naming the key; a
-    backend whose drivers are not in this build raises DeviceError (never a silent fallback).
+    with those attributes already typed. Config errors raise ConfigError naming the key. On
+    `loopback` this powers on the emulators (they stop when the rig disconnects); on `lab` it only
+    builds the drivers (nothing is opened before `rig.connect()`).
     """
     from omegaconf import DictConfig
 
@@ -30,7 +31,12 @@ def build_rig(cfg, setup: str) -> Rig:
         from hardware.sim import build_sim_rig
 
         return build_sim_rig(typed("sim"), typed("skin"), setup)
-    if backend in ("lab", "loopback"):
-        raise DeviceError(f"hardware={backend}: the {backend} drivers (UR5e/RTDE, Hand-E, Net F/T, serial "
-                          "boards, camera) are not in this build yet; run with hardware=sim")
+    if backend == "lab":
+        from hardware.lab import build_lab_rig
+
+        return build_lab_rig(hw, typed("skin"), setup)
+    if backend == "loopback":
+        from hardware.loopback import build_loopback_rig
+
+        return build_loopback_rig(hw, typed("sim"), typed("skin"), setup)
     raise DeviceError(f"hardware.backend={backend!r}: unknown backend; choose sim, lab or loopback")

@@ -7,7 +7,8 @@ serial ports); `hardware=loopback` points the same drivers at local emulators (p
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 from hydra.core.config_store import ConfigStore
 
@@ -20,10 +21,6 @@ def _check_backend(backend: str, expected: str) -> None:
     require(backend in BACKENDS, "hardware.backend", backend, f"unknown backend; choose one of {list(BACKENDS)}")
     require(backend == expected, "hardware.backend", backend,
             f"this is the {expected!r} schema; select the backend with hardware={backend}, not by overriding the key")
-
-
-def _check_port(key: str, port: int) -> None:
-    require(isinstance(port, int) and 1 <= port <= 65535, key, port, "must be a TCP/UDP port 1..65535")
 
 
 def _check_host(key: str, host: str) -> None:
@@ -40,61 +37,68 @@ class SimHardwareConfig:
         _check_backend(self.backend, "sim")
 
 
+def _device_configs():
+    from hardware.camera.config import CameraConfig
+    from hardware.hande.config import HandEConfig
+    from hardware.netft.config import NetFTConfig
+    from hardware.platform.config import GrblPlatformConfig
+    from hardware.skin_board.config import SkinBoardConfig
+    from hardware.ur5e.config import UR5eConfig
+
+    return SkinBoardConfig, GrblPlatformConfig, NetFTConfig, UR5eConfig, HandEConfig, CameraConfig
+
+
+(_Skin, _Platform, _NetFT, _UR5e, _HandE, _Camera) = _device_configs()
+
+
 @dataclass
 class LabHardwareConfig:
-    """The bench: UR5e over RTDE, Hand-E over the URCap socket, Mini40 over Net F/T UDP, serial boards."""
+    """The bench: one node per device, each the config of its driver (`hardware/<device>/config.py`).
+
+    skin_board: readout board on a serial port; platform: GRBL stage on a serial port; netft:
+    the Mini40's Net F/T box (UDP RDT); ur5e: the arm's controller (ur_rtde); hande: the Hand-E
+    through the URCap socket; camera: the D435 (OpenCV capture) with its intrinsics.
+    """
 
     backend: str = "lab"
-    ur_host: str = "192.168.1.10"
-    gripper_host: str = "192.168.1.10"  # the URCap socket runs on the robot controller
-    gripper_port: int = 63352
-    ft_host: str = "192.168.1.1"
-    ft_port: int = 49152  # Net F/T RDT
-    ft_rate_hz: int = 1000
-    skin_serial_port: str = "/dev/ttyACM0"
-    skin_baud: int = 2000000
-    platform_serial_port: str = "/dev/ttyUSB0"
-    platform_baud: int = 115200
-    camera_index: int = 0
-    connect_timeout_s: float = 5.0
+    skin_board: _Skin = field(default_factory=_Skin)
+    platform: _Platform = field(default_factory=_Platform)
+    netft: _NetFT = field(default_factory=_NetFT)
+    ur5e: _UR5e = field(default_factory=_UR5e)
+    hande: _HandE = field(default_factory=_HandE)
+    camera: _Camera = field(default_factory=_Camera)
 
     def __post_init__(self) -> None:
         _check_backend(self.backend, "lab")
-        for k in ("ur_host", "gripper_host", "ft_host"):
-            _check_host(f"hardware.{k}", getattr(self, k))
-        for k in ("gripper_port", "ft_port"):
-            _check_port(f"hardware.{k}", getattr(self, k))
-        for k in ("skin_serial_port", "platform_serial_port"):
-            require(getattr(self, k).strip() != "", f"hardware.{k}", getattr(self, k), "must name a serial device")
-        for k in ("skin_baud", "platform_baud"):
-            require(getattr(self, k) > 0, f"hardware.{k}", getattr(self, k), "must be > 0 baud")
-        require(1 <= self.ft_rate_hz <= 7000, "hardware.ft_rate_hz", self.ft_rate_hz, "Net F/T streams 1..7000 Hz")
-        require(self.camera_index >= 0, "hardware.camera_index", self.camera_index, "must be >= 0")
-        require(self.connect_timeout_s > 0, "hardware.connect_timeout_s", self.connect_timeout_s, "must be > 0 s")
 
 
 @dataclass
-class LoopbackHardwareConfig:
-    """The real drivers against emulators on this machine, backed by the simulated world."""
+class LoopbackHardwareConfig(LabHardwareConfig):
+    """The real drivers against emulators in this process, backed by the simulated world.
+
+    The device nodes configure the drivers as on the bench; their addresses are replaced by the
+    emulators' (pty paths, loopback ports). host: where the TCP/UDP emulators listen. ur_host:
+    the UR5e emulator's address ("auto": the first 127.0.0.N whose controller ports are free; a
+    UR controller's ports are fixed). faults: device -> emulator fault-injection arguments, e.g.
+    `+hardware.faults.skin_board.stalls=[[1.0,200]]`. world_period_s: how often the world is
+    advanced to wall time.
+    """
 
     backend: str = "loopback"
     host: str = "127.0.0.1"
-    rtde_port: int = 30004
-    ur_script_port: int = 30002
-    gripper_port: int = 63352
-    ft_port: int = 49152
-    camera_port: int = 50010
-    connect_timeout_s: float = 2.0
+    ur_host: str = "auto"
+    faults: dict[str, Any] = field(default_factory=dict)
+    world_period_s: float = 0.002
 
     def __post_init__(self) -> None:
         _check_backend(self.backend, "loopback")
         _check_host("hardware.host", self.host)
-        ports = ("rtde_port", "ur_script_port", "gripper_port", "ft_port", "camera_port")
-        for k in ports:
-            _check_port(f"hardware.{k}", getattr(self, k))
-        values = [getattr(self, k) for k in ports]
-        require(len(set(values)) == len(values), "hardware.*_port", values, "each emulator needs its own port")
-        require(self.connect_timeout_s > 0, "hardware.connect_timeout_s", self.connect_timeout_s, "must be > 0 s")
+        require(self.host.startswith("127.") or self.host in ("localhost", "::1"), "hardware.host", self.host,
+                "emulators listen on loopback addresses only (127.x.y.z)")
+        require(self.ur_host == "auto" or self.ur_host.startswith("127."), "hardware.ur_host", self.ur_host,
+                "must be 'auto' or a loopback address 127.x.y.z")
+        require(0 < self.world_period_s <= 0.01, "hardware.world_period_s", self.world_period_s,
+                "must be in (0, 0.01] s")
 
 
 HardwareConfig = SimHardwareConfig | LabHardwareConfig | LoopbackHardwareConfig

@@ -1,4 +1,5 @@
-"""The hardware group: schemas validate, lab/loopback refuse clearly, unknown backends name the key."""
+"""The hardware group: schemas validate, the lab rig builds without touching anything and fails to
+connect clearly, unknown backends and bad device settings name the key."""
 
 import pytest
 from omegaconf import OmegaConf
@@ -8,12 +9,15 @@ from hardware.interfaces import DeviceError
 from layerskin_exp.config import ConfigError, validate
 
 
-@pytest.mark.parametrize("backend", ["lab", "loopback"])
-def test_backends_without_drivers_refuse_clearly(make_cfg, backend):
-    cfg = make_cfg(backend)
-    assert validate(cfg, "hardware").backend == backend
-    with pytest.raises(DeviceError, match=f"hardware={backend}.*not in this build"):
-        build_rig(cfg, "platform")
+def test_lab_rig_builds_without_io_and_connect_names_the_missing_port(make_cfg, tmp_path):
+    cfg = make_cfg("lab")
+    cfg.hardware.skin_board.port = str(tmp_path / "ttyACM-missing")
+    cfg.hardware.skin_board.connect_timeout_s = 0.2
+    rig = build_rig(cfg, "platform")  # building opens nothing
+    assert rig.backend == "lab" and not any(d.is_connected for d in rig.devices())
+    with pytest.raises(DeviceError, match="ttyACM-missing"):
+        rig.connect()
+    assert not any(d.is_connected for d in rig.devices())
 
 
 def test_unknown_backend_and_bad_port_name_the_key(make_cfg):
@@ -22,8 +26,8 @@ def test_unknown_backend_and_bad_port_name_the_key(make_cfg):
     with pytest.raises(ConfigError, match="hardware.backend='fpga'"):
         build_rig(cfg, "platform")
     cfg = make_cfg("lab")
-    cfg.hardware.ft_port = 70000
-    with pytest.raises(ConfigError, match="hardware.ft_port=70000"):
+    cfg.hardware.netft.port = 70000
+    with pytest.raises(ConfigError, match="hardware.netft.port=70000"):
         validate(cfg, "hardware")
 
 

@@ -7,7 +7,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
@@ -46,9 +45,3 @@ def design_dir(protocol_root: Path) -> Path:
     dirs = [d for d in protocol_root.iterdir() if d.is_dir()]
     assert len(dirs) == 1, f"expected one design folder in {protocol_root}, found {dirs}"
     return dirs[0]
-
-
-@pytest.fixture
-def hydra_dirs(tmp_path):
-    """Overrides that keep Hydra's run/sweep folders inside tmp_path."""
-    return [f"hydra.run.dir={tmp_path}/out", f"hydra.sweep.dir={tmp_path}/multirun"]

@@ -1,0 +1,85 @@
+"""`python -m hardware.emulate DEVICE [--host H] [--port N] [sim.key=value ...]`: one device's
+emulator, standalone, for developing against the wire protocol without the bench.
+
+DEVICE is one of skin_board, platform, netft, ur5e, hande, camera. The emulator is backed by a
+simulated rig (the platform setup for skin_board/platform/netft, the gripper setup for
+ur5e/hande/camera) advanced at wall-clock pace; `sim.*` and `skin.*` overrides shape it as on
+`hardware=sim`. Once it is ready it prints one line saying where it listens (host:port, or the
+pty path to open as a serial port), then serves until Ctrl-C or SIGTERM. It binds loopback
+unless --host says otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+import threading
+
+from hardware.loopback import EMULATORS, emulator_class
+
+
+def _setup_of(device: str) -> str:
+    return importlib.import_module(EMULATORS[device][0]).EMULATOR_SETUP
+
+
+def _compose(setup: str, overrides: list[str]):
+    from hydra import compose, initialize_config_dir
+
+    from layerskin_exp.cli import CONF_DIR, refuse
+    from layerskin_exp.config import ConfigError, register_all, validate
+
+    register_all()
+    bad = [o for o in overrides if not o.lstrip("+~").startswith(("sim.", "skin."))]
+    if bad:
+        refuse(ConfigError(f"{bad[0]}: only sim.* and skin.* overrides shape an emulator's world"))
+    app = "force_calibration" if setup == "platform" else "grip_depth"
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            cfg = compose(config_name=app, overrides=overrides)
+        return validate(cfg.sim), validate(cfg.skin)
+    except Exception as e:  # noqa: BLE001 - one readable line, exit 2
+        refuse(e if isinstance(e, ConfigError) else ConfigError(str(e).splitlines()[0]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m hardware.emulate", description=__doc__.split("\n\n")[0])
+    parser.add_argument("device", choices=sorted(EMULATORS))
+    parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, default=None,
+                        help="port for TCP/UDP emulators (default: the device's usual port; ur5e uses the "
+                             "controller's fixed ports)")
+    parser.add_argument("overrides", nargs="*", help="sim.* / skin.* overrides for the simulated rig")
+    args = parser.parse_args(argv)
+
+    from hardware.sim.realtime import RealtimeWorld
+
+    setup = _setup_of(args.device)
+    sim_cfg, skin_cfg = _compose(setup, args.overrides)
+    rt = RealtimeWorld.from_config(sim_cfg, skin_cfg, setup)
+    kwargs = {"host": args.host}
+    if args.port is not None:
+        kwargs["port"] = args.port
+    emulator = emulator_class(args.device)(rt, **kwargs)
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    rt.start()
+    try:
+        where = emulator.start()
+        print(f"{args.device} emulator listening on {where} (simulated {setup} rig, seed {sim_cfg.seed}); "
+              "Ctrl-C to stop", flush=True)
+        while not done.wait(0.2):
+            if rt.error is not None:
+                print(f"error: the simulated world stopped: {rt.error!r}", file=sys.stderr)
+                return 1
+    except KeyboardInterrupt:
+        pass
+    finally:
+        emulator.stop()
+        rt.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""`hardware=loopback`: the real drivers against emulators that speak each device's wire protocol.
+
+The emulators run in this process, on one simulated world advanced at wall-clock pace
+(`hardware.sim.realtime.RealtimeWorld`), so a loopback session carries the simulator's physics
+through the real drivers, the real serial framing, UDP and TCP protocols and the `ur_rtde`
+client. They listen on loopback addresses and pseudo-terminals only. The bench is powered on
+when the rig is built and off when it disconnects.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import logging
+import socket
+from dataclasses import dataclass, field
+
+from hardware.interfaces import DeviceError, Rig
+from hardware.lab import MonotonicClock, attach_devices
+
+log = logging.getLogger(__name__)
+
+# device -> (emulator module, emulator class); the module's EMULATOR_SETUP names its simulated setup
+EMULATORS = {
+    "skin_board": ("hardware.skin_board.emulator", "SkinBoardEmulator"),
+    "platform": ("hardware.platform.emulator", "GrblEmulator"),
+    "netft": ("hardware.netft.emulator", "NetFTEmulator"),
+    "ur5e": ("hardware.ur5e.emulator", "UR5eEmulator"),
+    "hande": ("hardware.hande.emulator", "HandEEmulator"),
+    "camera": ("hardware.camera.emulator", "CameraEmulator"),
+}
+SETUP_DEVICES = {"platform": ("skin_board", "platform", "netft"),
+                 "gripper": ("skin_board", "ur5e", "hande", "camera")}
+UR_PORTS = (29999, 30001, 30002, 30003, 30004)  # fixed on a UR controller; ur_rtde dials them
+# Emulator arguments a loopback bench always uses: the Net F/T box serves its calibration page, so
+# the driver reads counts-per-unit over HTTP as it does from a real box.
+BENCH_DEFAULTS = {"netft": {"http_port": 0}}
+
+
+def free_ur_host(first: int = 2, last: int = 254) -> str:
+    """A loopback address 127.0.0.N on which none of the UR controller's fixed ports is taken
+    (so two loopback benches, or a test and a standalone emulator, never collide)."""
+    for n in range(first, last + 1):
+        host = f"127.0.0.{n}"
+        socks = []
+        try:
+            for port in UR_PORTS:
+                s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+                socks.append(s)
+                s.bind((host, port))
+            return host
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise DeviceError("loopback: no free 127.0.0.N address for the UR5e emulator's fixed ports "
+                      f"{UR_PORTS}; stop other UR emulators")
+
+
+def emulator_class(device: str):
+    module, name = EMULATORS[device]
+    return getattr(importlib.import_module(module), name)
+
+
+class LoopbackBench:
+    """The emulators of one setup, on one realtime simulated world.
+
+    faults: device -> keyword arguments for its emulator (fault injection, see each emulator).
+    """
+
+    def __init__(self, sim_cfg, skin_cfg, setup: str, host: str = "127.0.0.1", ur_host: str = "auto",
+                 faults: dict | None = None, period_s: float = 0.002) -> None:
+        from hardware.sim.realtime import RealtimeWorld
+
+        if setup not in SETUP_DEVICES:
+            raise DeviceError(f"loopback: unknown setup {setup!r}; choose one of {tuple(SETUP_DEVICES)}")
+        unknown = set(faults or {}) - set(SETUP_DEVICES[setup])
+        if unknown:
+            raise DeviceError(f"hardware.faults: no emulator {sorted(unknown)} on the {setup} setup; "
+                              f"choose among {list(SETUP_DEVICES[setup])}")
+        self.setup = setup
+        self.host = host
+        self.ur_host = ur_host
+        self.faults = {k: dict(v) for k, v in (faults or {}).items()}
+        self.rt = RealtimeWorld.from_config(sim_cfg, skin_cfg, setup, period_s)
+        self.emulators: dict[str, object] = {}
+        self.addresses: dict[str, str] = {}
+
+    def start(self) -> dict[str, str]:
+        """Start the world and every emulator; returns device -> where it serves."""
+        self.rt.start()
+        try:
+            for device in SETUP_DEVICES[self.setup]:
+                cls = emulator_class(device)
+                host = (free_ur_host() if self.ur_host == "auto" else self.ur_host) if device == "ur5e" else self.host
+                emu = cls(self.rt, host=host, **{**BENCH_DEFAULTS.get(device, {}), **self.faults.get(device, {})})
+                self.addresses[device] = emu.start()
+                self.emulators[device] = emu
+                log.info("loopback: %s emulator at %s", device, self.addresses[device])
+        except BaseException:
+            self.stop()
+            raise
+        return dict(self.addresses)
+
+    def stop(self) -> None:
+        for device, emu in reversed(list(self.emulators.items())):
+            try:
+                emu.stop()
+            except Exception as exc:  # noqa: BLE001 - stop the others
+                log.warning("loopback: stopping the %s emulator failed: %s", device, exc)
+        self.emulators.clear()
+        self.rt.stop()
+
+
+def _host_port(address: str) -> tuple[str, int]:
+    host, _, port = address.rpartition(":")
+    return host, int(port)
+
+
+def pointed_at(hw, bench: LoopbackBench):
+    """The device configs of `hw` with their addresses replaced by the bench's emulators'."""
+    changes = {}
+    for device, address in bench.addresses.items():
+        cfg = getattr(hw, device)
+        if device in ("skin_board", "platform"):
+            changes[device] = dataclasses.replace(cfg, port=address)
+        elif device == "netft":
+            host, port = _host_port(address)
+            http = bench.emulators[device].http_port
+            changes[device] = dataclasses.replace(cfg, host=host, port=port, http_port=http,
+                                                  fetch_calibration=http is not None)
+        elif device == "hande":
+            host, port = _host_port(address)
+            changes[device] = dataclasses.replace(cfg, host=host, port=port)
+        elif device == "ur5e":
+            changes[device] = dataclasses.replace(cfg, host=bench.emulators[device].host)
+    return dataclasses.replace(hw, **changes)
+
+
+@dataclass
+class LoopbackRig(Rig):
+    """The real drivers on a loopback bench. begin_trial reaches the simulated world (the trial's
+    noise and bench variation, as on `sim`); disconnect powers the bench off."""
+
+    bench: LoopbackBench | None = field(default=None, repr=False)
+
+    def begin_trial(self, labels: dict) -> None:
+        if self.bench is not None:
+            self.bench.rt.begin_trial(labels)
+
+    def disconnect(self) -> None:
+        try:
+            super().disconnect()
+        finally:
+            if self.bench is not None:
+                self.bench.stop()
+                self.bench = None
+
+
+def build_loopback_rig(hw, sim_cfg, skin_cfg, setup: str) -> LoopbackRig:
+    """Power on the emulators of `setup` and build the real drivers pointed at them.
+
+    hw: LoopbackHardwareConfig (device driver settings, loopback host, faults).
+    """
+    bench = LoopbackBench(sim_cfg, skin_cfg, setup, hw.host, hw.ur_host, hw.faults, hw.world_period_s)
+    bench.start()
+    try:
+        rig = LoopbackRig(backend="loopback", clock=MonotonicClock(), skin=None, bench=bench)
+        camera = bench.emulators.get("camera")
+        return attach_devices(rig, pointed_at(hw, bench), skin_cfg, setup,
+                              capture_factory=None if camera is None else camera.capture_factory)
+    except BaseException:
+        bench.stop()
+        raise

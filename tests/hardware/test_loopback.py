@@ -1,0 +1,122 @@
+"""`hardware=loopback` end to end: both protocols through the real drivers (pyserial on ptys,
+Net F/T over UDP, the installed ur_rtde client, the URCap socket, OpenCV capture) against the
+emulators, backed by the simulated world at wall-clock pace. The session files pass the same
+checks as simulated ones; a stalled stream stops the trial safely; kill -9 keeps the file."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+
+from layerskin_exp.log import load_session
+from protocols.calibration import plan_trials
+from tests.protocols.conftest import TINY_GRIP, compose_app, design_dir, popen_cli, run_cli
+from tests.protocols.test_apps import check_calibration_session, check_grip_session
+
+LOOPBACK_CAL = ["hardware=loopback", "positions.count=1", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05",
+                "progress=false"]
+
+
+def test_calibration_on_loopback(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    r = run_cli("protocols.force_calibration", [*LOOPBACK_CAL, f"data_root={data}", *hydra_dirs], tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    _, typed = compose_app("force_calibration", LOOPBACK_CAL)
+    folder = design_dir(data / "force_calibration")
+    for trial in plan_trials(typed):
+        s = load_session(folder / f"{trial.name}.mcap", warn=False)
+        assert s.metadata["backend"] == "loopback"
+        check_calibration_session(s, trial, typed, rate_tol=0.1)
+
+
+def test_grip_on_loopback_with_the_ur_rtde_client(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    args = ["hardware=loopback", *TINY_GRIP, "progress=false"]
+    r = run_cli("protocols.grip_depth", [*args, f"data_root={data}", *hydra_dirs], tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    _, typed = compose_app("grip_depth", args)
+    (f,) = design_dir(data / "grip_depth").glob("*.mcap")
+    s = load_session(f, warn=False)
+    assert s.metadata["backend"] == "loopback"
+    check_grip_session(s, typed, rate_tol=0.1)
+
+
+@pytest.mark.parametrize("app, device, fault", [
+    ("force_calibration", "skin_board", "stalls=[[2.5,1000]]"),
+    ("force_calibration", "netft", "stall_after_s=2.5"),
+])
+def test_stalled_stream_on_loopback_stops_safely(tmp_path, hydra_dirs, app, device, fault):
+    data = tmp_path / "data"
+    key, value = fault.split("=", 1)
+    args = [*LOOPBACK_CAL, f"+hardware.faults.{device}.{key}={value}", f"data_root={data}", *hydra_dirs]
+    r = run_cli(f"protocols.{app}", args, tmp_path)
+    assert r.returncode == 1, r.stderr[-3000:]
+    (partial,) = data.glob(f"{app}/*/*.partial")
+    s = load_session(partial, warn=False)
+    assert "stalled" in s.outcome and not s.complete
+    # the stop came within 50 ms of the stream's last sample (host receive times in the file)
+    stream = {"skin_board": "skin", "netft": "wrench"}[device]
+    last_ns = int(s.streams[stream]["host_t_ns"][-1])
+    ev = s.streams["events"]
+    error_ns = [t for k, t in zip(ev["kind"], ev["host_t_ns"], strict=True) if k == "error"][0]
+    assert error_ns - last_ns <= 50e6 + 10e6  # stall timeout + one tick, with a tick of margin
+
+
+def test_kill_9_during_a_loopback_trial_keeps_all_but_the_last_100_ms(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    proc = popen_cli("protocols.force_calibration", [*LOOPBACK_CAL, f"data_root={data}", *hydra_dirs], tmp_path)
+    try:
+        deadline = time.monotonic() + 120
+        partial = None
+        while time.monotonic() < deadline and proc.poll() is None:
+            found = list(data.glob("force_calibration/*/*.partial"))
+            if found and found[0].stat().st_size > 200_000:
+                partial = found[0]
+                break
+            time.sleep(0.05)
+        assert partial is not None and proc.poll() is None, "no trial in progress to kill"
+        t_kill = time.monotonic_ns()
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    s = load_session(partial, warn=False)
+    assert not s.complete
+    last_ns = int(s.streams["skin"]["host_t_ns"][-1])
+    assert t_kill - last_ns <= 150e6  # ~100 ms flush interval, with margin for the kill itself
+
+
+def test_standalone_emulator_prints_where_it_listens_and_serves(tmp_path):
+    import subprocess
+    import sys
+
+    from hardware.netft import NetFTConfig, NetFTSensor
+    from tests.protocols.conftest import REPO
+
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen([sys.executable, "-m", "hardware.emulate", "netft", "--host", "127.0.0.1", "--port", "0"],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("netft emulator listening on 127.0.0.1:"), line + proc.stderr.read()
+        port = int(line.split()[4].rsplit(":", 1)[1])
+        sensor = NetFTSensor(NetFTConfig(host="127.0.0.1", port=port, fetch_calibration=False))
+        sensor.connect()
+        try:
+            deadline = time.monotonic() + 5
+            samples = []
+            while len(samples) < 50 and time.monotonic() < deadline:
+                time.sleep(0.01)
+                samples += sensor.read_available()
+            assert len(samples) >= 50 and sensor.health.received >= 50
+        finally:
+            sensor.disconnect()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
