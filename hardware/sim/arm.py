@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hardware.interfaces import Arm
+from hardware.interfaces import Arm, DeviceError
 from hardware.sim.stream_device import SimStreamMixin
 from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.rig_config import ArmConfig
@@ -46,7 +46,24 @@ class SimArm(SimStreamMixin, Arm):
 
     def move_linear(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
                     angular_speed_rad_s: float | None = None) -> None:
+        """Refuse what the UR controller would (unreachable pose, beyond its speed limits)."""
         self._require_connected()
+        cfg = self.cfg
+        pose6 = np.asarray(pose6, dtype=float).reshape(-1)
+        if pose6.shape != (6,) or not np.all(np.isfinite(pose6)):
+            raise DeviceError(f"arm: pose {pose6.tolist()} must be six finite values [x, y, z, rx, ry, rz]")
+        lo, hi = np.asarray(cfg.workspace_min_m), np.asarray(cfg.workspace_max_m)
+        if np.any(pose6[:3] < lo) or np.any(pose6[:3] > hi):
+            raise DeviceError(f"arm: target position {np.round(pose6[:3], 5).tolist()} m is outside the reachable "
+                              f"box {lo.tolist()}..{hi.tolist()} m (sim.rig.arm.workspace_*)")
+        if not (np.isfinite(speed_m_s) and 0 < speed_m_s <= cfg.max_speed_m_s):
+            raise DeviceError(f"arm: speed {speed_m_s!r} m/s is outside (0, {cfg.max_speed_m_s}] m/s")
+        if not (np.isfinite(accel_m_s2) and 0 < accel_m_s2 <= cfg.max_accel_m_s2):
+            raise DeviceError(f"arm: acceleration {accel_m_s2!r} m/s^2 is outside (0, {cfg.max_accel_m_s2}]")
+        w = cfg.max_angular_speed_rad_s if angular_speed_rad_s is None else float(angular_speed_rad_s)
+        if not (np.isfinite(w) and 0 < w <= cfg.max_angular_speed_rad_s):
+            raise DeviceError(f"arm: angular speed {angular_speed_rad_s!r} rad/s is outside "
+                              f"(0, {cfg.max_angular_speed_rad_s}]")
         self.scene.command_arm(pose6, speed_m_s, accel_m_s2, angular_speed_rad_s)
 
     def stop(self) -> None:

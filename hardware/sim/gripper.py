@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hardware.interfaces import Gripper
+from hardware.interfaces import DeviceError, Gripper
 from hardware.sim.stream_device import SimStreamMixin
 from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.rig_config import GripperConfig
@@ -33,7 +33,16 @@ class SimGripper(SimStreamMixin, Gripper):
                                                                   host_ns, seq, strict=True)])
 
     def move(self, opening_mm: float, speed_mm_s: float, force_pct: float) -> None:
+        """Refuse what the Hand-E would (outside its stroke, speed range or force range)."""
         self._require_connected()
+        cfg = self.cfg
+        if not (np.isfinite(opening_mm) and 0 <= opening_mm <= cfg.stroke_mm):
+            raise DeviceError(f"gripper: opening {opening_mm!r} mm is outside the stroke 0..{cfg.stroke_mm} mm")
+        if not (np.isfinite(speed_mm_s) and cfg.min_speed_mm_s <= speed_mm_s <= cfg.max_speed_mm_s):
+            raise DeviceError(f"gripper: speed {speed_mm_s!r} mm/s is outside the Hand-E's "
+                              f"{cfg.min_speed_mm_s}..{cfg.max_speed_mm_s} mm/s")
+        if not (np.isfinite(force_pct) and 0 <= force_pct <= 100):
+            raise DeviceError(f"gripper: force {force_pct!r} % is outside 0..100 %")
         self.scene.command_gripper(opening_mm, speed_mm_s, force_pct)
 
     def stop(self) -> None:

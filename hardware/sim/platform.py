@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hardware.interfaces import Platform
+from hardware.interfaces import DeviceError, Platform
 from hardware.sim.stream_device import SimStreamMixin
 from layerskin_exp.sim.platform_scene import PlatformScene
 from layerskin_exp.sim.rig_config import PlatformConfig
@@ -29,8 +29,19 @@ class SimPlatform(SimStreamMixin, Platform):
         self.stream.push_many(host_ns, [StagePosition(*rec) for rec in zip(pos, seq, dev_ns, host_ns, strict=True)])
 
     def move_to(self, target_mm: np.ndarray, speed_mm_s: float) -> None:
+        """Refuse what the stage's controller would (outside its travel, beyond its speed)."""
         self._require_connected()
-        self.scene.command_move(target_mm, speed_mm_s)
+        target = np.asarray(target_mm, dtype=float).reshape(-1)
+        lo, hi = np.asarray(self.cfg.workspace_min_mm, float), np.asarray(self.cfg.workspace_max_mm, float)
+        if target.shape != (3,) or not np.all(np.isfinite(target)):
+            raise DeviceError(f"platform: target {target_mm!r} must be three finite values (x, y, z mm)")
+        if np.any(target < lo) or np.any(target > hi):
+            raise DeviceError(f"platform: target {np.round(target, 4).tolist()} mm is outside the stage's travel "
+                              f"{lo.tolist()}..{hi.tolist()} mm; command a reachable point")
+        if not (np.isfinite(speed_mm_s) and 0 < speed_mm_s <= self.cfg.max_speed_mm_s):
+            raise DeviceError(f"platform: speed {speed_mm_s!r} mm/s is outside (0, {self.cfg.max_speed_mm_s}] "
+                              "mm/s (sim.rig.platform.max_speed_mm_s)")
+        self.scene.command_move(target, float(speed_mm_s))
 
     def stop(self) -> None:
         self._require_connected()

@@ -22,7 +22,6 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hardware.interfaces import DeviceError
 from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.kinematics import LimitedMotion
 from layerskin_exp.sim.rig_config import ArmConfig, GripperConfig
@@ -86,25 +85,11 @@ class GripScene:
         self.place_rod(float(rng.normal(0.0, variation.rod_offset_sd_mm)),
                        float(rng.normal(0.0, variation.rod_yaw_sd_deg)))
 
-    # ---- commands (validated against the devices' physical range) ----------------------------
+    # ---- commands (the device twins have checked them against the devices' range) -----------
     def command_arm(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
                     angular_speed_rad_s: float | None) -> None:
-        cfg = self.arm_cfg
-        pose6 = np.asarray(pose6, dtype=float).reshape(-1)
-        if pose6.shape != (6,) or not np.all(np.isfinite(pose6)):
-            raise DeviceError(f"arm: pose {pose6.tolist()} must be six finite values [x, y, z, rx, ry, rz]")
-        lo, hi = np.asarray(cfg.workspace_min_m), np.asarray(cfg.workspace_max_m)
-        if np.any(pose6[:3] < lo) or np.any(pose6[:3] > hi):
-            raise DeviceError(f"arm: target position {np.round(pose6[:3], 5).tolist()} m is outside the reachable "
-                              f"box {lo.tolist()}..{hi.tolist()} m (sim.rig.arm.workspace_*)")
-        if not (np.isfinite(speed_m_s) and 0 < speed_m_s <= cfg.max_speed_m_s):
-            raise DeviceError(f"arm: speed {speed_m_s!r} m/s is outside (0, {cfg.max_speed_m_s}] m/s")
-        if not (np.isfinite(accel_m_s2) and 0 < accel_m_s2 <= cfg.max_accel_m_s2):
-            raise DeviceError(f"arm: acceleration {accel_m_s2!r} m/s^2 is outside (0, {cfg.max_accel_m_s2}]")
-        w = cfg.max_angular_speed_rad_s if angular_speed_rad_s is None else float(angular_speed_rad_s)
-        if not (np.isfinite(w) and 0 < w <= cfg.max_angular_speed_rad_s):
-            raise DeviceError(f"arm: angular speed {angular_speed_rad_s!r} rad/s is outside "
-                              f"(0, {cfg.max_angular_speed_rad_s}]")
+        pose6 = np.asarray(pose6, dtype=float).reshape(6)
+        w = self.arm_cfg.max_angular_speed_rad_s if angular_speed_rad_s is None else float(angular_speed_rad_s)
         # Re-reference the rotation at the current orientation; the new target is relative to it.
         self.R_ref = self.tcp_rotation()
         rel = Rotation.from_matrix(self.R_ref.T @ Rotation.from_rotvec(pose6[3:]).as_matrix()).as_rotvec()
@@ -114,13 +99,6 @@ class GripScene:
 
     def command_gripper(self, opening_mm: float, speed_mm_s: float, force_pct: float) -> None:
         cfg = self.grip_cfg
-        if not (np.isfinite(opening_mm) and 0 <= opening_mm <= cfg.stroke_mm):
-            raise DeviceError(f"gripper: opening {opening_mm!r} mm is outside the stroke 0..{cfg.stroke_mm} mm")
-        if not (np.isfinite(speed_mm_s) and cfg.min_speed_mm_s <= speed_mm_s <= cfg.max_speed_mm_s):
-            raise DeviceError(f"gripper: speed {speed_mm_s!r} mm/s is outside the Hand-E's "
-                              f"{cfg.min_speed_mm_s}..{cfg.max_speed_mm_s} mm/s")
-        if not (np.isfinite(force_pct) and 0 <= force_pct <= 100):
-            raise DeviceError(f"gripper: force {force_pct!r} % is outside 0..100 %")
         self.requested_mm = float(opening_mm)
         self.grip_speed_mm_s = float(speed_mm_s)
         self.force_pct = float(force_pct)
