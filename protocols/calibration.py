@@ -23,7 +23,7 @@ from protocols.config import SKIN_HALF_WIDTH_MM, ForceCalibrationConfig, Positio
 from protocols.identity import design_id, trial_identity
 from protocols.loop import ControlLoop
 from protocols.runner import TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
-from protocols.safety import FORCE_LIMIT, Safety
+from protocols.safety import FORCE_LIMIT, SLOW_ZONE, Safety
 
 PROTOCOL = "force_calibration"
 
@@ -140,6 +140,8 @@ class PlatformControl:
             if reason.startswith(FORCE_LIMIT):
                 return FORCE_LIMIT
             rig.clear_trip()  # a stop condition checked per sample, not a fault
+            if reason.startswith(SLOW_ZONE):  # near the limit: go on at a crawl
+                return self.move(target_mm, min(speed_mm_s, self.cfg.safety.slow_zone_speed_mm_s), stop_when)
         elif kind == "stop":
             self.platform.stop()
             self.wait_stopped()

@@ -62,6 +62,10 @@ class SafetyConfig:
     and per F/T sample for the normal force)."""
 
     max_normal_force_n: float = 6.0
+    # Above this fraction of the normal-force limit a platform move faster than slow_zone_speed
+    # is stopped and goes on at that speed, so the stage brakes from a crawl if the limit trips.
+    slow_zone_fraction: float = 0.9
+    slow_zone_speed_mm_s: float = 0.3
     platform_min_mm: list[float] = field(default_factory=lambda: [-13.0, -13.0, -2.5])
     platform_max_mm: list[float] = field(default_factory=lambda: [13.0, 13.0, 10.0])
     max_platform_speed_mm_s: float = 10.0
@@ -87,6 +91,10 @@ class SafetyConfig:
             value = getattr(self, key)
             require(0 < value <= HARD[key], f"safety.{key}", value,
                     f"must be > 0 and at most {HARD[key]} (a hard ceiling of this rig; no config can raise it)")
+        require(0.5 <= self.slow_zone_fraction < 1.0, "safety.slow_zone_fraction", self.slow_zone_fraction,
+                "must be in [0.5, 1) of safety.max_normal_force_n")
+        require(0 < self.slow_zone_speed_mm_s <= 1.0, "safety.slow_zone_speed_mm_s", self.slow_zone_speed_mm_s,
+                "must be in (0, 1] mm/s")
         require(0 < self.max_skin_load_fraction <= HARD["max_skin_load_fraction"], "safety.max_skin_load_fraction",
                 self.max_skin_load_fraction, f"must be in (0, {HARD['max_skin_load_fraction']}] of full scale")
         for i, (lo, hi) in enumerate(zip(self.platform_min_mm, self.platform_max_mm, strict=True)):

@@ -19,6 +19,7 @@ from protocols.config import SafetyConfig
 FORCE_LIMIT = "force_limit"
 SKIN_LOAD_LIMIT = "skin_load_limit"
 SAFETY_TRIPS = (FORCE_LIMIT, SKIN_LOAD_LIMIT)
+SLOW_ZONE = "slow_zone"
 
 
 class SafetyError(RuntimeError):
@@ -36,8 +37,10 @@ class Safety:
         # While lifting off after a trip the load is still above the limit; moving away from
         # the skin is what makes it safe, so the guard lets that one kind of move run.
         self.unloading = False
+        self.platform_speed_mm_s = 0.0  # speed of the platform move in progress
         if rig.ft is not None:
             rig.add_guard(self._normal_force_guard)
+            rig.add_guard(self._slow_zone_guard)
         else:  # no F/T sensor (the grip rig): the skin itself guards the load, on every frame
             self._skin_full_scale = 2 * 256 * 4095
             rig.add_guard(self._skin_load_guard, "skin")
@@ -47,6 +50,15 @@ class Safety:
         fz_n = float(sample.force_n[2])
         if fz_n > self.cfg.max_normal_force_n and not self.unloading:
             return f"{FORCE_LIMIT}: Fz={fz_n:.3f} N exceeds {self.cfg.max_normal_force_n} N"
+        return None
+
+    def _slow_zone_guard(self, sample: Wrench) -> str | None:
+        """Near the limit a fast move is stopped so it can go on slowly: the force rises while the
+        stage brakes, and at the slow speed that overshoot past the limit is ~(v_slow/v)^2 smaller."""
+        fz_n = float(sample.force_n[2])
+        zone_n = self.cfg.slow_zone_fraction * self.cfg.max_normal_force_n
+        if fz_n > zone_n and not self.unloading and self.platform_speed_mm_s > self.cfg.slow_zone_speed_mm_s:
+            return f"{SLOW_ZONE}: Fz={fz_n:.3f} N above {zone_n:.2f} N"
         return None
 
     def _skin_load_guard(self, frame) -> str | None:
@@ -67,6 +79,7 @@ class Safety:
                               f"safety.max_platform_speed_mm_s={self.cfg.max_platform_speed_mm_s}]")
         if self.rig.tripped is not None and not self.unloading:
             raise SafetyError(f"guard tripped ({self.rig.tripped}); acknowledge it before moving again")
+        self.platform_speed_mm_s = float(speed_mm_s)
 
     def check_arm_move(self, pose6: np.ndarray, start_pose6: np.ndarray, speed_mm_s: float,
                        angular_speed_deg_s: float | None) -> None:

@@ -218,3 +218,23 @@ def check_grip_session(s, typed, rate_tol: float = 0.05) -> None:
     assert (total[window] - contact["baseline_counts"] > typed.approach.threshold_counts).all()
     assert total[skin["seq"] == contact["frame_seq"] - n] - contact["baseline_counts"] <= \
         typed.approach.threshold_counts
+
+
+def test_slow_zone_keeps_the_normal_force_within_its_stated_overshoot(tmp_path):
+    # Slides with large vertical offsets drive Fz into the 6 N limit at 2 mm/s. Near the limit the
+    # move goes on at slow_zone_speed_mm_s, so the stage brakes from a crawl when the guard trips:
+    # the force stays within 1 % (0.06 N) of the limit. Without the slow zone it overshoots ~0.2 N.
+    def worst_fz(extra):
+        cfg, typed = compose_app("force_calibration", [
+            "positions.count=3", "press.repeats=0", "slide.repeats=2", "slide.z_offset_mm=1.0",
+            f"data_root={tmp_path / str(len(extra))}", "progress=false", *extra])
+        with build_rig(cfg, "platform") as rig:
+            results = run_campaign(typed, rig, {"config": {"extra": extra}, "backend": "sim"})
+        assert any(r.stop_reason == "force_limit" for r in results), "no slide reached the limit"
+        return max(float(load_session(r.path, warn=False).streams["wrench"]["force_n"][:, 2].max())
+                   for r in results), typed.safety.max_normal_force_n
+
+    worst, limit = worst_fz([])
+    assert worst <= limit * 1.01
+    unslowed, _ = worst_fz(["safety.slow_zone_speed_mm_s=1.0", "safety.slow_zone_fraction=0.99"])
+    assert unslowed - limit > 2 * (worst - limit)  # the slow zone is what keeps it small
