@@ -239,8 +239,12 @@ class Rig:
     # Why motion was stopped by a guard (the first reason since the last clear_trip), or None.
     tripped: str | None = None
     _guards: dict[str, list[Guard]] = field(default_factory=dict, init=False, repr=False)
-    _faults: list[str] = field(default_factory=list, init=False, repr=False)
+    _faults: list[tuple[str, int]] = field(default_factory=list, init=False, repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, init=False, repr=False)
+    _watchdog: threading.Thread | None = field(default=None, init=False, repr=False)
+    _watchdog_stop: threading.Event = field(default_factory=threading.Event, init=False, repr=False)
+    # How often the watchdog asks every device for a fault on a real-time rig.
+    watchdog_period_s: float = field(default=0.005, init=False, repr=False)
 
     # ---- trials --------------------------------------------------------------------------------
     def begin_trial(self, labels: dict) -> None:
@@ -304,13 +308,18 @@ class Rig:
         """A device or driver thread reports a failure (any thread). Motion stops at once; the
         protocol loop raises it on its next tick."""
         with self._lock:
-            self._faults.append(reason)
+            self._faults.append((reason, self.clock.now_ns()))
         self.stop_motion()
 
     def fault(self) -> str | None:
         """The first reported fault, else the first connected device whose `fault()` is not None
         (a stalled stream, a lost link, a fault the device signals). The protocol loop asks every
         tick."""
+        first = self.first_fault()
+        return None if first is None else first[0]
+
+    def first_fault(self) -> tuple[str, int] | None:
+        """(reason, host ns when it was detected) of the first fault, as fault()."""
         with self._lock:
             if self._faults:
                 return self._faults[0]
@@ -319,8 +328,23 @@ class Rig:
             if d.is_connected:
                 reason = d.fault(now_ns)
                 if reason:
-                    return reason
+                    return reason, now_ns
         return None
+
+    def _watch(self) -> None:
+        """Real-time rigs: ask every device for a fault every few ms, whatever the protocol thread
+        is doing (it may be blocked in a command to a hung device), and stop all motion on the
+        first one. Faults are latched: the protocol loop raises the first on its next tick."""
+        while not self._watchdog_stop.wait(self.watchdog_period_s):
+            with self._lock:
+                if self._faults:
+                    continue
+            now_ns = self.clock.now_ns()
+            for d in self.devices():
+                reason = d.fault(now_ns) if d.is_connected else None
+                if reason:
+                    self.report_fault(reason)
+                    break
 
     # ---- devices -------------------------------------------------------------------------------
     def devices(self) -> list[Device]:
@@ -328,7 +352,8 @@ class Rig:
                 if d is not None]
 
     def connect(self) -> None:
-        """Connect every device; if one fails, disconnect those already connected and raise."""
+        """Connect every device; if one fails, disconnect those already connected and raise.
+        On a real-time clock a watchdog thread then checks every device for faults (see _watch)."""
         done: list[Device] = []
         try:
             for d in self.devices():
@@ -341,6 +366,10 @@ class Rig:
                 except Exception:  # noqa: BLE001 - keep the original error
                     pass
             raise
+        if not self.clock.is_virtual and self._watchdog is None:
+            self._watchdog_stop.clear()
+            self._watchdog = threading.Thread(target=self._watch, name="rig-watchdog", daemon=True)
+            self._watchdog.start()
 
     def stop_motion(self) -> None:
         """Stop everything that moves; never raises. Safe from any thread."""
@@ -352,6 +381,10 @@ class Rig:
                     pass
 
     def disconnect(self) -> None:
+        if self._watchdog is not None:
+            self._watchdog_stop.set()
+            self._watchdog.join(timeout=1.0)
+            self._watchdog = None
         for d in reversed(self.devices()):
             try:
                 d.disconnect()

@@ -17,7 +17,12 @@ from protocols.runner import TrialLog
 
 
 class DeviceFault(DeviceError):
-    """A device failed, stalled or lost its link during a trial (motion has been stopped)."""
+    """A device failed, stalled or lost its link during a trial (motion has been stopped).
+    detected_ns: host time at which the fault was detected."""
+
+    def __init__(self, reason: str, detected_ns: int | None = None) -> None:
+        super().__init__(reason)
+        self.detected_ns = detected_ns
 
 
 class GuardTripped(RuntimeError):
@@ -43,10 +48,10 @@ class ControlLoop:
     def check(self) -> None:
         """Raise DeviceFault (after stopping all motion) if any device reports a fault, and
         GuardTripped if a guard tripped and trips end the trial."""
-        reason = self.rig.fault()
-        if reason:
+        first = self.rig.first_fault()
+        if first:
             self.rig.stop_motion()
-            raise DeviceFault(reason)
+            raise DeviceFault(*first)
         if self.trips_abort and self.rig.tripped is not None:
             raise GuardTripped(self.rig.tripped)
 

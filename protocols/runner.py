@@ -211,7 +211,8 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         reason = _describe(exc)
         try:
             log.drain()
-            log.event("error", reason)
+            detected_ns = getattr(exc, "detected_ns", None)  # a fault: when motion was stopped
+            log.event("error", reason, **({} if detected_ns is None else {"detected_ns": int(detected_ns)}))
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
         writer.close(f"aborted: {reason}")

@@ -18,7 +18,6 @@ import http.server
 import logging
 import socket
 import threading
-import time
 from collections import deque
 
 import numpy as np
@@ -42,16 +41,13 @@ class NetFTEmulator:
 
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, http_port: int | None = None,
                  calibration: wire.Calibration = DEFAULT_CALIBRATION, ft_sample_rate_hz: float = 7000.0,
-                 records_per_packet: int = 10, drop_every: int = 0, stalled: bool = False, status: int = 0,
-                 stall_after_s: float | None = None) -> None:
+                 records_per_packet: int = 10, drop_every: int = 0, stalled: bool = False, status: int = 0) -> None:
         self.rt = rt
         self.host, self.port, self.http_port = host, port, http_port
         self.calibration = calibration
         self.ft_sample_rate_hz = float(ft_sample_rate_hz)
         self.records_per_packet = int(records_per_packet)
         self.drop_every, self.stalled, self.status = int(drop_every), bool(stalled), int(status)
-        self.stall_after_s = stall_after_s  # stop sending this long after start() (a box that hangs)
-        self._t_start = 0.0
         self.http_address: str | None = None
         self.requests: list[tuple[int, int]] = []  # (command, count) received, for tests
         self._sock: socket.socket | None = None
@@ -75,7 +71,6 @@ class NetFTEmulator:
         sock.settimeout(POLL_S)
         self._sock = sock
         self.port = sock.getsockname()[1]
-        self._t_start = time.monotonic()
         self._stop.clear()
         if self.http_port is not None:
             self._http = http.server.ThreadingHTTPServer((self.host, self.http_port), self._handler())
@@ -139,8 +134,6 @@ class NetFTEmulator:
                 if self._stop.is_set():
                     break
                 log.debug("netft emulator: %s", exc)  # e.g. a client gone (ICMP unreachable)
-            if self.stall_after_s is not None and time.monotonic() - self._t_start > self.stall_after_s:
-                self.stalled = True
             with self.rt.lock:
                 samples = self.rt.rig.ft.read_available()
             for w in samples:

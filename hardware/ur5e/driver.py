@@ -138,14 +138,40 @@ class UR5eArm(Arm):
             self._thread = None
         self._close_clients()
 
+    def _stalled(self) -> bool:
+        """The controller stopped sending (connections open): calls that wait for its answer hang."""
+        last = self._last_rx_ns
+        return last is not None and time.monotonic_ns() - last > self.cfg.stall_timeout_s * 1e9
+
     def _close_clients(self) -> None:
-        with self._io:
-            if self._ctrl is not None:
-                _quiet(self._ctrl.stopScript)
-                _quiet(self._ctrl.disconnect)
-            if self._recv is not None:
-                _quiet(self._recv.disconnect)
+        stalled = self._stalled()
+        locked = self._io.acquire(timeout=2.0)  # a call stuck on a hung controller may hold it
+        try:
+            ctrl, recv = self._ctrl, self._recv
             self._ctrl = self._recv = None
+        finally:
+            if locked:
+                self._io.release()
+
+        def close() -> None:
+            if ctrl is not None:
+                if not stalled:
+                    _quiet(ctrl.stopScript)
+                _quiet(ctrl.disconnect)
+            if recv is not None:
+                _quiet(recv.disconnect)
+
+        if not stalled:
+            with self._io:
+                close()
+            return
+        # A hung controller: ur_rtde's clients loop reconnecting; give them a bounded time, then
+        # leave them (daemon thread) rather than hang the protocol's way out.
+        t = threading.Thread(target=close, name="ur5e-close", daemon=True)
+        t.start()
+        t.join(timeout=2.0)
+        if t.is_alive():
+            log.warning("ur5e: the controller stopped answering; its client connections were abandoned")
 
     def restart_program(self) -> None:
         """Upload and start the control script again (after an operator unlocked a protective stop)."""
@@ -385,6 +411,9 @@ class UR5eArm(Arm):
         self._require_connected()
         kind = self._move_kind
         self._torsion_cancel.set()
+        if self._stalled():  # the controller stopped answering: a stop that waits for it would hang
+            log.warning("ur5e: stop not sent, the controller stopped answering (its own safety must hold it)")
+            return
         try:
             with self._io:
                 if self._link_error is not None:
