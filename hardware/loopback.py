@@ -157,6 +157,8 @@ def pointed_at(hw, bench: LoopbackBench):
             changes[device] = dataclasses.replace(cfg, host=host, port=port)
         elif device == "ur5e":
             changes[device] = dataclasses.replace(cfg, host=bench.emulators[device].host)
+        elif device == "camera":  # frames come through the emulator's capture_factory
+            changes[device] = dataclasses.replace(cfg, source=address)
     return dataclasses.replace(hw, **changes)
 
 

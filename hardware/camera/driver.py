@@ -74,7 +74,7 @@ class OpenCVMarkerCamera(MarkerCamera):
             self._shutdown()
             raise DeviceError(f"camera: {reason} from {c.backend} source {c.source!r} within {c.connect_timeout_s} s;"
                               " check the camera's cable and that it streams (e.g. with v4l2-ctl or realsense-viewer)")
-        log.info("camera: streaming from %s source %r", c.backend, c.source)
+        log.info("camera: streaming from %s (%s source %r)", type(cap).__name__, c.backend, c.source)
 
     def _disconnect(self) -> None:
         self._shutdown()
