@@ -20,7 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from hardware.interfaces import DeviceError
 from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, refuse
 from layerskin_exp.config import ConfigError, validate
-from protocols.runner import Terminated
+from protocols.runner import Terminated, check_termination, request_termination, termination_pending
 
 __all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "run_app"]
 
@@ -32,21 +32,30 @@ EXIT_TERMINATED = 143
 
 
 def _on_sigterm(signum, frame) -> None:
-    raise Terminated()
+    request_termination("terminated (SIGTERM)")  # acted on at the control loop's next tick (a safe point)
+
+
+def _on_sigint(signum, frame) -> None:
+    """First Ctrl-C: stop at the next tick, closing the trial cleanly; a second one: at once."""
+    if termination_pending():
+        raise KeyboardInterrupt
+    request_termination("interrupted (Ctrl-C)")
+    print("stopping at the next control tick (Ctrl-C again to stop at once)", file=sys.stderr, flush=True)
 
 
 @contextlib.contextmanager
 def _sigterm_as_exception():
-    """Turn SIGTERM into `Terminated` in the main thread while the rig runs (Hydra runs jobs in
-    the main thread; elsewhere the default handling stays)."""
+    """Turn SIGTERM into `Terminated` raised by the control loop at its next tick while the rig
+    runs (Hydra runs jobs in the main thread; elsewhere the default handling stays)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    previous = signal.signal(signal.SIGTERM, _on_sigterm), signal.signal(signal.SIGINT, _on_sigint)
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGTERM, previous[0])
+        signal.signal(signal.SIGINT, previous[1])
 
 
 def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object]):
@@ -75,24 +84,21 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         rig.disconnect()
         print(f"error: could not connect the {rig.backend} rig: {one_line(e)}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
-    except Terminated:
-        rig.disconnect()
-        print("terminated (SIGTERM) while connecting; nothing moved", file=sys.stderr)
-        sys.exit(EXIT_TERMINATED)
     metadata = {"config": OmegaConf.to_container(cfg, resolve=True), "backend": rig.backend,
                 "calibration": rig.skin.calibration()}
     try:
+        check_termination()  # SIGTERM while connecting
         return body(typed, rig, metadata)
     except KeyboardInterrupt:
         rig.stop_motion()
         print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
               "to resume", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
-    except Terminated:
+    except Terminated as e:
         rig.stop_motion()
-        print("terminated (SIGTERM): motion stopped, the current trial is marked aborted; rerun the same "
-              "command to resume", file=sys.stderr)
-        sys.exit(EXIT_TERMINATED)
+        print(f"{e}: motion stopped, the current trial is marked aborted; rerun the same command to resume",
+              file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED if "Ctrl-C" in str(e) else EXIT_TERMINATED)
     except ConfigError as e:
         rig.stop_motion()
         refuse(e)

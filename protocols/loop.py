@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from hardware.interfaces import DeviceError
-from protocols.runner import TrialLog
+from protocols.runner import Terminated, TrialLog, check_termination
 
 
 class DeviceFault(DeviceError):
@@ -52,6 +52,11 @@ class ControlLoop:
         if first:
             self.rig.stop_motion()
             raise DeviceFault(*first)
+        try:
+            check_termination()
+        except Terminated:
+            self.rig.stop_motion()
+            raise
         if self.trips_abort and self.rig.tripped is not None:
             raise GuardTripped(self.rig.tripped)
 

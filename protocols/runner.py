@@ -42,7 +42,28 @@ class ProtocolError(RuntimeError):
 
 
 class Terminated(BaseException):
-    """SIGTERM arrived (a process manager or SLURM ending the job): handled like Ctrl-C."""
+    """The run was asked to stop: SIGTERM (a process manager or SLURM ending the job) or Ctrl-C.
+    str(exc) says which."""
+
+
+_termination: list[str] = []
+
+
+def request_termination(reason: str = "terminated (SIGTERM)") -> None:
+    """Ask the running protocol to stop (safe from a signal handler: it only records the
+    request). The control loop raises Terminated at its next tick (and run_trial before a trial
+    starts), so the trial file is closed "aborted" at a safe point, never in the middle of a write."""
+    if not _termination:
+        _termination.append(reason)
+
+
+def termination_pending() -> bool:
+    return bool(_termination)
+
+
+def check_termination() -> None:
+    if _termination:
+        raise Terminated(_termination[0])
 
 
 def trial_is_complete(path: Path, identity: str | None = None) -> bool:
@@ -173,7 +194,7 @@ def _describe(exc: BaseException) -> str:
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted (Ctrl-C)"
     if isinstance(exc, Terminated):
-        return "terminated (SIGTERM)"
+        return str(exc) or "terminated"
     text = str(exc).strip().splitlines()
     if isinstance(exc, DeviceError) or type(exc).__name__ == "GuardTripped":
         if text:  # the message names the device (or the guard) and what happened
@@ -193,6 +214,7 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     """
     path = Path(path)
     name = path.stem
+    check_termination()
     if trial_is_complete(path, identity):
         return TrialResult(name, labels, str(path), "complete", skipped=True)
     if identity is not None:

@@ -238,3 +238,23 @@ def test_slow_zone_keeps_the_normal_force_within_its_stated_overshoot(tmp_path):
     assert worst <= limit * 1.01
     unslowed, _ = worst_fz(["safety.slow_zone_speed_mm_s=1.0", "safety.slow_zone_fraction=0.99"])
     assert unslowed - limit > 2 * (worst - limit)  # the slow zone is what keeps it small
+
+
+def test_ctrl_c_closes_the_trial_at_the_next_tick(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", f"data_root={data}", "progress=false",
+            *hydra_dirs]
+    proc = popen_cli("protocols.force_calibration", args, tmp_path)
+    try:
+        deadline = time.monotonic() + 200
+        while not list(data.glob("force_calibration/*/*.mcap")) and proc.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, "the campaign ended before Ctrl-C could be sent"
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=60) == 130
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    (partial,) = data.glob("force_calibration/*/*.partial")
+    assert load_session(partial, warn=False).outcome == "aborted: interrupted (Ctrl-C)"
