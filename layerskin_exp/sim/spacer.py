@@ -68,15 +68,6 @@ class SpacerLaw:
         g = self.g_open_kpa + (self.g_solid_kpa - self.g_open_kpa) * closure
         return g / (self.h_mm * (1.0 - e))
 
-    def pasternak_length_mm(self) -> float:
-        """Shear-coupling length sqrt(G_p / k) of the layer (Vlasov: G_p = G h / 3, k = E / h)."""
-        return self.h_mm * float(np.sqrt(self.g_open_kpa / (3.0 * self.e_lat_kpa)))
-
-    def spread_sigma_mm(self, indentation_mm):
-        """Width (Gaussian sigma) of the load spreading through the compressed spacer."""
-        h_now = self.h_mm - np.clip(indentation_mm, 0.0, self.e_d * self.h_mm)
-        return self.cfg.spread_ratio * h_now
-
 
 def hex_cell_pattern(x_mm: np.ndarray, y_mm: np.ndarray, cell_mm: float, contrast: float) -> np.ndarray:
     """Fixed multiplicative load pattern of a hexagonal lattice of pitch `cell_mm`, mean 1.
