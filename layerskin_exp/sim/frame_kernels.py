@@ -13,10 +13,10 @@ same numbers.
 Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
 - `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
 - `prm` (N_PARAM,) float64, entries `P_*` (geometry, table grids, FSR and readout constants);
-- `lk` (4, n_pairs, n_fine, 2) float32: the superficial and deep profiles, then their changes
-  per unit couple of the shear (hemisphere: divided by r, so that times the offset along the
-  shear they give the cos(phi) mode), resampled for nearest-bin lookups, (value of row k,
-  row k+1 - row k) pairs, last column zero (guard);
+- `lk` (2, n_pairs, n_fine, 4) float32: per layer (superficial, deep) the profile and its
+  change per unit couple of the shear (hemisphere: divided by r, so that times the offset along
+  the shear it gives the cos(phi) mode), resampled for nearest-bin lookups, as (profile at row
+  k, row k+1 - row k, couple response at row k, row k+1 - row k), last column zero (guard);
 - `rows` (n_delta, 1) float64: the height of the cover above the deep sensing plane (mm);
   `bounds` (n_pairs, 2): the superficial and deep reach (mm) beyond which both the profile and
   its couple response stay below WINDOW_EPS of their peaks;
@@ -92,9 +92,9 @@ def _delta_row(delta, prm):
 
 @_jit
 def _lookup(lk_row, t32, coord, origin32, scale32):
-    """Profile (float32) at coord (r^2 or signed distance, float32) for indentation row i + t
-    (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table, linear between the two
-    rows; zero beyond the table (guard column)."""
+    """Profile and couple response (float32) at coord (r^2 or signed distance, float32) for
+    indentation row i + t (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table,
+    linear between the two rows; zero beyond the table (guard column)."""
     n_fine = lk_row.shape[0]
     c = coord
     if origin32 != _F0:
@@ -105,7 +105,7 @@ def _lookup(lk_row, t32, coord, origin32, scale32):
         j = 0
     elif j > n_fine - 1:
         j = n_fine - 1
-    return lk_row[j, 1] * t32 + lk_row[j, 0]
+    return lk_row[j, 1] * t32 + lk_row[j, 0], lk_row[j, 3] * t32 + lk_row[j, 2]
 
 
 @_jit
@@ -165,9 +165,9 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     t32 = np.float32(t)
     origin32, scale32 = np.float32(prm[P_LK_ORIGIN]), np.float32(prm[P_LK_SCALE])
     scale_d32, origin_d32 = np.float32(prm[P_LK_SCALE_DEEP]), np.float32(prm[P_LK_ORIGIN_DEEP])
-    lk_sup, lk_deep, lk_sup1, lk_deep1 = lk[0, i], lk[1, i], lk[2, i], lk[3, i]
+    lk_sup, lk_deep = lk[0, i], lk[1, i]
     if prm[P_ROD] != 0.0:
-        _rod_fields(st, prm, lk_sup, lk_deep, lk_sup1, lk_deep1, h_eff, t32, quad, lattice, f_sup, f_deep,
+        _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
                     origin32, scale32, origin_d32, scale_d32, colsum, tax, bounds[i, 0], bounds[i, 1])
         return
     win = np.empty(4, np.int64)
@@ -190,8 +190,8 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
         wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
             rr = dx2[c] + dy2
-            v = _lookup(lk_sup, t32, rr, origin32, scale32) + (mdx[c] + mdy) * _lookup(lk_sup1, t32, rr, origin32,
-                                                                                        scale32)
+            v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
+            v = v0 + (mdx[c] + mdy) * v1
             if v < _F0:
                 v = _F0
             f_sup[r, c] = v
@@ -212,8 +212,8 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
         wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
             rr = dx2[c] + dy2
-            v = _lookup(lk_deep, t32, rr, origin_d32, scale_d32) + (mdx[c] + mdy) * _lookup(lk_deep1, t32, rr, origin_d32,
-                                                                                             scale_d32)
+            v0, v1 = _lookup(lk_deep, t32, rr, origin_d32, scale_d32)
+            v = v0 + (mdx[c] + mdy) * v1
             if v < _F0:
                 v = _F0
             v = v * lattice[r, c]
@@ -236,7 +236,7 @@ def _band(a, b, reach, q, x0):
 
 
 @_jit
-def _rod_fields(st, prm, lk_sup, lk_deep, lk_sup1, lk_deep1, h_eff, t32, quad, lattice, f_sup, f_deep,
+def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
                 origin32, scale32, origin_d32, scale_d32, colsum, tax, reach_sup, reach_deep):
     """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
     quadrature row is evaluated on the band of columns within reach_sup / reach_deep (mm) of the
@@ -269,7 +269,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, lk_sup1, lk_deep1, h_eff, t32, quad, l
         b0, b1 = _band(np.float64(sx), np.float64(row), reach_sup, q, np.float64(ax32))
         for c in range(b0, b1):
             d = col[c] + row
-            v = _lookup(lk_sup, t32, d, origin32, scale32) + m_s * _lookup(lk_sup1, t32, d, origin32, scale32)
+            v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
+            v = v0 + m_s * v1
             if v < _F0:
                 v = _F0
             f_sup[r, c] = v
@@ -301,7 +302,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, lk_sup1, lk_deep1, h_eff, t32, quad, l
         b0, b1 = _band(-np.float64(ey), np.float64(py), reach_deep, q, np.float64(cdx32))
         for c in range(b0, b1):
             d = px[c] + py
-            v = _lookup(lk_deep, t32, d, origin_d32, scale_d32) + m_d * _lookup(lk_deep1, t32, d, origin_d32, scale_d32)
+            v0, v1 = _lookup(lk_deep, t32, d, origin_d32, scale_d32)
+            v = v0 + m_d * v1
             ramp = ramp_x[c] + ramp_y
             if ramp < _F0:
                 ramp = _F0

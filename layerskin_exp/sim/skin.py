@@ -243,8 +243,8 @@ class SkinModel:
         """Resample the profile tables for nearest-bin lookups: in r^2 (hemisphere, no sqrt per
         point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
         far below the profile's own scale. Stored as (value, next row - value) float32 pairs per
-        pair of indentation rows, with one guard column of zeros: `_lk` (2, n_delta - 1,
-        n_fine, 2) [superficial, deep, superficial couple response, deep couple response]. Also
+        pair of indentation rows, with one guard column of zeros, profile and couple response
+        side by side: `_lk` (2, n_delta - 1, n_fine, 4) [superficial, deep]. Also
         the window reach of each pair of rows (`_bounds`) and the stack height per row (`_rows`),
         see frame_kernels."""
         tab = self.tab
@@ -265,7 +265,7 @@ class SkinModel:
             self._lk_origin_deep, self._lk_scale_deep = float(tab.dist_mm[0]), 1.0 / step
         n_fine = len(grid) + 1
 
-        def pairs(table, at, per_r=False):
+        def resample(table, at, per_r=False):
             fine = np.zeros((table.shape[0], n_fine), dtype=np.float32)
             for k in range(table.shape[0]):
                 v = np.interp(at, tab.dist_mm, table[k])
@@ -273,15 +273,19 @@ class SkinModel:
                     v = v / np.maximum(at, 1e-9)
                     v[at <= 0.0] = v[at > 0.0][0] if (at > 0.0).any() else 0.0
                 fine[k, :-1] = v
-            out = np.empty((table.shape[0] - 1, n_fine, 2), dtype=np.float32)
-            out[..., 0] = fine[:-1]
-            out[..., 1] = fine[1:] - fine[:-1]
+            return fine
+
+        def quads(profile, couple, at, per_r):
+            a, b = resample(profile, at), resample(couple, at, per_r)
+            out = np.empty((a.shape[0] - 1, n_fine, 4), dtype=np.float32)
+            out[..., 0], out[..., 1] = a[:-1], a[1:] - a[:-1]
+            out[..., 2], out[..., 3] = b[:-1], b[1:] - b[:-1]
             return out
 
         hemi = self.kind == "hemisphere"
         self._lk = np.ascontiguousarray(np.stack([
-            pairs(tab.superficial_kpa, at_layer[0]), pairs(tab.deep_kpa, at_layer[1]),
-            pairs(tab.superficial_couple_kpa, at_layer[0], hemi), pairs(tab.deep_couple_kpa, at_layer[1], hemi)]))
+            quads(tab.superficial_kpa, tab.superficial_couple_kpa, at_layer[0], hemi),
+            quads(tab.deep_kpa, tab.deep_couple_kpa, at_layer[1], hemi)]))
         # Per pair of rows (k, k+1): how far from the contact either the profile or its couple
         # response exceeds WINDOW_EPS of its own peak, for each layer.
 
