@@ -176,7 +176,9 @@ class FSRConfig:
     saturation_kpa: float = 150.0  # pressure at half the saturated conductance
     saturated_kohm: float = 1.0  # 1 / G_sat for one 1.2 x 1.2 mm taxel
     floor_mohm: float = 5.0  # unloaded leakage resistance
-    gain_cv: float = 0.14  # per-taxel conductance spread (lognormal), fixed per seed
+    gain_cv: float = 0.10  # independent per-taxel conductance spread (electrode-Velostat contact)
+    sheet_gain_cv: float = 0.10  # smooth conductance spread over the sheet (Velostat thickness, lamination)
+    sheet_correlation_mm: float = 5.0  # correlation length of that smooth part
     hysteresis: float = 0.06  # relative play width: loading reads low, unloading high
     creep: float = 0.08  # fraction of the response that settles with time constant creep_s
     creep_s: float = 1.5
@@ -187,8 +189,11 @@ class FSRConfig:
         _positive(self.saturation_kpa, "sim.fsr.saturation_kpa", "saturation pressure must be > 0 kPa")
         _positive(self.saturated_kohm, "sim.fsr.saturated_kohm")
         _positive(self.floor_mohm, "sim.fsr.floor_mohm")
-        require(self.gain_cv is not None and 0 <= self.gain_cv < 1, "sim.fsr.gain_cv", self.gain_cv,
-                "must lie in [0, 1)")
+        for key in ("gain_cv", "sheet_gain_cv"):
+            v = getattr(self, key)
+            require(v is not None and 0 <= v < 1, f"sim.fsr.{key}", v, "must lie in [0, 1)")
+        require(self.sheet_correlation_mm is not None and self.sheet_correlation_mm >= 0,
+                "sim.fsr.sheet_correlation_mm", self.sheet_correlation_mm, "must be >= 0 mm")
         _fraction(self.hysteresis, "sim.fsr.hysteresis")
         _fraction(self.creep, "sim.fsr.creep")
         _positive(self.creep_s, "sim.fsr.creep_s", "creep time constant must be > 0 s")
