@@ -120,7 +120,14 @@ class CoverConfig:
 class SheetConfig:
     """How one FSR sheet is built: two electrode films (polyimide with copper strips, the strips
     of the two films crossed) laminated around the Velostat. Sets the superficial sheet's
-    bending rigidity, which spreads the indenter's load over the lattice (`laminate`)."""
+    bending rigidity, which spreads the indenter's load over the lattice (`laminate`).
+
+    `bonded`: whether the films act as the faces of a sandwich about the Velostat (D = 5.7 N mm
+    with the defaults) or bend on their own (0.11 N mm). A sandwich needs the interfaces to carry
+    the core's shear flow, ~V / d ~ 1 MPa a few mm from a 3 N contact; electrodes that must touch
+    the Velostat are held by lamination at the rim and by friction (~mu p, tens of kPa) over the
+    active area, so the true sheet lies between the two. The default (bonded) is the paper's
+    "laminating"; `validate` and the campaign figures differ markedly between the two."""
 
     film_modulus_mpa: float = 2500.0  # polyimide
     film_thickness_mm: float = 0.025

@@ -47,7 +47,7 @@ from layerskin_exp.sim.spacer import SpacerLaw, hex_cell_pattern
 
 INDENTERS = ("hemisphere", "rod")
 # The hemisphere's fields are evaluated in a window around the contact: outside it each layer's
-# profile (times the deep layer's largest tilt factor) is below this fraction of its peak.
+# profile and its couple response are below this fraction of their peaks.
 WINDOW_EPS = fk.WINDOW_EPS
 
 

@@ -1,8 +1,8 @@
-"""The lattice spacer: its compression law, shear stiffness, load spreading and cell pattern.
+"""The lattice spacer: its compression law, shear stiffness and cell pattern.
 
-The spacer is modelled as a nonlinear Winkler foundation (each column carries the pressure of
-its own compression) whose walls bulge into the voids and touch at the densification strain
-e_d = 1 - solid fraction; beyond that the column is squeezed solid silicone.
+The spacer is the nonlinear foundation under the superficial laminate (`laminate`): each column
+carries the pressure of its own compression, the walls bulge into the voids and touch at the
+densification strain e_d = 1 - solid fraction; beyond that the column is squeezed solid silicone.
 Its transverse shear modulus rises from the open lattice's to the solid's as the walls close.
 Lengths mm, pressures kPa, stiffness per area kPa/mm.
 """

@@ -21,7 +21,7 @@ SKIN = SkinConfig()
 
 
 def _press_slide(m, n_steps=400, xy=(1.0, -2.0)):
-    """Press to 2.2 mm, then slide +x (shear loads the deep layer's tilt)."""
+    """Press to 2.2 mm, then slide +x (the shear's couple loads both layers)."""
     return [m.step(k * 1e-3, np.array([xy[0] + 0.004 * max(k - 150, 0), xy[1], -2.2 * min(k / 150, 1.0)]))
             for k in range(n_steps)]
 
