@@ -146,7 +146,8 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     """Pressure (kPa, float32) at the quadrature points of both layers for one loaded state
     st (N_STATE,), written into f_sup, f_deep (n*q, n*q) [y, x] inside each layer's taxel
     window (hemisphere; the rod's is the whole grid), and the Gauss-weighted taxel means
-    (kPa) into tax (2, n, n), zero outside the windows.
+    (kPa) into tax (2, n, n), zero outside the windows. With empty (0, 0) f_sup, f_deep only
+    the taxel means are written (the frame pipeline's path).
 
     Each layer reads the axisymmetric profile of the loaded laminate plus, along the shear, its
     first-order change under the shear's couple F_t H about the deep plane; the sheet's FSR
@@ -154,6 +155,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     n, nq = int(prm[P_N]), int(prm[P_NQ])
     m = n * nq
     q = quad[:m]
+    store = f_sup.shape[0] > 0  # the maps path passes empty field arrays: taxel means only
     tax[:, :, :] = 0.0
     colsum = np.zeros(m)
     delta = st[S_DELTA]
@@ -194,7 +196,8 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
             v = v0 + (mdx[c] + mdy) * v1
             if v < _F0:
                 v = _F0
-            f_sup[r, c] = v
+            if store:
+                f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[0])
     # deep: the lattice's pressure around the contact's deep-frame position, times the cell pattern
@@ -217,7 +220,8 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
             if v < _F0:
                 v = _F0
             v = v * lattice[r, c]
-            f_deep[r, c] = v
+            if store:
+                f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[1])
 
@@ -248,6 +252,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     n, nq = int(prm[P_N]), int(prm[P_NQ])
     m = n * nq
     q = quad[:m]
+    store = f_sup.shape[0] > 0
     yaw = st[S_YAW]
     fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
     cdx, cdy = st[S_AX] + st[S_UX], st[S_AY] + st[S_UY]
@@ -273,7 +278,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
             v = v0 + m_s * v1
             if v < _F0:
                 v = _F0
-            f_sup[r, c] = v
+            if store:
+                f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[0])
     i_s = (s2**3 - s1**3) / 3.0
@@ -311,7 +317,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
             if v < _F0:
                 v = _F0
             v = v * lattice[r, c]
-            f_deep[r, c] = v
+            if store:
+                f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[1])
 
@@ -323,9 +330,8 @@ def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cach
     cache_serial[0]) repeats its loading configuration and reuses its maps (holds), unless
     prm[P_REUSE] is 0. Updates the cache (the last state's serial and maps). Returns how many
     states' maps were computed."""
-    m = quad.shape[0] - int(prm[P_NQ])
-    f_sup = np.empty((m, m), np.float32)
-    f_deep = np.empty((m, m), np.float32)
+    f_sup = np.empty((0, 0), np.float32)  # fields are not kept: taxel means only
+    f_deep = np.empty((0, 0), np.float32)
     reuse = prm[P_REUSE] != 0.0
     prev = cache_serial[0]
     computed = 0
