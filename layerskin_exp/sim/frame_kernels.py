@@ -95,16 +95,8 @@ def _lookup(lk_row, t32, coord, origin32, scale32):
     """Profile and couple response (float32) at coord (r^2 or signed distance, float32) for
     indentation row i + t (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table,
     linear between the two rows; zero beyond the table (guard column)."""
-    n_fine = lk_row.shape[0]
-    c = coord
-    if origin32 != _F0:
-        c = c - origin32
-    c = c * scale32 + _FHALF
-    j = int(c)
-    if j < 0:
-        j = 0
-    elif j > n_fine - 1:
-        j = n_fine - 1
+    c = (coord - origin32) * scale32 + _FHALF
+    j = min(max(int(c), 0), lk_row.shape[0] - 1)  # branch-free clamp (the guard column is zero)
     return lk_row[j, 1] * t32 + lk_row[j, 0], lk_row[j, 3] * t32 + lk_row[j, 2]
 
 
@@ -194,8 +186,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
             rr = dx2[c] + dy2
             v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
             v = v0 + (mdx[c] + mdy) * v1
-            if v < _F0:
-                v = _F0
+            v = max(v, _F0)
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
@@ -217,8 +208,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
             rr = dx2[c] + dy2
             v0, v1 = _lookup(lk_deep, t32, rr, origin_d32, scale_d32)
             v = v0 + (mdx[c] + mdy) * v1
-            if v < _F0:
-                v = _F0
+            v = max(v, _F0)
             v = v * lattice[r, c]
             if store:
                 f_deep[r, c] = v
@@ -276,8 +266,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
             d = col[c] + row
             v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
             v = v0 + m_s * v1
-            if v < _F0:
-                v = _F0
+            v = max(v, _F0)
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
@@ -314,8 +303,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
             if ramp < _F0:
                 ramp = _F0
             v = v * ramp
-            if v < _F0:
-                v = _F0
+            v = max(v, _F0)
             v = v * lattice[r, c]
             if store:
                 f_deep[r, c] = v
