@@ -247,6 +247,20 @@ def response_spread(sim: SimConfig, n_positions: int = 30, seed: int = 0) -> tup
             {"taxel_cv": taxel_cv, "position_cv": pos_cv})
 
 
+def press_cop_offsets(sim: SimConfig, xs=(0.0, 4.0, 8.0)) -> dict:
+    """For the record: each layer's count-CoP minus the contact position for a 3 N press (no
+    shear) at x = xs mm. Whatever is not zero here enters the inter-layer shift as position,
+    not shear: the deep layer's broad low-pressure tail (read through the FSR's concave response)
+    and the array's edge pull its CoP towards the array centre."""
+    out = {}
+    for x in xs:
+        m = _model(_quiet(sim))
+        st = m.step(0.0, np.array([x, 0.0, -_depth_for(m, 3.0)]))
+        c = np.clip(np.stack(m.frames([st] * 3, np.arange(3) * 2.36e-3))[:, -1] - m.baseline_counts, 0, None)
+        out[x] = (round(float(_cop(c[0])[0] - x), 2), round(float(_cop(c[1])[0] - x), 2))
+    return out
+
+
 def run(sim: SimConfig | None = None) -> tuple[list[Check], dict]:
     sim = sim or SimConfig()
     checks: list[Check] = [lateral_stiffness(sim), plate_on_winkler_closed_form(sim), vertical_stiffness(sim),
@@ -261,7 +275,8 @@ def run(sim: SimConfig | None = None) -> tuple[list[Check], dict]:
     c5, c6, spread = response_spread(sim)
     checks += [c5, c6]
     return checks, {"stop_reasons": reasons, "effective_height_mm_by_fz": {k: round(float(v), 3) for k, v in heights.items()},
-                    "peak_contact_pressure_at_3n_kpa": round(contact_peak, 1), **spread}
+                    "peak_contact_pressure_at_3n_kpa": round(contact_peak, 1),
+                    "press_cop_offset_mm_superficial_deep_by_x": press_cop_offsets(sim), **spread}
 
 
 def table(checks: list[Check]) -> str:
