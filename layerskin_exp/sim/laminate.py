@@ -189,9 +189,8 @@ class PlateOnFoundation:
         norm = np.linalg.norm(res)
         it = 0
         scale = max(kc * max(delta_mm, 1e-3), 1e-12)
-        for it in range(1, max_iter + 1):
-            if norm <= tol * scale:
-                break
+        while it < max_iter and norm > tol * scale:
+            it += 1
             jac = a + sp.diags(slope + kc * (gap > 0.0))
             dw = spla.spsolve(jac.tocsc(), -res)
             s = 1.0

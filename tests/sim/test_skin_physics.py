@@ -6,11 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import quad
 
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.sim.config import SimConfig, SpacerConfig
-from layerskin_exp.sim.skin import SkinModel, _chord, stack_states
+from layerskin_exp.sim.skin import SkinModel, _chord
 from layerskin_exp.sim.spacer import SpacerLaw
 
 SKIN = SkinConfig()
