@@ -5,9 +5,9 @@
 - peak Python heap (tracemalloc) of a 60 s grip trial that keeps every record it reads.
 Shares of wall time: skin frames (SkinModel.frames_of_steps) in both trials, camera render + detect in the grip.
 Each speed is simulated seconds per wall second. Baseline, same run: the same trial with the
-naive per-taxel frame pipeline (benchmarks/skin_naive.py) in place of the frame kernel. The
-naive pipeline is hemisphere-only and very slow, so its cost per frame pair is timed on a short
-stretch and the baseline extrapolated: wall - time in frames + frames x naive cost per frame.
+plain numpy frame pipeline (layerskin_exp.sim.reference, via benchmarks/skin_naive.py) in place
+of the frame kernel. It is very slow, so its cost per frame pair is timed on a short stretch and
+the baseline extrapolated: wall - time in frames + frames x naive cost per frame.
 """
 
 from __future__ import annotations

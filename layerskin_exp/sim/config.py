@@ -45,7 +45,6 @@ class SpacerConfig:
     width: float = 26.0  # mm, side of the square spacer pad (24 mm array + border)
     confinement_length: float = 2.0  # mm, half-width of the squeezed region (~ indenter radius), sets S
     lattice_contrast: float = 0.25  # relative depth of the cell pattern seen by the deep layer
-    spread_ratio: float = 0.5  # deep spreading width / compressed spacer height (Boussinesq-like)
 
     def __post_init__(self) -> None:
         _positive(self.modulus, "sim.spacer.modulus", "Young's modulus must be > 0 kPa")
@@ -58,7 +57,6 @@ class SpacerConfig:
         _positive(self.confinement_length, "sim.spacer.confinement_length", "must be > 0 mm")
         require(self.lattice_contrast is not None and 0 <= self.lattice_contrast < 0.5,
                 "sim.spacer.lattice_contrast", self.lattice_contrast, "must lie in [0, 0.5) to keep the load positive")
-        _positive(self.spread_ratio, "sim.spacer.spread_ratio")
 
     @property
     def solid_fraction(self) -> float:
@@ -97,6 +95,7 @@ class CoverConfig:
     """
 
     thickness: float = 0.2  # mm
+    modulus: float = 35.0  # kPa, Young's modulus of the cover silicone
     friction: float = 1.0  # static coefficient
     kinetic_ratio: float = 0.75  # kinetic / static
     aging_s: float = 0.05
@@ -104,6 +103,7 @@ class CoverConfig:
 
     def __post_init__(self) -> None:
         _positive(self.thickness, "sim.cover.thickness", "cover thickness must be > 0 mm")
+        _positive(self.modulus, "sim.cover.modulus", "cover Young's modulus must be > 0 kPa")
         _positive(self.friction, "sim.cover.friction", "static friction coefficient must be > 0")
         require(self.kinetic_ratio is not None and 0 < self.kinetic_ratio <= 1, "sim.cover.kinetic_ratio",
                 self.kinetic_ratio, "kinetic/static ratio must lie in (0, 1]")
@@ -114,6 +114,45 @@ class CoverConfig:
     @property
     def kinetic(self) -> float:
         return self.friction * self.kinetic_ratio
+
+
+@dataclass
+class SheetConfig:
+    """How one FSR sheet is built: two electrode films (polyimide with copper strips, the strips
+    of the two films crossed) laminated around the Velostat. Sets the superficial sheet's
+    bending rigidity, which spreads the indenter's load over the lattice (`laminate`).
+
+    `bonded`: whether the films act as the faces of a sandwich about the Velostat (D = 5.7 N mm
+    with the defaults) or bend on their own (0.11 N mm). A sandwich needs the interfaces to carry
+    the core's shear flow, ~V / d ~ 1 MPa a few mm from a 3 N contact; electrodes that must touch
+    the Velostat are held by lamination at the rim and by friction (~mu p, tens of kPa) over the
+    active area, so the true sheet lies between the two. The default (bonded) is the paper's
+    "laminating"; `validate` and the campaign figures differ markedly between the two."""
+
+    film_modulus_mpa: float = 2500.0  # polyimide
+    film_thickness_mm: float = 0.025
+    copper_modulus_mpa: float = 117000.0
+    copper_thickness_mm: float = 0.018
+    electrode_fill: float = 0.8  # 1.2 mm electrodes at 1.5 mm pitch
+    velostat_modulus_mpa: float = 150.0
+    velostat_thickness_mm: float = 0.1
+    bonded: bool = True  # laminated: the films act as the faces of a sandwich about the Velostat
+
+    def __post_init__(self) -> None:
+        for key in ("film_modulus_mpa", "film_thickness_mm", "copper_modulus_mpa", "copper_thickness_mm",
+                    "velostat_modulus_mpa", "velostat_thickness_mm"):
+            _positive(getattr(self, key), f"sim.sheet.{key}")
+        require(self.electrode_fill is not None and 0 < self.electrode_fill <= 1, "sim.sheet.electrode_fill",
+                self.electrode_fill, "must lie in (0, 1]")
+
+    @property
+    def rigidity_n_mm(self) -> float:
+        """Bending rigidity D of the sheet (N mm), see laminate.sheet_rigidity_n_mm."""
+        from layerskin_exp.sim.laminate import sheet_rigidity_n_mm
+
+        return sheet_rigidity_n_mm(self.film_modulus_mpa, self.film_thickness_mm, self.copper_modulus_mpa,
+                                   self.copper_thickness_mm, self.electrode_fill, self.velostat_thickness_mm,
+                                   self.velostat_modulus_mpa, self.bonded)
 
 
 @dataclass
@@ -144,7 +183,9 @@ class FSRConfig:
     saturation_kpa: float = 150.0  # pressure at half the saturated conductance
     saturated_kohm: float = 1.0  # 1 / G_sat for one 1.2 x 1.2 mm taxel
     floor_mohm: float = 5.0  # unloaded leakage resistance
-    gain_cv: float = 0.14  # per-taxel conductance spread (lognormal), fixed per seed
+    gain_cv: float = 0.10  # independent per-taxel conductance spread (electrode-Velostat contact)
+    sheet_gain_cv: float = 0.10  # smooth conductance spread over the sheet (Velostat thickness, lamination)
+    sheet_correlation_mm: float = 5.0  # correlation length of that smooth part
     hysteresis: float = 0.06  # relative play width: loading reads low, unloading high
     creep: float = 0.08  # fraction of the response that settles with time constant creep_s
     creep_s: float = 1.5
@@ -155,8 +196,11 @@ class FSRConfig:
         _positive(self.saturation_kpa, "sim.fsr.saturation_kpa", "saturation pressure must be > 0 kPa")
         _positive(self.saturated_kohm, "sim.fsr.saturated_kohm")
         _positive(self.floor_mohm, "sim.fsr.floor_mohm")
-        require(self.gain_cv is not None and 0 <= self.gain_cv < 1, "sim.fsr.gain_cv", self.gain_cv,
-                "must lie in [0, 1)")
+        for key in ("gain_cv", "sheet_gain_cv"):
+            v = getattr(self, key)
+            require(v is not None and 0 <= v < 1, f"sim.fsr.{key}", v, "must lie in [0, 1)")
+        require(self.sheet_correlation_mm is not None and self.sheet_correlation_mm >= 0,
+                "sim.fsr.sheet_correlation_mm", self.sheet_correlation_mm, "must be >= 0 mm")
         _fraction(self.hysteresis, "sim.fsr.hysteresis")
         _fraction(self.creep, "sim.fsr.creep")
         _positive(self.creep_s, "sim.fsr.creep_s", "creep time constant must be > 0 s")
@@ -195,6 +239,7 @@ class SimConfig:
     seed: int = 0
     spacer: SpacerConfig = field(default_factory=SpacerConfig)
     cover: CoverConfig = field(default_factory=CoverConfig)
+    sheet: SheetConfig = field(default_factory=SheetConfig)
     contact: ContactConfig = field(default_factory=ContactConfig)
     fsr: FSRConfig = field(default_factory=FSRConfig)
     readout: ReadoutConfig = field(default_factory=ReadoutConfig)

@@ -1,20 +1,22 @@
-"""Contact of a rigid indenter (hemisphere or rod) with the thin soft stack.
+"""Contact of a rigid indenter (hemisphere or rod) with the thin soft stack, as tables.
 
-Hertz does not apply here: the contact radius exceeds the indenter radius long before the
-study's loads, and the 2.7 mm stack is far thinner than the contact is wide. Instead each
-point of the spacer carries the pressure of its own compression (nonlinear Winkler, see
-`spacer.SpacerLaw`) under the rigid profile; the cover and the lattice's shear coupling
-(Pasternak length) spread that pressure over the surface, and the spacer spreads it further
-on its way to the deep layer. All of it is precomputed once per design as tables over the
-indentation depth:
+Hertz does not apply: the stack is far thinner than the contact is wide, and the indenter
+presses a stiff laminate (the cover and the superficial FSR sheet) that rests on a soft
+lattice. The laminate spreads the load over several millimetres of lattice as a plate on a
+nonlinear foundation (`laminate.PlateOnFoundation`); the lattice densifies under the contact
+only when the sheet's bending can no longer hand the load outwards. Everything is solved once
+per design, as tables over the indentation depth delta:
 
 - hemisphere: axisymmetric radial profiles p(delta, r);
 - rod: line-contact profiles p(delta, d) across the axis, per unit length along it.
 
-Tables also hold the normal force (or line load), the spacer's tangential and torsional
-stiffness under the contact, the friction radius, and the exponential-tilt parameters that
-put the deep pressure centre where moment equilibrium demands (`tilt_*`).
-Lengths mm, pressures kPa, forces N.
+Per row: the normal force (or line load); the pressure the superficial layer feels (contact
+pressure under the cover) and the deep layer feels (the lattice's pressure); their first-order
+change per unit couple of the shear about the deep plane (`laminate.CoupleResponse`: the sheet
+tilts, the lattice takes most of the moment and the indenter the rest, so the moment balance
+F_t H = F_z shift holds for the whole deep pressure but not for what the sensor reads); the
+lattice's extra tangential and torsional stiffness under the contact; the friction radius; the
+height of the cover above the deep sensing plane. Lengths mm, pressures kPa, forces N.
 """
 
 from __future__ import annotations
@@ -23,14 +25,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import i0e, i1e
+from scipy.special import i0e
 
 from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim.laminate import PlateOnFoundation, cover_stiffness_n_per_mm3, pad_radius_mm
 from layerskin_exp.sim.spacer import SpacerLaw
 
 KPA_MM2_TO_N = 1e-3
-MAX_TILT_SHIFT_MM = 6.0  # largest deep-CoP shift the tilt tables cover (friction keeps it < mu*H)
-_N_SHIFT = 49
+_PLATE_STEP_MM = 0.05  # grid of the laminate solve (the cover's contact edge spans several steps)
 
 
 @dataclass
@@ -52,9 +54,10 @@ class ContactTables:
     torsion_extra: np.ndarray  # (n_delta,) hemisphere: extra torsional stiffness N mm/rad
     friction_radius_mm: np.ndarray  # (n_delta,) int p r dA / int p dA (hemisphere)
     contact_halfwidth_mm: np.ndarray  # (n_delta,) contact radius / half-width of the Winkler zone
-    tilt_shift_mm: np.ndarray  # (n_shift,) uniform grid of deep-CoP shifts
-    tilt_gamma: np.ndarray  # (n_delta, n_shift) exponential-tilt rate 1/mm giving that shift
-    tilt_logz: np.ndarray  # (n_delta, n_shift) log normaliser of the tilt
+    superficial_couple_kpa: np.ndarray  # (n_delta, n_dist) contact-pressure change per unit couple
+    deep_couple_kpa: np.ndarray  # (n_delta, n_dist) lattice-pressure change per unit couple
+    height_mm: np.ndarray  # (n_delta,) height of the cover surface above the deep sensing plane
+    lattice_compression_mm: np.ndarray  # (n_delta,) the lattice's compression under the contact
 
     @property
     def d_delta(self) -> float:
@@ -86,98 +89,74 @@ def _line_gauss_matrix(d_out: np.ndarray, d_in: np.ndarray, dd_in: float, sigma:
     return np.exp(-((d_out[:, None] - d_in[None, :]) ** 2) / (2 * sigma**2)) / (math.sqrt(2 * math.pi) * sigma) * dd_in
 
 
-def _tilt_tables(kind: str, dist: np.ndarray, deep: np.ndarray, dd: float):
-    """For each row: the tilt rate gamma and log-normaliser that shift the centre by s.
-
-    Tilted map p(x) exp(gamma xi) / Z with xi the coordinate along the shear. For a radial
-    profile the angular integrals are 2 pi I0(gamma r) and 2 pi r I1(gamma r) (scaled Bessels
-    keep the exponentials in range); for a line profile it is a 1D integral.
-    """
-    shifts = np.linspace(0.0, MAX_TILT_SHIFT_MM, _N_SHIFT)
-    n = deep.shape[0]
-    gam = np.zeros((n, _N_SHIFT))
-    logz = np.zeros((n, _N_SHIFT))
-    for k in range(n):
-        p = deep[k]
-        tot = p.sum()
-        if tot <= 0:
-            continue
-        if kind == "hemisphere":
-            var = (p * dist**3).sum() / (p * dist).sum() / 2.0
-        else:
-            var = (p * dist**2).sum() / tot
-        g_hi = 3.0 * MAX_TILT_SHIFT_MM / max(var, 1e-6)
-        g = np.linspace(0.0, g_hi, 400)
-        gr = g[:, None] * dist[None, :]
-        if kind == "hemisphere":
-            w = p * dist
-            # scaled Bessels: I(x) = Ie(x) e^x; factor e^{gamma r} shared by both integrals
-            log_w0 = np.log(np.maximum(w * i0e(gr), 1e-300)) + gr
-            log_w1 = np.log(np.maximum(w * dist * i1e(gr), 1e-300)) + gr
-            m0 = np.logaddexp.reduce(log_w0, axis=1)
-            m1 = np.logaddexp.reduce(log_w1, axis=1)
-            s_of_g = np.exp(m1 - m0)
-            lz = m0 - math.log(w.sum())
-        else:
-            log_w = np.log(np.maximum(p, 1e-300))[None, :] + gr
-            m0 = np.logaddexp.reduce(log_w, axis=1)
-            s_of_g = (np.exp(log_w - m0[:, None]) * dist[None, :]).sum(axis=1)
-            lz = m0 - math.log(tot)
-        s_of_g = np.maximum.accumulate(s_of_g)
-        gam[k] = np.interp(shifts, s_of_g, g)
-        logz[k] = np.interp(shifts, s_of_g, lz)
-    return shifts, gam, logz
+def _solver(sim: SimConfig, kind: str) -> PlateOnFoundation:
+    """The laminate-on-lattice model of one design (see `laminate`)."""
+    law = SpacerLaw(sim.spacer)
+    radius = sim.contact.hemisphere_radius_mm if kind == "hemisphere" else sim.contact.rod_diameter_mm / 2
+    g_p = sim.spacer.shear_modulus_kpa * KPA_MM2_TO_N * sim.spacer.thickness / 3.0  # Vlasov: G h / 3
+    k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, sim.cover.thickness, sim.spacer.confinement_length)
+    return PlateOnFoundation(kind, law, sim.sheet.rigidity_n_mm, g_p, k_c, radius,
+                             pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM)
 
 
 def build_tables(sim: SimConfig, kind: str) -> ContactTables:
-    """Integrate the contact model for one indenter over a grid of indentation depths."""
+    """Solve the laminate on its lattice for a grid of indentation depths (see `laminate`)."""
     if kind not in ("hemisphere", "rod"):
         raise ValueError(f"indenter={kind!r}: must be 'hemisphere' or 'rod'")
     law = SpacerLaw(sim.spacer)
-    radius = sim.contact.hemisphere_radius_mm if kind == "hemisphere" else sim.contact.rod_diameter_mm / 2
+    plate = _solver(sim, kind)
+    radius = plate.radius
     h = sim.spacer.thickness
     delta_max = min(0.99 * radius, 0.97 * h)
     n_delta = sim.contact.table_points
     delta = np.linspace(0.0, delta_max, n_delta)
-
-    sigma_s = math.hypot(law.pasternak_length_mm(), sim.cover.thickness)
-    sigma_d = np.array([math.hypot(sigma_s, float(law.spread_sigma_mm(dl))) for dl in delta])
-    a_max = math.sqrt(max(2 * radius * delta_max - delta_max**2, 0.0))
-    reach = a_max + 5.0 * float(sigma_d.max())
-
-    fine_step = min(0.01, a_max / 200)
+    x = plate.x
+    n_x = len(x)
+    contact = np.zeros((n_delta, n_x))
+    found = np.zeros((n_delta, n_x))
+    contact1 = np.zeros((n_delta, n_x))
+    found1 = np.zeros((n_delta, n_x))
+    comp = np.zeros((n_delta, n_x))
+    load = np.zeros(n_delta)
+    w = None
+    for k, dl in enumerate(delta):
+        if dl <= 0.0:
+            continue
+        sol = plate.solve(float(dl), w)
+        w = sol.w_mm
+        contact[k], found[k], comp[k] = sol.contact_kpa, sol.foundation_kpa, np.maximum(w, 0.0)
+        load[k] = plate.load(sol)
+        resp = plate.couple(sol)
+        contact1[k], found1[k] = resp.contact_kpa, resp.foundation_kpa
+    # what each layer's Velostat feels: the contact pressure under the cover, the lattice's
+    # (compressive) pressure under the deep sheet's top film; each spread over its layer's thickness
+    sigma_s = sim.cover.thickness
+    sigma_d = 0.5 * sim.fsr.layer_thickness_mm
+    # tabulated to just beyond the plate's edge (the equal-area disc), where the lattice ends
+    reach = min(float(np.abs(x).max()), pad_radius_mm(kind, sim.spacer.width) + 1.0)
     if kind == "hemisphere":
-        r_in = np.arange(0.0, a_max + fine_step, fine_step)
-        dist = np.linspace(0.0, reach, 241)
+        dist = np.linspace(0.0, reach, 801)
+        blur_s = _radial_gauss_matrix(dist, x, plate.step, sigma_s)
+        blur_d = _radial_gauss_matrix(dist, x, plate.step, sigma_d)
+        weight = plate.area
     else:
-        r_in = np.arange(-a_max - fine_step, a_max + 2 * fine_step, fine_step)
-        dist = np.linspace(-reach, reach, 321)
-    ind_h = _profile_height(kind, radius, r_in)
-    raw = law.pressure_kpa(np.maximum(delta[:, None] - ind_h[None, :], 0.0))  # (n_delta, n_in)
-
-    if kind == "hemisphere":
-        weight = 2 * np.pi * r_in * fine_step  # area of each ring
-        blur_s = _radial_gauss_matrix(dist, r_in, fine_step, sigma_s)
-    else:
-        weight = np.full(r_in.shape, fine_step)  # length per unit rod length
-        blur_s = _line_gauss_matrix(dist, r_in, fine_step, sigma_s)
-    load = raw @ weight * KPA_MM2_TO_N
-    superficial = raw @ blur_s.T
-    deep = np.empty_like(superficial)
-    for k in range(n_delta):
-        blur = (_radial_gauss_matrix if kind == "hemisphere" else _line_gauss_matrix)(
-            dist, r_in, fine_step, float(sigma_d[k]))
-        deep[k] = blur @ raw[k]
-
-    comp = np.maximum(delta[:, None] - ind_h[None, :], 0.0)
+        dist = np.linspace(-reach, reach, 961)
+        blur_s = _line_gauss_matrix(dist, x, plate.step, sigma_s)
+        blur_d = _line_gauss_matrix(dist, x, plate.step, sigma_d)
+        weight = plate.area
+    superficial = contact @ blur_s.T
+    deep = found @ blur_d.T  # signed: where the sheet lifts, the bonded lattice pulls (the FSR reads 0)
+    superficial1 = contact1 @ blur_s.T
+    deep1 = found1 @ blur_d.T
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
     k_extra = np.where(comp > 0, k_extra, 0.0)
     shear_extra = k_extra @ weight * KPA_MM2_TO_N
-    torsion_extra = (k_extra * r_in[None, :] ** 2) @ weight * KPA_MM2_TO_N if kind == "hemisphere" else np.zeros(n_delta)
+    torsion_extra = (k_extra * x[None, :] ** 2) @ weight * KPA_MM2_TO_N if kind == "hemisphere" else np.zeros(n_delta)
     with np.errstate(invalid="ignore", divide="ignore"):
-        fr = (raw * np.abs(r_in)[None, :]) @ weight / (raw @ weight)
+        fr = (contact * np.abs(x)[None, :]) @ weight / (contact @ weight)
     fr = np.nan_to_num(fr)
-    halfwidth = np.sqrt(np.maximum(2 * radius * delta - delta**2, 0.0))
-    shifts, gam, logz = _tilt_tables(kind, dist, deep, float(dist[1] - dist[0]))
+    halfwidth = np.array([np.abs(x[row > 0]).max() if (row > 0).any() else 0.0 for row in contact])
+    centre = int(np.argmin(np.abs(x)))
+    height = sim.cover.thickness + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
-                         halfwidth, shifts, gam, logz)
+                         halfwidth, superficial1, deep1, height, comp[:, centre].copy())

@@ -13,11 +13,15 @@ same numbers.
 Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
 - `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
 - `prm` (N_PARAM,) float64, entries `P_*` (geometry, table grids, FSR and readout constants);
-- `lk` (2, n_pairs, n_fine, 2) float32: superficial and deep profiles resampled for
-  nearest-bin lookups, (value of row k, row k+1 - row k) pairs, last column zero (guard);
-- `tilt` (n_delta, n_shift, 2) float64 [gamma, logz]; `deep_bound` (n_pairs, n_dist + 2):
-  the deep profile's pairwise maximum, then the WINDOW_EPS threshold and the superficial reach;
-- `dist` (n_dist,) float64; `quad` (n*q + q,) float32: quadrature coordinates then weights;
+- `lk` (2, n_pairs, n_fine, 4) float32: per layer (superficial, deep) the profile and its
+  change per unit couple of the shear (hemisphere: divided by r, so that times the offset along
+  the shear it gives the cos(phi) mode), resampled for nearest-bin lookups, as (profile at row
+  k, row k+1 - row k, couple response at row k, row k+1 - row k), last column zero (guard);
+- `rows` (n_delta, 1) float64: the height of the cover above the deep sensing plane (mm);
+  `bounds` (n_pairs, 2): the superficial and deep reach (mm) beyond which both the profile and
+  its couple response stay below WINDOW_EPS of their peaks;
+- `dist` (n_dist,) float64 (the tables' grid); `quad` (n*q + q,) float32: quadrature
+  coordinates then weights;
   `lattice` (n*q, n*q) float32.
 
 Floating point: field values are float32 (as in the numpy pipeline), taxel means, FSR and
@@ -42,11 +46,11 @@ N_STATE = 12
 assert (S_T, S_ROT) == (0, N_STATE - 1)
 
 # --- entries of the parameter vector
-(P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA, P_DSHIFT, P_XMAX_SHIFT,
- P_H0, P_HCLIP, P_LK_ORIGIN, P_LK_SCALE, P_HALF_PAD, P_PERIOD, P_HYST, P_CREEP, P_CREEP_S,
+(P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA, _P_FREE0, _P_FREE1,
+ _P_FREE2, _P_FREE3, P_LK_ORIGIN, P_LK_SCALE, P_HALF_PAD, P_PERIOD, P_HYST, P_CREEP, P_CREEP_S,
  P_PSAT, P_EXPONENT, P_G_FLOOR, P_G_SAT, P_G_LEAK, P_G_DIV, P_R_ON, P_SUPPLY_V, P_FULL_SCALE,
- P_CROSSTALK, P_REUSE, P_JITTER_S, P_NOISE_COUNTS) = range(32)
-N_PARAM = 32
+ P_CROSSTALK, P_REUSE, P_JITTER_S, P_NOISE_COUNTS, P_LK_SCALE_DEEP, P_LK_ORIGIN_DEEP) = range(34)
+N_PARAM = 34
 
 _TINY = np.finfo(float).tiny
 # Hemisphere windows: outside, the profile is below this fraction of its peak. At 1e-5 what is
@@ -87,41 +91,13 @@ def _delta_row(delta, prm):
 
 
 @_jit
-def _tilt(tilt, i, t, shift, prm):
-    """Exponential-tilt rate gamma (1/mm) and log-normaliser giving a deep-CoP shift (mm)."""
-    x = min(max(shift / prm[P_DSHIFT], 0.0), prm[P_XMAX_SHIFT])
-    si = int(x)
-    su = x - si
-    a = tilt[i, si, 0] * (1 - su) + tilt[i, si + 1, 0] * su
-    b = tilt[i + 1, si, 0] * (1 - su) + tilt[i + 1, si + 1, 0] * su
-    gamma = a * (1 - t) + b * t
-    a = tilt[i, si, 1] * (1 - su) + tilt[i, si + 1, 1] * su
-    b = tilt[i + 1, si, 1] * (1 - su) + tilt[i + 1, si + 1, 1] * su
-    return gamma, a * (1 - t) + b * t
-
-
-@_jit
 def _lookup(lk_row, t32, coord, origin32, scale32):
-    """Profile (float32) at coord (r^2 or signed distance, float32) for indentation row i + t
-    (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table, linear between the two
-    rows; zero beyond the table (guard column)."""
-    n_fine = lk_row.shape[0]
-    c = coord
-    if origin32 != _F0:
-        c = c - origin32
-    c = c * scale32 + _FHALF
-    j = int(c)
-    if j < 0:
-        j = 0
-    elif j > n_fine - 1:
-        j = n_fine - 1
-    return lk_row[j, 1] * t32 + lk_row[j, 0]
-
-
-@_jit
-def _stack_height(delta, prm):
-    """Height of the cover surface above the deep sensing plane at the contact (mm)."""
-    return prm[P_H0] - min(max(delta, 0.0), prm[P_HCLIP])
+    """Profile and couple response (float32) at coord (r^2 or signed distance, float32) for
+    indentation row i + t (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table,
+    linear between the two rows; zero beyond the table (guard column)."""
+    c = (coord - origin32) * scale32 + _FHALF
+    j = min(max(int(c), 0), lk_row.shape[0] - 1)  # branch-free clamp (the guard column is zero)
+    return lk_row[j, 1] * t32 + lk_row[j, 0], lk_row[j, 3] * t32 + lk_row[j, 2]
 
 
 @_jit
@@ -141,21 +117,6 @@ def _window(cx, cy, reach, prm, win, at):
         win[k], win[k + 1] = int(lo), int(hi)
 
 
-@_jit
-def _deep_reach(deep_bound, dist, i, gamma, logz):
-    """Radius (mm) beyond which the deep profile times the largest tilt factor exp(|gamma| r -
-    logz) stays below WINDOW_EPS of the row's peak (the next-but-one coarse node beyond)."""
-    nd = dist.shape[0]
-    thr = deep_bound[i, nd]
-    ag = abs(gamma)
-    last = -2
-    for d in range(nd - 1, -1, -1):
-        if deep_bound[i, d] * math.exp(ag * dist[d] - logz) > thr:
-            last = d
-            break
-    return dist[min(max(last + 2, 0), nd - 1)]
-
-
 # ---------------------------------------------------------------------------------- fields
 @_jit
 def _row_done(colsum, r, c0, c1, quad, n, nq, tax):
@@ -173,72 +134,84 @@ def _row_done(colsum, r, c0, c1, quad, n, nq, tax):
 
 
 @_jit
-def frame_fields(st, prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, tax):
+def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, tax):
     """Pressure (kPa, float32) at the quadrature points of both layers for one loaded state
     st (N_STATE,), written into f_sup, f_deep (n*q, n*q) [y, x] inside each layer's taxel
     window (hemisphere; the rod's is the whole grid), and the Gauss-weighted taxel means
-    (kPa) into tax (2, n, n), zero outside the windows."""
+    (kPa) into tax (2, n, n), zero outside the windows. With empty (0, 0) f_sup, f_deep only
+    the taxel means are written (the frame pipeline's path).
+
+    Each layer reads the axisymmetric profile of the loaded laminate plus, along the shear, its
+    first-order change under the shear's couple F_t H about the deep plane; the sheet's FSR
+    reads no tension (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
     n, nq = int(prm[P_N]), int(prm[P_NQ])
     m = n * nq
     q = quad[:m]
+    store = f_sup.shape[0] > 0  # the maps path passes empty field arrays: taxel means only
     tax[:, :, :] = 0.0
     colsum = np.zeros(m)
-    delta, fz = st[S_DELTA], st[S_FZ]
+    delta = st[S_DELTA]
     fx, fy = st[S_FX], st[S_FY]
     ax, ay = st[S_AX], st[S_AY]
     cdx, cdy = ax + st[S_UX], ay + st[S_UY]  # contact in the deep frame
-    h_eff = _stack_height(delta, prm)
-    ft_mag = math.hypot(fx, fy)
     i, t = _delta_row(delta, prm)
+    h_eff = rows[i, 0] * (1 - t) + rows[i + 1, 0] * t
     t32 = np.float32(t)
-    gamma, logz = _tilt(tilt, i, t, ft_mag * h_eff / fz, prm)  # moment balance: F_t H = F_z shift
     origin32, scale32 = np.float32(prm[P_LK_ORIGIN]), np.float32(prm[P_LK_SCALE])
+    scale_d32, origin_d32 = np.float32(prm[P_LK_SCALE_DEEP]), np.float32(prm[P_LK_ORIGIN_DEEP])
     lk_sup, lk_deep = lk[0, i], lk[1, i]
     if prm[P_ROD] != 0.0:
-        reach_deep = _deep_reach(deep_bound, dist, i, gamma, logz)
-        _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice, f_sup, f_deep,
-                    origin32, scale32, colsum, tax, deep_bound[i, dist.shape[0] + 1], reach_deep)
+        _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
+                    origin32, scale32, origin_d32, scale_d32, colsum, tax, bounds[i, 0], bounds[i, 1])
         return
     win = np.empty(4, np.int64)
-    # superficial: radial profile around the contact, in the superficial frame
-    _window(ax, ay, deep_bound[i, dist.shape[0] + 1], prm, win, 0)
+    # couple of the shear about the deep plane along each axis (N mm)
+    mx32, my32 = np.float32(fx * h_eff), np.float32(fy * h_eff)
+    # superficial: around the contact, in the superficial frame
+    _window(ax, ay, bounds[i, 0], prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
     ax32, ay32 = np.float32(ax), np.float32(ay)
     dx2 = np.empty(m, np.float32)
+    mdx = np.empty(m, np.float32)
     for c in range(c0, c1):
         dx = q[c] - ax32
         dx2[c] = dx * dx
+        mdx[c] = mx32 * dx
     for r in range(r0, r1):
         dy = q[r] - ay32
         dy2 = dy * dy
+        mdy = my32 * dy
         wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
-            v = _lookup(lk_sup, t32, dx2[c] + dy2, origin32, scale32)
-            f_sup[r, c] = v
+            rr = dx2[c] + dy2
+            v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
+            v = v0 + (mdx[c] + mdy) * v1
+            v = max(v, _F0)
+            if store:
+                f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[0])
-    # deep: spread profile tilted along the shear, times the lattice pattern
-    _window(cdx, cdy, _deep_reach(deep_bound, dist, i, gamma, logz), prm, win, 0)
+    # deep: the lattice's pressure around the contact's deep-frame position, times the cell pattern
+    _window(cdx, cdy, bounds[i, 1], prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
-    den = max(ft_mag, _TINY)  # shear direction (0 without shear: ft is 0 there, so no 0/0)
-    gx = np.float32(gamma * np.float64(np.float32(fx / den)))
-    gy = np.float32(gamma * np.float64(np.float32(fy / den)))
-    half_logz = np.float32(0.5 * logz)
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
-    ex = np.empty(m, np.float32)
     for c in range(c0, c1):
         dx = q[c] - cdx32
         dx2[c] = dx * dx
-        ex[c] = np.exp(gx * dx - half_logz)
+        mdx[c] = mx32 * dx
     for r in range(r0, r1):
         dy = q[r] - cdy32
         dy2 = dy * dy
-        ey = np.exp(gy * dy - half_logz)
+        mdy = my32 * dy
         wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
-            v = _lookup(lk_deep, t32, dx2[c] + dy2, origin32, scale32)
-            v = (v * (ey * ex[c])) * lattice[r, c]
-            f_deep[r, c] = v
+            rr = dx2[c] + dy2
+            v0, v1 = _lookup(lk_deep, t32, rr, origin_d32, scale_d32)
+            v = v0 + (mdx[c] + mdy) * v1
+            v = max(v, _F0)
+            v = v * lattice[r, c]
+            if store:
+                f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[1])
 
@@ -257,18 +230,30 @@ def _band(a, b, reach, q, x0):
 
 
 @_jit
-def _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice, f_sup, f_deep,
-                origin32, scale32, colsum, tax, reach_sup, reach_deep):
+def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
+                origin32, scale32, origin_d32, scale_d32, colsum, tax, reach_sup, reach_deep):
     """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
     quadrature row is evaluated on the band of columns within reach_sup / reach_deep (mm) of the
     line (beyond, the profile is below WINDOW_EPS of its peak); f_sup, f_deep are left as they
-    were outside the bands."""
+    were outside the bands. Shear across the rod adds the couple response per unit length;
+    along it, its moment is balanced by a linear load gradient along the line; torsion loads
+    the line with traction proportional to the distance along it, whose moments turn the deep
+    line."""
     n, nq = int(prm[P_N]), int(prm[P_NQ])
     m = n * nq
     q = quad[:m]
+    store = f_sup.shape[0] > 0
     yaw = st[S_YAW]
+    fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
+    cdx, cdy = st[S_AX] + st[S_UX], st[S_AY] + st[S_UY]
+    s1, s2 = _chord(cdx, cdy, yaw, prm[P_HALF_PAD])
+    length = max(s2 - s1, 1e-9)
+    line_q = fz / length  # N/mm
     yaw_s = yaw - st[S_ROT]  # rod axis in the superficial frame
     sx, cy = np.float32(-math.sin(yaw_s)), np.float32(math.cos(yaw_s))
+    # couple per unit length of the shear across the rod (along the normal (-sin, cos))
+    f_perp_s = -fx * math.sin(yaw_s) + fy * math.cos(yaw_s)
+    m_s = np.float32(f_perp_s * h_eff / length)
     ax32, ay32 = np.float32(st[S_AX]), np.float32(st[S_AY])
     col = np.empty(m, np.float32)
     for c in range(m):
@@ -278,66 +263,63 @@ def _rod_fields(st, prm, lk_sup, lk_deep, gamma, logz, h_eff, t32, quad, lattice
         wa = np.float64(quad[m + r % nq])
         b0, b1 = _band(np.float64(sx), np.float64(row), reach_sup, q, np.float64(ax32))
         for c in range(b0, b1):
-            v = _lookup(lk_sup, t32, col[c] + row, origin32, scale32)
-            f_sup[r, c] = v
+            d = col[c] + row
+            v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
+            v = v0 + m_s * v1
+            v = max(v, _F0)
+            if store:
+                f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[0])
-    fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
-    cdx, cdy = st[S_AX] + st[S_UX], st[S_AY] + st[S_UY]
-    s1, s2 = _chord(cdx, cdy, yaw, prm[P_HALF_PAD])
-    length = max(s2 - s1, 1e-9)
-    line_q = fz / length  # N/mm
     i_s = (s2**3 - s1**3) / 3.0
-    # torsion: traction T s / I_s across the line; its moment shifts the deep line by T H s / (I_s q)
+    # torsion: traction T s / I_s along the line; its moment shifts the deep line by T H s / (I_s q)
     twist = math.atan(st[S_TORQUE] * h_eff / (i_s * line_q))
     yaw_d = yaw + twist
     ex, ey = np.float32(math.cos(yaw_d)), np.float32(math.sin(yaw_d))
     f_perp = -fx * np.float64(ey) + fy * np.float64(ex)
     f_along = fx * np.float64(ex) + fy * np.float64(ey)
-    sgn = 1.0 if f_perp > 0 else (-1.0 if f_perp < 0 else 0.0)
-    g = np.float32(sgn * gamma)
-    logz32 = np.float32(logz)
+    m_d = np.float32(f_perp * h_eff / length)
     # along-axis shear: its moment is balanced by a linear load gradient along the line
     mid32 = np.float32(0.5 * (s1 + s2))
     beta = np.float32(f_along * h_eff / (line_q * length**3 / 12.0))
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
     px = np.empty(m, np.float32)
-    tx = np.empty(m, np.float32)
     ramp_x = np.empty(m, np.float32)
     for c in range(m):
         dx = q[c] - cdx32
         px[c] = -ey * dx
-        tx[c] = np.exp(g * px[c] - logz32)
         ramp_x[c] = _F1 + beta * (ex * dx - mid32)
     for r in range(m):
         dy = q[r] - cdy32
         py = ex * dy
-        ty = np.exp(g * py)
         ramp_y = beta * (ey * dy)
         wa = np.float64(quad[m + r % nq])
         b0, b1 = _band(-np.float64(ey), np.float64(py), reach_deep, q, np.float64(cdx32))
         for c in range(b0, b1):
-            v = _lookup(lk_deep, t32, px[c] + py, origin32, scale32)
-            v = v * (ty * tx[c])
+            d = px[c] + py
+            v0, v1 = _lookup(lk_deep, t32, d, origin_d32, scale_d32)
+            v = v0 + m_d * v1
             ramp = ramp_x[c] + ramp_y
             if ramp < _F0:
                 ramp = _F0
-            v = (v * ramp) * lattice[r, c]
-            f_deep[r, c] = v
+            v = v * ramp
+            v = max(v, _F0)
+            v = v * lattice[r, c]
+            if store:
+                f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[1])
 
 
 @_jit
-def maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, cache_serial, cache_maps, maps):
+def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cache_serial, cache_maps, maps):
     """Taxel-mean pressure maps (N, 2, n, n) of N states into maps (zero when unloaded). A
     state whose config serial (>= 0) equals the previous one's (or, for the first,
     cache_serial[0]) repeats its loading configuration and reuses its maps (holds), unless
     prm[P_REUSE] is 0. Updates the cache (the last state's serial and maps). Returns how many
     states' maps were computed."""
-    m = quad.shape[0] - int(prm[P_NQ])
-    f_sup = np.empty((m, m), np.float32)
-    f_deep = np.empty((m, m), np.float32)
+    f_sup = np.empty((0, 0), np.float32)  # fields are not kept: taxel means only
+    f_deep = np.empty((0, 0), np.float32)
     reuse = prm[P_REUSE] != 0.0
     prev = cache_serial[0]
     computed = 0
@@ -350,7 +332,7 @@ def maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, 
                 maps[k] = maps[k - 1]
         else:
             if states[k, S_FZ] > 0.0:
-                frame_fields(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, f_sup, f_deep, maps[k])
+                frame_fields(states[k], prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, maps[k])
             else:
                 maps[k] = 0.0
             computed += 1
@@ -363,14 +345,14 @@ def maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, 
 
 
 @_jit
-def fields_kernel(states, prm, lk, tilt, deep_bound, dist, quad, lattice, out_sup, out_deep):
+def fields_kernel(states, prm, lk, rows, bounds, dist, quad, lattice, out_sup, out_deep):
     """Pressure (kPa, float32) at the quadrature points of N states into out_sup, out_deep
     (N, n*q, n*q), zero-initialised by the caller; only each layer's window is written."""
     n = int(prm[P_N])
     tax = np.empty((2, n, n))
     for k in range(states.shape[0]):
         if states[k, S_FZ] > 0.0:
-            frame_fields(states[k], prm, lk, tilt, deep_bound, dist, quad, lattice, out_sup[k], out_deep[k], tax)
+            frame_fields(states[k], prm, lk, rows, bounds, dist, quad, lattice, out_sup[k], out_deep[k], tax)
 
 
 # ---------------------------------------------------------------------------------- transduction
@@ -520,7 +502,7 @@ def column_volts_batch(g, prm, out):
 
 # ---------------------------------------------------------------------------------- frames
 @_jit
-def frames_kernel(states, serial, t_s, rng, prm, lk, tilt, deep_bound, dist, quad, lattice,
+def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, lattice,
                   row_offsets, gains, baseline, play, lag, last_maps, memory, cache_serial, cache_maps,
                   maps, counts):
     """N frame pairs: counts (2, N, n, n) uint16 for states (N, N_STATE) completed at t_s (N,).
@@ -541,7 +523,7 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, tilt, deep_bound, dist, qua
     if n_all == 0:
         return True, 0
     n = int(prm[P_N])
-    computed = maps_kernel(states, serial, prm, lk, tilt, deep_bound, dist, quad, lattice, cache_serial,
+    computed = maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cache_serial,
                            cache_maps, maps)
     sj = prm[P_JITTER_S]
     w_h, c_cr, creep_s = prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S]

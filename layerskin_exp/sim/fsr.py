@@ -3,7 +3,11 @@
 Conductance rises as a power of pressure (carbon-particle contacts percolating through the
 Velostat) and saturates as the contact spots merge:
     G(p) = gain_ij (G_floor + G_sat x / (1 + x)),  x = (p / p_sat)^n.
-The gain of each taxel is lognormal (fixed per seed): sheet thickness and lamination vary.
+The gain of each taxel is lognormal (fixed per seed) with two parts (`taxel_gains`): a smooth
+field over the sheet (Velostat thickness and carbon loading, lamination pressure: they vary
+over millimetres, so neighbouring taxels share them) and an independent part per taxel (the
+contact resistance between each electrode crossing and the Velostat). A contact loads many
+taxels at once, so only the smooth part survives in its summed response.
 Two slow effects of the polymer come first, on the pressure the Velostat feels:
 - hysteresis as a rate-independent play operator of relative width w: loading reads
   p (1 - w), unloading holds the value until p (1 + w) falls below it;
@@ -18,7 +22,6 @@ from __future__ import annotations
 import numpy as np
 
 from layerskin_exp.sim import frame_kernels as fk
-from layerskin_exp.sim.clocks import lognormal_unit_mean
 from layerskin_exp.sim.config import FSRConfig
 
 
@@ -27,7 +30,7 @@ class FSRLayer:
 
     def __init__(self, cfg: FSRConfig, shape: tuple[int, int], rng: np.random.Generator):
         self.cfg = cfg
-        self.gain = lognormal_unit_mean(rng, cfg.gain_cv, shape)
+        self.gain = taxel_gains(rng, cfg, shape)
         self.g_sat_s = 1.0 / (cfg.saturated_kohm * 1e3)
         self.g_floor_s = 1.0 / (cfg.floor_mohm * 1e6)
         self.play = np.zeros(shape)
@@ -45,6 +48,28 @@ class FSRLayer:
         previous sample (the first relative to the last call).
         """
         return advance_layers((self,), pressure_kpa[:, None], dt_s)[:, 0]
+
+
+def taxel_gains(rng: np.random.Generator, cfg: FSRConfig, shape: tuple[int, int],
+                pitch_mm: float = 1.5) -> np.ndarray:
+    """Mean-one lognormal gains (shape): exp(s_sheet G + s_taxel e - (s_sheet^2 + s_taxel^2) / 2)
+    with G a unit-variance Gaussian field of correlation length `sheet_correlation_mm` (white
+    noise smoothed by a Gaussian kernel, drawn on a padded grid so the edges are like the
+    middle) and e independent per taxel; s = sqrt(log(1 + cv^2)) for each part's CV."""
+    from scipy.ndimage import gaussian_filter
+
+    s_sheet = np.sqrt(np.log1p(cfg.sheet_gain_cv**2))
+    s_taxel = np.sqrt(np.log1p(cfg.gain_cv**2))
+    field = np.zeros(shape)
+    if s_sheet > 0:
+        sigma = cfg.sheet_correlation_mm / pitch_mm  # kernel width in taxels
+        pad = int(np.ceil(3 * sigma))
+        white = rng.standard_normal((shape[0] + 2 * pad, shape[1] + 2 * pad))
+        smooth = gaussian_filter(white, sigma, mode="wrap")[pad:pad + shape[0], pad:pad + shape[1]]
+        # a Gaussian kernel of width sigma leaves white noise with variance 1 / (4 pi sigma^2)
+        field = smooth * np.sqrt(4 * np.pi * sigma * sigma) if sigma > 0 else smooth
+    log_gain = s_sheet * field + s_taxel * rng.standard_normal(shape) - 0.5 * (s_sheet**2 + s_taxel**2)
+    return np.exp(log_gain)
 
 
 def conductance_layers(layers, pressure_kpa: np.ndarray, gain: np.ndarray | None = None) -> np.ndarray:

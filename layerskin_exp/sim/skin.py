@@ -10,12 +10,14 @@ Mechanics (`step`, scalar, ~1 kHz). The realised indentation comes from the cont
 the series support compliance; the spacer's shear stiffness (rising with compression) loads
 the stick-slip friction at the cover, which gives the tangential force and torque.
 
-Pressure maps (`pressure_maps`, vectorised). Superficial: the contact table's profile around
-the contact point, in the superficial frame. Deep: the profile spread through the spacer
-around the contact's deep-frame position, tilted so that the deep normal pressure balances
-the moment of the shear force about the deep plane (F_t H = F_z shift, H the compressed stack
-height), times the lattice's cell pattern. For the rod, torsion loads the line with traction
-proportional to the distance along it, whose local moments rotate the deep line.
+Pressure maps (`pressure_maps`, vectorised). Both come from the laminate-on-lattice solution
+(`contact`, `laminate`). Superficial: the contact pressure under the cover around the contact
+point, in the superficial frame. Deep: the lattice's pressure around the contact's deep-frame
+position, times the lattice's cell pattern. The shear's couple F_t H about the deep plane (H
+the height of the cover above it) adds the laminate's first-order response to both: the sheet
+tilts, the lattice takes most of the moment and the indenter the rest. Neither FSR reads
+tension. For the rod, torsion loads the line with traction proportional to the distance along
+it, whose local moments rotate the deep line.
 Each taxel integrates its electrode footprint with Gauss points.
 
 Frames (`frames`, or `frames_batch` on arrays): row-sequential sampling instants, FSR
@@ -45,7 +47,7 @@ from layerskin_exp.sim.spacer import SpacerLaw, hex_cell_pattern
 
 INDENTERS = ("hemisphere", "rod")
 # The hemisphere's fields are evaluated in a window around the contact: outside it each layer's
-# profile (times the deep layer's largest tilt factor) is below this fraction of its peak.
+# profile and its couple response are below this fraction of their peaks.
 WINDOW_EPS = fk.WINDOW_EPS
 
 
@@ -103,7 +105,7 @@ _KERNELS_LOADED = False  # the frame kernels are loaded once per process (SkinMo
 
 def tables_for(sim: SimConfig, kind: str) -> ContactTables:
     """Contact tables for a design, computed once per distinct (spacer, cover, contact) config."""
-    key = repr((sim.spacer, sim.cover, sim.contact, kind))
+    key = repr((sim.spacer, sim.cover, sim.sheet, sim.fsr.layer_thickness_mm, sim.contact, kind))
     if key not in _TABLE_CACHE:
         if len(_TABLE_CACHE) > 16:
             _TABLE_CACHE.clear()
@@ -176,7 +178,7 @@ class SkinModel:
         self._last_maps = np.zeros((2, n, n))  # pressure at the last frame
         self._memory = np.zeros(2)  # [time of the last frame, whether there was one]
         self._params = self._kernel_params()
-        self._tables = (self._params, self._lk, self._tilt_table, self._deep_bound, self._dist, self._quad32,
+        self._tables = (self._params, self._lk, self._rows, self._bounds, self._dist, self._quad32,
                         self._lattice32)
         self.maps_computed = 0  # states whose pressure maps were computed (not reused in a hold)
         # Idle sheet: no pressure at the last frame and both FSR memories exactly zero. Unloaded
@@ -233,51 +235,71 @@ class SkinModel:
 
     # ------------------------------------------------------------------ pressure maps
     def stack_height_mm(self, delta_mm):
-        """Height of the cover surface above the deep sensing plane at the contact (mm)."""
-        s = self.sim
-        return s.cover.thickness + s.fsr.layer_thickness_mm + s.spacer.thickness - _clip(
-            delta_mm, 0.0, 0.95 * s.spacer.thickness)
+        """Height of the cover surface above the deep sensing plane at the contact (mm): the
+        stack less the lattice's compression under the contact at indentation delta_mm."""
+        return np.interp(delta_mm, self.tab.delta_mm, self.tab.height_mm)
 
     def _build_lookups(self) -> None:
         """Resample the profile tables for nearest-bin lookups: in r^2 (hemisphere, no sqrt per
         point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
         far below the profile's own scale. Stored as (value, next row - value) float32 pairs per
-        pair of indentation rows, with one guard column of zeros: `_lk` (2, n_delta - 1,
-        n_fine, 2) [superficial, deep]. Also the window bounds of each pair of rows
-        (`_deep_bound`, see frame_kernels) and the tilt tables (`_tilt_table`)."""
+        pair of indentation rows, with one guard column of zeros, profile and couple response
+        side by side: `_lk` (2, n_delta - 1, n_fine, 4) [superficial, deep]. Also
+        the window reach of each pair of rows (`_bounds`) and the stack height per row (`_rows`),
+        see frame_kernels."""
         tab = self.tab
         if self.kind == "hemisphere":
+            # the deep profile is broad and smooth, the superficial one narrow (the contact and
+            # the cover's spread) with steep edges: the same bins, 16 times finer in r^2 for it
             r2_max = float(tab.dist_mm[-1]) ** 2
-            step = 0.01  # mm^2
-            grid = np.arange(0.0, r2_max, step)
-            at = np.sqrt(grid)
-            self._lk_origin, self._lk_scale = 0.0, 1.0 / step
-        else:
+            step_deep = 0.02  # mm^2
+            grid = np.arange(0.0, r2_max, step_deep)
+            at_layer = (np.sqrt(grid / 16.0), np.sqrt(grid))
+            self._lk_origin, self._lk_scale, self._lk_scale_deep = 0.0, 16.0 / step_deep, 1.0 / step_deep
+            self._lk_origin_deep = 0.0
+        else:  # signed distance to the line; the superficial table spans half the deep one, twice as fine
             step = 0.005  # mm
             grid = np.arange(tab.dist_mm[0], tab.dist_mm[-1], step)
-            at = grid
-            self._lk_origin, self._lk_scale = float(tab.dist_mm[0]), 1.0 / step
+            at_layer = (0.5 * grid, grid)
+            self._lk_origin, self._lk_scale = 0.5 * float(tab.dist_mm[0]), 2.0 / step
+            self._lk_origin_deep, self._lk_scale_deep = float(tab.dist_mm[0]), 1.0 / step
         n_fine = len(grid) + 1
 
-        def pairs(table):
+        def resample(table, at, per_r=False):
             fine = np.zeros((table.shape[0], n_fine), dtype=np.float32)
             for k in range(table.shape[0]):
-                fine[k, :-1] = np.interp(at, tab.dist_mm, table[k])
-            out = np.empty((table.shape[0] - 1, n_fine, 2), dtype=np.float32)
-            out[..., 0] = fine[:-1]
-            out[..., 1] = fine[1:] - fine[:-1]
+                v = np.interp(at, tab.dist_mm, table[k])
+                if per_r:  # the cos(phi) mode's amplitude / r (it vanishes linearly on the axis)
+                    v = v / np.maximum(at, 1e-9)
+                    v[at <= 0.0] = v[at > 0.0][0] if (at > 0.0).any() else 0.0
+                fine[k, :-1] = v
+            return fine
+
+        def quads(profile, couple, at, per_r):
+            a, b = resample(profile, at), resample(couple, at, per_r)
+            out = np.empty((a.shape[0] - 1, n_fine, 4), dtype=np.float32)
+            out[..., 0], out[..., 1] = a[:-1], a[1:] - a[:-1]
+            out[..., 2], out[..., 3] = b[:-1], b[1:] - b[:-1]
             return out
 
-        self._lk = np.ascontiguousarray(np.stack([pairs(tab.superficial_kpa), pairs(tab.deep_kpa)]))
-        # Per pair of rows (k, k+1): the larger magnitude on the coarse grid, and (hemisphere) the
-        # radius beyond which the superficial profile stays below WINDOW_EPS of its peak.
-        pair_max_sup = np.maximum(np.abs(tab.superficial_kpa[:-1]), np.abs(tab.superficial_kpa[1:]))
-        pair_max_deep = np.maximum(np.abs(tab.deep_kpa[:-1]), np.abs(tab.deep_kpa[1:]))
-        reach_sup = self._window_reach(pair_max_sup, np.ones(1))
-        thr_deep = WINDOW_EPS * pair_max_deep.max(axis=1)
-        self._deep_bound = np.ascontiguousarray(np.column_stack([pair_max_deep, thr_deep, reach_sup]))
+        hemi = self.kind == "hemisphere"
+        self._lk = np.ascontiguousarray(np.stack([
+            quads(tab.superficial_kpa, tab.superficial_couple_kpa, at_layer[0], hemi),
+            quads(tab.deep_kpa, tab.deep_couple_kpa, at_layer[1], hemi)]))
+        # Per pair of rows (k, k+1): how far from the contact either the profile or its couple
+        # response exceeds WINDOW_EPS of its own peak, for each layer.
+
+        def reach(*tables):
+            out = np.zeros(len(tab.delta_mm) - 1)
+            for table in tables:
+                pair_max = np.maximum(np.abs(table[:-1]), np.abs(table[1:]))
+                out = np.maximum(out, self._window_reach(pair_max, np.ones(1)))
+            return out
+
+        self._bounds = np.ascontiguousarray(np.column_stack([
+            reach(tab.superficial_kpa, tab.superficial_couple_kpa), reach(tab.deep_kpa, tab.deep_couple_kpa)]))
         self._dist = np.ascontiguousarray(tab.dist_mm, dtype=float)
-        self._tilt_table = np.ascontiguousarray(np.stack([tab.tilt_gamma, tab.tilt_logz], axis=-1), dtype=float)
+        self._rows = np.ascontiguousarray(tab.height_mm.reshape(-1, 1), dtype=float)
 
     def _window_reach(self, pair_max: np.ndarray, factor: np.ndarray) -> np.ndarray:
         """Radius (mm) beyond which pair_max (M, n_dist) x factor (M or 1, n_dist) stays below
@@ -298,11 +320,8 @@ class SkinModel:
         prm[fk.P_N], prm[fk.P_NQ], prm[fk.P_ROD] = skin.n_taxels, self._nq, float(self.kind == "rod")
         prm[fk.P_X0], prm[fk.P_PITCH], prm[fk.P_HALF_EL] = self._centres[0], skin.pitch_mm, self._half_electrode
         prm[fk.P_DDELTA], prm[fk.P_XMAX_DELTA] = tab.d_delta, len(tab.delta_mm) - 1.000001
-        prm[fk.P_DSHIFT] = tab.tilt_shift_mm[1] - tab.tilt_shift_mm[0]
-        prm[fk.P_XMAX_SHIFT] = len(tab.tilt_shift_mm) - 1.000001
-        prm[fk.P_H0] = s.cover.thickness + s.fsr.layer_thickness_mm + s.spacer.thickness
-        prm[fk.P_HCLIP] = 0.95 * s.spacer.thickness
         prm[fk.P_LK_ORIGIN], prm[fk.P_LK_SCALE] = self._lk_origin, self._lk_scale
+        prm[fk.P_LK_SCALE_DEEP], prm[fk.P_LK_ORIGIN_DEEP] = self._lk_scale_deep, self._lk_origin_deep
         prm[fk.P_HALF_PAD] = self._half
         prm[fk.P_PERIOD] = skin.frame_period_ms * 1e-3
         prm[fk.P_REUSE] = 1.0

@@ -1,8 +1,8 @@
-"""The lattice spacer: its compression law, shear stiffness, load spreading and cell pattern.
+"""The lattice spacer: its compression law, shear stiffness and cell pattern.
 
-The spacer is modelled as a nonlinear Winkler foundation (each column carries the pressure of
-its own compression) whose walls bulge into the voids and touch at the densification strain
-e_d = 1 - solid fraction; beyond that the column is squeezed solid silicone.
+The spacer is the nonlinear foundation under the superficial laminate (`laminate`): each column
+carries the pressure of its own compression, the walls bulge into the voids and touch at the
+densification strain e_d = 1 - solid fraction; beyond that the column is squeezed solid silicone.
 Its transverse shear modulus rises from the open lattice's to the solid's as the walls close.
 Lengths mm, pressures kPa, stiffness per area kPa/mm.
 """
@@ -67,15 +67,6 @@ class SpacerLaw:
         closure = np.clip(e / self.e_d, 0.0, 1.0) ** 2
         g = self.g_open_kpa + (self.g_solid_kpa - self.g_open_kpa) * closure
         return g / (self.h_mm * (1.0 - e))
-
-    def pasternak_length_mm(self) -> float:
-        """Shear-coupling length sqrt(G_p / k) of the layer (Vlasov: G_p = G h / 3, k = E / h)."""
-        return self.h_mm * float(np.sqrt(self.g_open_kpa / (3.0 * self.e_lat_kpa)))
-
-    def spread_sigma_mm(self, indentation_mm):
-        """Width (Gaussian sigma) of the load spreading through the compressed spacer."""
-        h_now = self.h_mm - np.clip(indentation_mm, 0.0, self.e_d * self.h_mm)
-        return self.cfg.spread_ratio * h_now
 
 
 def hex_cell_pattern(x_mm: np.ndarray, y_mm: np.ndarray, cell_mm: float, contrast: float) -> np.ndarray:

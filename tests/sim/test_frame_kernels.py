@@ -9,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.skin_naive import naive_frames
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.sim.config import FSRConfig, ReadoutConfig, SimConfig
 from layerskin_exp.sim.fsr import FSRLayer
 from layerskin_exp.sim.readout import MatrixReadout
+from layerskin_exp.sim.reference import ReferenceSkin
 from layerskin_exp.sim.skin import SkinModel, stack_states
 from tests.sim.test_skin_readout import _nodal_reference
 
@@ -21,7 +21,7 @@ SKIN = SkinConfig()
 
 
 def _press_slide(m, n_steps=400, xy=(1.0, -2.0)):
-    """Press to 2.2 mm, then slide +x (shear loads the deep layer's tilt)."""
+    """Press to 2.2 mm, then slide +x (the shear's couple loads both layers)."""
     return [m.step(k * 1e-3, np.array([xy[0] + 0.004 * max(k - 150, 0), xy[1], -2.2 * min(k / 150, 1.0)]))
             for k in range(n_steps)]
 
@@ -35,22 +35,25 @@ def _rod_twist(m, n_steps=600):
     return out
 
 
-def test_frames_match_the_naive_per_taxel_pipeline():
-    """Hemisphere press and slide: the kernel against benchmarks.skin_naive (scalar Python per
-    taxel and quadrature point, coarse-table interpolation, per-row 32-node solves). Without
-    noise and jitter the counts agree to the last count's rounding."""
+def test_frames_match_the_reference_pipeline_on_a_slide():
+    """Hemisphere press and slide, frames one at a time: the kernel against the numpy reference
+    (sim.reference). Without noise and jitter the counts agree to within 2 counts: on the
+    contact's steep rim (the indenter's edge through the 0.2 mm cover) the kernel's nearest bin
+    in r^2 and the reference's linear interpolation differ by ~0.1 % of the pressure."""
     sim = SimConfig(seed=1, readout=ReadoutConfig(noise_counts=0.0, scan_jitter_ms=0.0))
     fast = SkinModel(sim, SKIN, "hemisphere", np.random.default_rng(1))
-    slow = SkinModel(sim, SKIN, "hemisphere", np.random.default_rng(1))  # same sheet (gains, offsets)
+    ref = ReferenceSkin(fast)
+    recs = fast.step_many(np.arange(400) * 1e-3, np.array(
+        [[1.0 + 0.004 * max(k - 150, 0), -2.0, -2.2 * min(k / 150, 1.0)] for k in range(400)]), np.zeros(400))
     idx = [100, 150, 250, 300, 399]
-    st_fast = _press_slide(fast)
-    st_slow = _press_slide(slow)
-    t = np.array([st_fast[i].t_s for i in idx])
-    got = fast.frames([st_fast[i] for i in idx], t)
-    want = naive_frames(slow, [st_slow[i] for i in idx], t)
-    for g, w in zip(got, want, strict=True):
-        d = np.abs(g.astype(int) - w.astype(int))
-        assert d.max() <= 1 and np.mean(d > 0) < 0.03
+    t = recs[idx, 0]
+    got = [fast.frames_of_steps(recs[i:i + 1], t[j:j + 1]) for j, i in enumerate(idx)]
+    want = [ref.frames(recs[i:i + 1], t[j:j + 1]) for j, i in enumerate(idx)]
+    for layer in range(2):
+        g = np.concatenate([x[layer] for x in got]).astype(int)
+        w = np.concatenate([x[layer] for x in want]).astype(int)
+        d = np.abs(g - w)
+        assert d.max() <= 2 and np.mean(d > 0) < 0.03
         assert w.max() > 1000  # loaded frames are compared
 
 

@@ -87,14 +87,16 @@ def test_translation_slips_and_the_camera_sees_the_superficial_layer_move():
 
 
 def test_torsion_slips_and_rotates_the_rod_in_the_skin_frame():
+    """At g = 6 mm the cover sticks until the spacer's torsion reaches mu Fz r (about 6 deg of
+    twist here), then slips and sticks again: 16 deg of rotation give several slips."""
     rig, world, _ = _grip(6.0)
     p0 = rig.arm.tcp_pose6()
     yaw0 = world.state.indenter_yaw_rad
     target = p0.copy()
-    target[3:] = (Rotation.from_rotvec(p0[3:]) * Rotation.from_rotvec([0.0, np.radians(8.0), 0.0])).as_rotvec()
+    target[3:] = (Rotation.from_rotvec(p0[3:]) * Rotation.from_rotvec([0.0, np.radians(16.0), 0.0])).as_rotvec()
     onsets = _run(rig, world, target, 0.01, np.radians(4.0))
     assert onsets >= 2
-    assert abs(world.state.indenter_yaw_rad - yaw0) == pytest.approx(np.radians(8.0), abs=1e-6)
+    assert abs(world.state.indenter_yaw_rad - yaw0) == pytest.approx(np.radians(16.0), abs=1e-6)
     assert np.allclose(world.scene.indenter_pose()[0][:2], 0.0, atol=1e-6)  # turning about the skin normal
 
 

@@ -1,11 +1,11 @@
-"""The fast frame pipeline against the previous full-grid implementation (same physics).
+"""The compiled frame pipeline against the package's numpy reference (`sim.reference`).
 
-`benchmarks.skin_naive.previous_model_class()` keeps the previous vectorised pipeline verbatim
-(every frame on the full quadrature grid, one layer and one crosstalk solve at a time). Both
-models share the seed, so their gains, offsets and scan jitter are the same draws; with the
-read noise off, the pressure maps must agree to float32 round-off plus what the hemisphere
-windows leave out (below WINDOW_EPS of the profile's peak), and the counts to the rounding of
-the last count.
+`ReferenceSkin` computes the same physics the plain way: both layers on the whole quadrature
+grid with linear interpolation on the contact tables' own grid, the FSR memories row by row,
+and the full 32-node nodal solve per driven row. It shares the model's sheet (gains, offsets);
+with the read noise and scan jitter off the pressure maps must agree to what the kernels'
+nearest-bin lookups and windows (below WINDOW_EPS of the profile's peak) change, and the
+counts to within a few counts (at the contact's steep rim).
 """
 
 from __future__ import annotations
@@ -15,20 +15,25 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.skin_naive import previous_model_class
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.sim.config import ReadoutConfig, SimConfig
-from layerskin_exp.sim.skin import WINDOW_EPS, SkinModel
+from layerskin_exp.sim.reference import ReferenceSkin
+from layerskin_exp.sim.skin import SkinModel
 
 SKIN = SkinConfig()
 PERIOD_S = SKIN.frame_period_ms * 1e-3
 
 
-def _pair(kind, k_support=None, **readout):
-    sim = SimConfig(seed=5, readout=ReadoutConfig(noise_counts=0.0, **readout))
-    fast = SkinModel(sim, SKIN, kind, np.random.default_rng(5), support_stiffness_n_per_mm=k_support)
-    ref = previous_model_class()(sim, SKIN, kind, np.random.default_rng(5), support_stiffness_n_per_mm=k_support)
-    return fast, ref
+def _model(kind, k_support=None, **readout):
+    sim = SimConfig(seed=5, readout=ReadoutConfig(noise_counts=0.0, scan_jitter_ms=0.0, **readout))
+    return SkinModel(sim, SKIN, kind, np.random.default_rng(5), support_stiffness_n_per_mm=k_support)
+
+
+def _records(m, states):
+    """The step records (SkinModel.step_many's rows) of MechStates."""
+    return np.array([[s.t_s, *s.force_n, s.torque_z_nmm, s.indentation_mm, *s.contact_xy_mm, s.indenter_yaw_rad,
+                      *s.surface_shift_mm, s.surface_rotation_rad, float(s.slipping), *s.slip_mm, s.slip_rad,
+                      s.config_key[1]] for s in states])
 
 
 def _press(m):
@@ -62,47 +67,42 @@ CASES = {"press": ("hemisphere", None, _press), "slide": ("hemisphere", None, _s
 
 
 @pytest.mark.parametrize("case", list(CASES))
-def test_pressure_maps_match_the_previous_pipeline(case):
+def test_pressure_maps_match_the_reference(case):
     kind, k_support, drive = CASES[case]
-    fast, ref = _pair(kind, k_support)
-    states = drive(fast)
-    ref_states = drive(ref)
-    for a, b in zip(states, ref_states, strict=True):  # the mechanics are shared
-        np.testing.assert_array_equal(a.force_n, b.force_n)
-    pick = states[::7]
-    for lo in range(0, len(pick), 64):
-        got = fast.pressure_maps(pick[lo:lo + 64])
-        want = ref.pressure_maps(pick[lo:lo + 64])
-        for g, w in zip(got, want, strict=True):
-            assert g.shape == w.shape == (len(pick[lo:lo + 64]), 16, 16)
-            scale = max(float(np.abs(w).max()), 1.0)
-            np.testing.assert_allclose(g, w, rtol=1e-4, atol=max(1e-6, 10 * WINDOW_EPS) * scale)
-    # the comparison covers loaded frames, not just zeros
-    assert max(float(ref.pressure_maps([s])[1].max()) for s in pick[::20]) > 50.0
+    fast = _model(kind, k_support)
+    ref = ReferenceSkin(fast)
+    pick = drive(fast)[::37]
+    got = np.stack(fast.pressure_maps(pick), axis=1)
+    want = ref.maps(_records(fast, pick))
+    scale = float(np.abs(want).max())
+    # nearest-bin lookups against linear interpolation: up to ~2 % of the local value in the
+    # tail of the contact's rim, plus what the windows leave out
+    np.testing.assert_allclose(got, want, rtol=2e-2, atol=2e-4 * scale)
+    assert want[:, 1].max() > 50.0  # loaded frames are compared, not just zeros
 
 
-@pytest.mark.parametrize("case", list(CASES))
-@pytest.mark.parametrize("crosstalk", [True, False])
-def test_frames_match_the_previous_pipeline(case, crosstalk):
+@pytest.mark.parametrize("case,crosstalk", [("press", True), ("slide", True), ("rod_torsion", True),
+                                            ("slide", False)])
+def test_frames_match_the_reference(case, crosstalk):
     kind, k_support, drive = CASES[case]
-    fast, ref = _pair(kind, k_support, crosstalk=crosstalk)
-    states = drive(fast)
-    pick = states[::2]  # ~ one frame per 2.36 ms scan
+    fast = _model(kind, k_support, crosstalk=crosstalk)
+    ref = ReferenceSkin(fast)
+    pick = drive(fast)[::23]
     t = np.arange(len(pick)) * PERIOD_S + 1e-4
-    sizes = [1, 32, 5, 32, 32, 17, 64]  # batches as the world sends them, including singles
+    sizes = [1, 32, 5, 17]  # batches as the world sends them, including singles
     lo, got, want = 0, [], []
     while lo < len(pick):
         n = sizes[len(got) % len(sizes)]
         got.append(fast.frames(pick[lo:lo + n], t[lo:lo + n]))
-        want.append(ref.frames(pick[lo:lo + n], t[lo:lo + n]))
+        want.append(ref.frames(_records(fast, pick[lo:lo + n]), t[lo:lo + n]))
         lo += n
     for layer in range(2):
         g = np.concatenate([x[layer] for x in got]).astype(int)
         w = np.concatenate([x[layer] for x in want]).astype(int)
-        assert g.dtype == int and g.shape == w.shape == (len(pick), 16, 16)
-        assert np.abs(g - w).max() <= 1  # only the last count's rounding may differ
-        assert np.mean(g != w) < 0.01
-        assert w.max() > 1000  # loaded frames are compared
+        assert g.shape == w.shape == (len(pick), 16, 16)
+        assert np.abs(g - w).max() <= 3
+        assert np.mean(np.abs(g - w) > 1) < 0.02 and np.mean(g != w) < 0.15  # float32 fields: rounding
+    assert max(int(x[0].max()) for x in want) > 1000  # loaded frames are compared
 
 
 def test_frames_with_noise_are_deterministic_and_noise_has_its_rms():

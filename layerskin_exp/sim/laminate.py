@@ -1,0 +1,291 @@
+"""The superficial laminate on the lattice: a plate on a nonlinear foundation, pressed by a
+rigid indenter through the cover.
+
+The cover and the superficial FSR sheet (two copper-on-polyimide films with the Velostat
+between them) are a thin plate of bending rigidity D. It rests on the spacer lattice, whose
+columns carry the pressure of their own compression p_f(w) (`spacer.SpacerLaw`, bonded to the
+sheet, so it also pulls back where the sheet lifts) and whose walls couple neighbouring
+columns in shear (Pasternak/Vlasov, G_p = G_lattice h / 3). The indenter presses the plate
+through the cover, a thin bonded rubber layer of stiffness k_c per area. In the plate's
+deflection w (mm, positive down, = the lattice's compression):
+
+    D lap^2 w - G_p lap w + p_f(w) = p_c,   p_c = k_c max(delta - z_ind - w, 0)
+
+with delta the indenter's depth below the undeformed cover and z_ind(r) the height of its
+surface above its lowest point. The plate spreads the load: the contact and the loaded
+region grow with the load, and the lattice under the contact densifies only once the sheet's
+bending can no longer hand the load outwards. Beyond the pad the plate ends (a free edge).
+
+Two geometries, both on a uniform grid from the contact outwards:
+- "hemisphere": axisymmetric about the contact (the square pad replaced by the disc of the same
+  area), lap w = (1/r) (r w')';
+- "rod": a line contact, cylindrical bending across the rod axis, per unit length along it.
+
+This module is the readable reference: it is run once per design to build the contact tables
+(`contact.build_tables`), so it stays in numpy/scipy. Lengths mm, pressures N/mm^2 inside the
+solver (kPa at its interface), forces N.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from layerskin_exp.sim.spacer import SpacerLaw
+
+KPA = 1e-3  # N/mm^2 per kPa
+
+
+def laplacian(kind: str, n: int, step_mm: float) -> sp.csr_matrix:
+    """Second-order finite-difference Laplacian on n points from the contact outwards.
+
+    hemisphere: r_j = j step, lap w = (1/r)(r w')' with the symmetry condition at r = 0
+    (lap w = 2 w'' there); rod: d_j = (j - (n-1)/2) step, lap w = w''. The last point(s) carry
+    w = 0 far beyond the pad (the plate there is cut free by its zero rigidity)."""
+    h2 = step_mm * step_mm
+    main = np.empty(n)
+    lo = np.empty(n - 1)
+    up = np.empty(n - 1)
+    if kind == "hemisphere":
+        main[0], up[0] = -4.0 / h2, 4.0 / h2
+        j = np.arange(1, n)
+        r = j * step_mm
+        rp, rm = r + 0.5 * step_mm, r - 0.5 * step_mm
+        main[1:] = -(rp + rm) / (r * h2)
+        lo[:] = rm / (r * h2)
+        up[1:] = (rp / (r * h2))[:-1]
+    else:
+        main[:], lo[:], up[:] = -2.0 / h2, 1.0 / h2, 1.0 / h2
+    return sp.diags([lo, main, up], [-1, 0, 1], format="csr")
+
+
+def laplacian_m1(n: int, step_mm: float) -> sp.csr_matrix:
+    """Laplacian of the first angular mode w(r) cos(phi) on r_j = j step: (1/r)(r w')' - w / r^2,
+    with w(0) = 0 (the mode vanishes on the axis; row 0 only keeps the system regular)."""
+    h2 = step_mm * step_mm
+    r = np.arange(n) * step_mm
+    main = np.empty(n)
+    lo = np.zeros(n - 1)
+    up = np.zeros(n - 1)
+    main[0] = 1.0
+    rj = r[1:]
+    rp, rm = rj + 0.5 * step_mm, rj - 0.5 * step_mm
+    main[1:] = -(rp + rm) / (rj * h2) - 1.0 / rj**2
+    lo[1:] = (rm / (rj * h2))[1:]  # the coupling to w_0 = 0 is dropped
+    up[1:] = (rp / (rj * h2))[:-1]
+    return sp.diags([lo, main, up], [-1, 0, 1], format="csr")
+
+
+@dataclass
+class LaminateSolution:
+    """The loaded laminate at one indentation: deflection, contact and foundation pressure."""
+
+    delta_mm: float
+    w_mm: np.ndarray  # (n,) deflection of the sheet = compression of the lattice
+    contact_kpa: np.ndarray  # (n,) pressure between indenter and cover
+    foundation_kpa: np.ndarray  # (n,) pressure the lattice carries (negative: pulling the sheet)
+    iterations: int
+
+
+@dataclass
+class CoupleResponse:
+    """First-order response of the loaded laminate to the shear's moment, per unit couple.
+
+    The traction on the cover (resultant F_t, taken proportional to the contact pressure, as
+    when the contact slides) acts at height H above the deep sensing plane: about that plane it
+    is a couple F_t H, which the sheet hands to the lattice. The sheet's antisymmetric
+    deflection w1 cos(phi) (hemisphere; odd across the rod) changes the lattice pressure by
+    k_f(r) w1 (k_f its tangent stiffness at the loaded state) and the contact pressure by
+    -k_c w1 where the cover touches the indenter (the indenter is held by the stage and takes
+    part of the moment). Amplitudes are per N mm of couple (hemisphere) or per N mm/mm (rod).
+    """
+
+    w_mm: np.ndarray  # (n,) deflection amplitude, mm per N mm
+    contact_kpa: np.ndarray  # (n,) contact pressure amplitude
+    foundation_kpa: np.ndarray  # (n,) lattice pressure amplitude
+
+
+class PlateOnFoundation:
+    """Plate (the cover + superficial sheet) on the lattice foundation under a rigid indenter.
+
+    kind: "hemisphere" (axisymmetric) or "rod" (line contact). `rigidity_n_mm` D, `pasternak_n_per_mm`
+    G_p, `cover_n_per_mm3` k_c; `law` the lattice's compression law; `pad_radius_mm` where the
+    plate ends (hemisphere: radius of the disc of the pad's area; rod: half the pad width).
+    """
+
+    def __init__(self, kind: str, law: SpacerLaw, rigidity_n_mm: float, pasternak_n_per_mm: float,
+                 cover_n_per_mm3: float, indenter_radius_mm: float, pad_radius_mm: float,
+                 step_mm: float = 0.05):
+        if kind not in ("hemisphere", "rod"):
+            raise ValueError(f"kind={kind!r}: must be 'hemisphere' or 'rod'")
+        self.kind, self.law = kind, law
+        self.rigidity, self.pasternak, self.k_cover = rigidity_n_mm, pasternak_n_per_mm, cover_n_per_mm3
+        self.radius = indenter_radius_mm
+        self.step = step_mm
+        reach = pad_radius_mm + 3.0  # a free margin beyond the edge, where nothing carries load
+        if kind == "hemisphere":
+            n = int(round(reach / step_mm)) + 1
+            self.x = np.arange(n) * step_mm
+            self.area = 2.0 * np.pi * self.x * step_mm  # ring areas
+            self.area[0] = np.pi * (0.5 * step_mm) ** 2
+        else:
+            half = int(round(reach / step_mm))
+            self.x = (np.arange(2 * half + 1) - half) * step_mm
+            self.area = np.full(self.x.shape, step_mm)  # per mm of rod length
+        on_pad = np.abs(self.x) <= pad_radius_mm
+        self.on_pad = on_pad
+        lap = laplacian(kind, len(self.x), step_mm)
+        # lap (D lap w) with D = 0 off the pad: bending moment and shear vanish at the edge;
+        # a vanishing stiffness there keeps the cut-off margin determined (it carries no load).
+        d = np.where(on_pad, rigidity_n_mm, 1e-9 * rigidity_n_mm)
+        gp = np.where(on_pad, pasternak_n_per_mm, 0.0)
+        self._linear = (lap @ sp.diags(d) @ lap - sp.diags(gp) @ lap).tocsc() + sp.eye(len(self.x)) * 1e-9
+        self.z_ind = self.indenter_height(self.x)
+        self._d, self._gp = d, gp
+        if kind == "hemisphere":
+            lap1 = laplacian_m1(len(self.x), step_mm)
+            self._linear1 = (lap1 @ sp.diags(d) @ lap1 - sp.diags(gp) @ lap1).tocsc()
+        else:
+            self._linear1 = self._linear
+        self._e_lat = law.e_lat_kpa * KPA / law.h_mm  # tension side: the bonded lattice, linear
+
+    def indenter_height(self, x_mm: np.ndarray) -> np.ndarray:
+        """Height of the indenter's surface above its lowest point (inf beyond its radius)."""
+        x = np.abs(x_mm)
+        z = np.full(x.shape, np.inf)
+        inside = x < self.radius
+        z[inside] = self.radius - np.sqrt(self.radius**2 - x[inside] ** 2)
+        return z
+
+    def foundation(self, w_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lattice pressure (N/mm^2) and its slope (N/mm^3) at compression w (tension linear)."""
+        w = np.asarray(w_mm, float)
+        eps = 1e-6
+        comp = np.maximum(w, 0.0)
+        p = np.where(w >= 0.0, self.law.pressure_kpa(comp) * KPA, self._e_lat * w)
+        slope = np.where(w >= 0.0, (self.law.pressure_kpa(comp + eps) - self.law.pressure_kpa(np.maximum(comp - eps, 0.0)))
+                         * KPA / (comp + eps - np.maximum(comp - eps, 0.0)), self._e_lat)
+        p = np.where(self.on_pad, p, 0.0)
+        slope = np.where(self.on_pad, slope, 0.0)
+        return p, slope
+
+    def solve(self, delta_mm: float, w_start: np.ndarray | None = None, tol: float = 1e-9,
+              max_iter: int = 60) -> LaminateSolution:
+        """Equilibrium at indentation delta (Newton with backtracking on the residual)."""
+        w = np.zeros(len(self.x)) if w_start is None else w_start.copy()
+        a = self._linear
+        kc = self.k_cover
+
+        def residual(w):
+            gap = delta_mm - self.z_ind - w
+            pf, slope = self.foundation(w)
+            return a @ w + pf - kc * np.maximum(gap, 0.0), slope, gap
+
+        res, slope, gap = residual(w)
+        norm = np.linalg.norm(res)
+        it = 0
+        scale = max(kc * max(delta_mm, 1e-3), 1e-12)
+        while it < max_iter and norm > tol * scale:
+            it += 1
+            jac = a + sp.diags(slope + kc * (gap > 0.0))
+            dw = spla.spsolve(jac.tocsc(), -res)
+            s = 1.0
+            while True:
+                w_new = w + s * dw
+                r_new, sl_new, gap_new = residual(w_new)
+                n_new = np.linalg.norm(r_new)
+                if n_new < (1.0 - 1e-4 * s) * norm or s < 1e-4:
+                    break
+                s *= 0.5
+            w, res, slope, gap, norm = w_new, r_new, sl_new, gap_new, n_new
+        pf, _ = self.foundation(w)
+        pc = kc * np.maximum(delta_mm - self.z_ind - w, 0.0)
+        return LaminateSolution(delta_mm, w, pc / KPA, pf / KPA, it)
+
+    def couple(self, sol: LaminateSolution) -> CoupleResponse:
+        """Response to a unit couple of the shear about the deep plane (see CoupleResponse).
+
+        A couple density m = H tau(x) along the shear direction loads the sheet like a pressure
+        dm/dx; with tau = F_t p_c / F_z and F_t H = 1 that is p_c'(r) / F_z times cos(phi)
+        (hemisphere) or p_c'(d) / F_z (rod, per unit length)."""
+        pc = sol.contact_kpa * KPA
+        fz = float(pc @ self.area)
+        n = len(self.x)
+        if fz <= 0.0:
+            zero = np.zeros(n)
+            return CoupleResponse(zero, zero.copy(), zero.copy())
+        _, slope = self.foundation(sol.w_mm)
+        touching = pc > 0.0
+        stiff = slope + self.k_cover * touching
+        load = -np.gradient(pc, self.step) / fz  # sign: the deep pressure moves along the shear
+        jac = self._linear1 + sp.diags(stiff)
+        if self.kind == "hemisphere":
+            load[0] = 0.0
+            jac = jac.tolil()
+            jac[0, :] = 0.0
+            jac[0, 0] = 1.0
+            jac = jac.tocsc()
+        w1 = spla.spsolve(jac.tocsc(), load)
+        if self.kind == "hemisphere":
+            w1[0] = 0.0
+        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, slope * w1 / KPA)
+
+    def first_moment(self, amplitude_kpa: np.ndarray) -> float:
+        """Moment (N mm, about the axis through the contact, per unit couple) of an amplitude:
+        pi int p r^2 dr (cos(phi) mode) or int p d dd (rod, per unit length)."""
+        a = np.asarray(amplitude_kpa) * KPA
+        if self.kind == "hemisphere":
+            return float(np.pi * (a * self.x**2).sum() * self.step)
+        return float((a * self.x).sum() * self.step)
+
+    def load(self, sol: LaminateSolution) -> float:
+        """Normal force (hemisphere, N) or line load (rod, N/mm) on the indenter."""
+        return float(sol.contact_kpa @ self.area) * KPA
+
+
+def sheet_rigidity_n_mm(film_modulus_mpa: float, film_mm: float, copper_modulus_mpa: float, copper_mm: float,
+                        electrode_fill: float, core_mm: float, core_modulus_mpa: float, bonded: bool,
+                        poisson: float = 0.34) -> float:
+    """Bending rigidity D (N mm) of one FSR sheet: two electrode films (polyimide + copper strips,
+    strips of the two films crossed) around the Velostat core.
+
+    Along its strips a film is stiff in tension (copper over `electrode_fill` of the width),
+    across them it stretches through the polyimide gaps (strips and gaps in series). Bonded,
+    the films act as the faces of a sandwich about the core: in each direction one face is the
+    along-strip film and the other the across-strip one, D = E1 E2 / (E1 + E2) d^2 (E_i A_i per
+    width, d the distance between the films' mid-planes), plus each film's own bending. Not
+    bonded, only the films' and the core's own bending add up. Crossed strips make x and y
+    alike, so the sheet is taken as isotropic."""
+    pi_a = film_modulus_mpa * film_mm  # N/mm, polyimide tension stiffness per width
+    cu_a = copper_modulus_mpa * copper_mm
+    along = pi_a + electrode_fill * cu_a
+    gap = 1.0 - electrode_fill
+    across = 1.0 / (electrode_fill / (pi_a + cu_a) + gap / pi_a)
+    t = film_mm + copper_mm
+    # own bending of one film along its strips (two-layer beam about its neutral axis)
+    e1, t1, e2, t2 = film_modulus_mpa, film_mm, electrode_fill * copper_modulus_mpa, copper_mm
+    zn = (e1 * t1 * t1 / 2 + e2 * t2 * (t1 + t2 / 2)) / (e1 * t1 + e2 * t2)
+    own_along = e1 * (t1**3 / 12 + t1 * (t1 / 2 - zn) ** 2) + e2 * (t2**3 / 12 + t2 * (t1 + t2 / 2 - zn) ** 2)
+    own_across = film_modulus_mpa * film_mm**3 / 12  # the gaps hinge: polyimide alone
+    own = (own_along + own_across) / (1 - poisson**2)  # one along + one across film per direction
+    core = core_modulus_mpa * core_mm**3 / (12 * (1 - 0.4**2))
+    if not bonded:
+        return own + core
+    d = core_mm + t
+    return along * across / (along + across) * d * d / (1 - poisson**2) + own + core
+
+
+def cover_stiffness_n_per_mm3(modulus_kpa: float, thickness_mm: float, confinement_mm: float) -> float:
+    """Compression stiffness per area of the thin bonded cover: an incompressible layer squeezed
+    over a half-width L stiffens by 1 + 2 S^2, S = L / 2t (Gent & Lindley)."""
+    s = confinement_mm / (2.0 * thickness_mm)
+    return modulus_kpa * KPA * (1.0 + 2.0 * s * s) / thickness_mm
+
+
+def pad_radius_mm(kind: str, pad_width_mm: float) -> float:
+    """Where the plate ends: the disc of the pad's area (hemisphere) or half the width (rod)."""
+    return pad_width_mm / math.sqrt(math.pi) if kind == "hemisphere" else pad_width_mm / 2.0

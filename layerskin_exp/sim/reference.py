@@ -1,0 +1,161 @@
+"""Readable numpy reference of the skin's frame pipeline, what the compiled kernels are tested
+against (noise and scan jitter off).
+
+It takes the same contact tables (`contact.ContactTables`) and the same sheet (gains, offsets)
+as a `SkinModel`, and computes each frame the plain way: both layers' pressure on the whole
+quadrature grid with linear interpolation on the tables' own grid (no windows, no nearest-bin
+lookups, float64), taxel means, the FSR memories row by row at each row's sampling instant,
+the conductance law, and the passive matrix as the full 32-node nodal system solved once per
+driven row. The physics is the one described in `skin`, `contact`, `fsr` and `readout`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from layerskin_exp.sim.mechanics import chord
+from layerskin_exp.sim.spacer import hex_cell_pattern
+
+
+def _row_interp(table: np.ndarray, i: int, t: float, coord: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Table row i + t (linear between rows) at coord, linear on the grid dist, 0 beyond it."""
+    a = np.interp(coord, dist, table[i], left=0.0, right=0.0)
+    b = np.interp(coord, dist, table[i + 1], left=0.0, right=0.0)
+    return a + (b - a) * t
+
+
+class ReferenceSkin:
+    """The frame pipeline of `model` (a SkinModel) in plain numpy, with its own FSR memories."""
+
+    def __init__(self, model) -> None:
+        sim, skin = model.sim, model.skin
+        if sim.readout.noise_counts > 0 or sim.readout.scan_jitter_ms > 0:
+            raise ValueError("ReferenceSkin reproduces the noiseless pipeline: set sim.readout.noise_counts=0 "
+                             "and sim.readout.scan_jitter_ms=0")
+        self.model, self.tab, self.sim, self.skin = model, model.tab, sim, skin
+        n, nq = skin.n_taxels, sim.contact.quad_points
+        g, w = np.polynomial.legendre.leggauss(nq)
+        self.q = (skin.taxel_centres_mm()[:, None] + 0.5 * skin.electrode_mm * g[None, :]).ravel()  # (n*nq,)
+        self.qw = 0.5 * w
+        self.x, self.y = np.meshgrid(self.q, self.q)  # [y, x]
+        self.lattice = hex_cell_pattern(self.x, self.y, sim.spacer.cell, sim.spacer.lattice_contrast)
+        self.play = np.zeros((2, n, n))
+        self.lag = np.zeros((2, n, n))
+        self.last_maps: np.ndarray | None = None
+        self.last_t: float | None = None
+
+    # ------------------------------------------------------------------ pressure
+    def _row(self, delta: float) -> tuple[int, float]:
+        x = min(max(delta / self.tab.d_delta, 0.0), len(self.tab.delta_mm) - 1.000001)
+        return int(x), x - int(x)
+
+    def fields(self, rec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pressure (kPa) of both layers on the quadrature grid (n*q, n*q) [y, x] for one state
+        (a row of SkinModel.step_many's records)."""
+        from layerskin_exp.sim import mechanics as mk
+
+        tab = self.tab
+        m = len(self.q)
+        if rec[mk.S_FZ] <= 0.0:
+            return np.zeros((m, m)), np.zeros((m, m))
+        i, t = self._row(rec[mk.S_DELTA])
+        h = tab.height_mm[i] * (1 - t) + tab.height_mm[i + 1] * t
+        fx, fy, fz = rec[mk.S_FX], rec[mk.S_FY], rec[mk.S_FZ]
+        ax, ay = rec[mk.S_CX], rec[mk.S_CY]
+        dxd, dyd = ax + rec[mk.S_UX], ay + rec[mk.S_UY]
+        dist = tab.dist_mm
+        if self.tab.kind == "hemisphere":
+            def layer(profile, couple, cx, cy):
+                dx, dy = self.x - cx, self.y - cy
+                r = np.hypot(dx, dy)
+                p0 = _row_interp(profile, i, t, r, dist)
+                p1 = _row_interp(couple, i, t, r, dist)
+                cos_term = np.where(r > 0, (fx * h * dx + fy * h * dy) / np.maximum(r, 1e-12), 0.0)
+                return np.maximum(p0 + cos_term * p1, 0.0)
+
+            sup = layer(tab.superficial_kpa, tab.superficial_couple_kpa, ax, ay)
+            deep = layer(tab.deep_kpa, tab.deep_couple_kpa, dxd, dyd) * self.lattice
+            return sup, deep
+        # rod: line load across the axis, per unit length
+        yaw = rec[mk.S_YAW]
+        s1, s2 = chord(dxd, dyd, yaw, self.model._half)
+        length = max(s2 - s1, 1e-9)
+        yaw_s = yaw - rec[mk.S_THETA]
+        n_s = np.array([-math.sin(yaw_s), math.cos(yaw_s)])
+        d_s = n_s[0] * (self.x - ax) + n_s[1] * (self.y - ay)
+        m_s = (fx * n_s[0] + fy * n_s[1]) * h / length
+        sup = np.maximum(_row_interp(tab.superficial_kpa, i, t, d_s, dist)
+                         + m_s * _row_interp(tab.superficial_couple_kpa, i, t, d_s, dist), 0.0)
+        line_q = fz / length
+        i_s = (s2**3 - s1**3) / 3.0
+        yaw_d = yaw + math.atan(rec[mk.S_TORQUE] * h / (i_s * line_q))
+        e = np.array([math.cos(yaw_d), math.sin(yaw_d)])
+        n_d = np.array([-e[1], e[0]])
+        dx, dy = self.x - dxd, self.y - dyd
+        d_d = n_d[0] * dx + n_d[1] * dy
+        m_d = (fx * n_d[0] + fy * n_d[1]) * h / length
+        beta = (fx * e[0] + fy * e[1]) * h / (line_q * length**3 / 12.0)
+        ramp = np.maximum(1.0 + beta * (e[0] * dx + e[1] * dy - 0.5 * (s1 + s2)), 0.0)
+        deep = np.maximum((_row_interp(tab.deep_kpa, i, t, d_d, dist)
+                           + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)) * ramp, 0.0)
+        return sup, deep * self.lattice
+
+    def maps(self, recs: np.ndarray) -> np.ndarray:
+        """(N, 2, n, n) Gauss means of both layers' pressure over each taxel's electrode (kPa)."""
+        n, nq = self.skin.n_taxels, len(self.qw)
+        wq = np.outer(self.qw, self.qw)
+        out = np.zeros((len(recs), 2, n, n))
+        for k, rec in enumerate(recs):
+            for layer, f in enumerate(self.fields(rec)):
+                out[k, layer] = np.einsum("aibj,ij->ab", f.reshape(n, nq, n, nq), wq)
+        return out
+
+    # ------------------------------------------------------------------ frames
+    def frames(self, recs: np.ndarray, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(superficial, deep) uint16 counts (N, 16, 16) for step records recs completed at t_s."""
+        sim, skin, model = self.sim, self.skin, self.model
+        n = skin.n_taxels
+        period = skin.frame_period_ms * 1e-3
+        fsr, ro = sim.fsr, sim.readout
+        g_sat, g_floor = 1.0 / (fsr.saturated_kohm * 1e3), 1.0 / (fsr.floor_mohm * 1e6)
+        g_div, g_leak, r_on = 1.0 / (ro.divider_kohm * 1e3), 1.0 / (ro.leak_mohm * 1e6), ro.mux_on_ohm
+        full_scale = 2**skin.adc_bits - 1
+        maps = self.maps(recs)
+        out = np.zeros((len(recs), 2, n, n), np.uint16)
+        for k in range(len(recs)):
+            tk = float(t_s[k])
+            prev_t = self.last_t if self.last_t is not None else tk - period
+            before = self.last_maps if self.last_maps is not None else maps[k]
+            span = max(tk - prev_t, 1e-9)
+            alpha = 1.0 - math.exp(-max(tk - prev_t, 0.0) / fsr.creep_s)
+            for layer in range(2):
+                g = np.zeros((n, n))
+                for r in range(n):
+                    # row r of this layer is sampled before the frame's end by its scan slot
+                    row_t = tk - model._row_offsets_s[layer, r]
+                    wt = min(max((tk - row_t) / span, 0.0), 1.0)
+                    p = np.maximum(maps[k, layer, r] * (1 - wt) + before[layer, r] * wt, 0.0)
+                    play = np.clip(self.play[layer, r], p * (1 - fsr.hysteresis), p * (1 + fsr.hysteresis))
+                    self.lag[layer, r] += alpha * (play - self.lag[layer, r])
+                    self.play[layer, r] = play
+                    eff = (1 - fsr.creep) * play + fsr.creep * self.lag[layer, r]
+                    x = (eff / fsr.saturation_kpa) ** fsr.exponent
+                    g[r] = model._gains[layer, r] * (g_floor + g_sat * x / (1 + x))
+                for r in range(n):  # the full nodal system, one solve per driven row
+                    if ro.crosstalk:
+                        y = np.zeros((2 * n, 2 * n))
+                        y[:n, :n] = np.diag(g.sum(axis=1) + g_leak)
+                        y[n:, n:] = np.diag(g.sum(axis=0) + g_div)
+                        y[:n, n:], y[n:, :n] = -g, -g.T
+                        rhs = np.zeros(2 * n)
+                        y[r, r] += 1.0 / r_on
+                        rhs[r] = ro.supply_v / r_on
+                        volts = np.linalg.solve(y, rhs)[n:]
+                    else:
+                        volts = ro.supply_v / g_div / (r_on + 1.0 / g[r] + 1.0 / g_div)
+                    cnt = volts / ro.supply_v * full_scale + model.baseline_counts[layer, r]
+                    out[k, layer, r] = np.clip(np.rint(cnt), 0, full_scale)
+            self.last_maps, self.last_t = maps[k], tk
+        return out[:, 0], out[:, 1]
