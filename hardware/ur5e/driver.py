@@ -35,6 +35,7 @@ State and health
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import threading
 import time
@@ -62,6 +63,9 @@ def async_status(word: int) -> tuple[bool, int]:
     word &= 0xFFFFFFFF
     return bool(word & ASYNC_RUNNING_BIT), (word >> 24) & 0x7F
 
+
+# ur_rtde clients left behind when their controller hung (see UR5eArm._close_clients)
+_ABANDONED: list = []
 
 class UR5eArm(Arm):
     """The UR5e through ur_rtde. See the module docstring for how moves are commanded."""
@@ -153,25 +157,23 @@ class UR5eArm(Arm):
             if locked:
                 self._io.release()
 
-        def close() -> None:
-            if ctrl is not None:
-                if not stalled:
-                    _quiet(ctrl.stopScript)
-                _quiet(ctrl.disconnect)
-            if recv is not None:
-                _quiet(recv.disconnect)
-
         if not stalled:
             with self._io:
-                close()
+                if ctrl is not None:
+                    _quiet(ctrl.stopScript)
+                    _quiet(ctrl.disconnect)
+                if recv is not None:
+                    _quiet(recv.disconnect)
             return
-        # A hung controller: ur_rtde's clients loop reconnecting; give them a bounded time, then
-        # leave them (daemon thread) rather than hang the protocol's way out.
-        t = threading.Thread(target=close, name="ur5e-close", daemon=True)
-        t.start()
-        t.join(timeout=2.0)
-        if t.is_alive():
-            log.warning("ur5e: the controller stopped answering; its client connections were abandoned")
+        # A hung controller: ur_rtde's clients loop reconnecting, and disconnecting or destroying
+        # a client whose threads still run calls std::terminate (the process would abort after
+        # the session was closed). So they are left as they are and kept alive (never destroyed)
+        # for the rest of the process; the operator restarts the controller.
+        for c in (ctrl, recv):
+            if c is not None:
+                _ABANDONED.append(c)
+                ctypes.pythonapi.Py_IncRef(ctypes.py_object(c))
+        log.warning("ur5e: the controller stopped answering; its client connections were abandoned")
 
     def restart_program(self) -> None:
         """Upload and start the control script again (after an operator unlocked a protective stop)."""
