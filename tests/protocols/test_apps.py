@@ -221,23 +221,24 @@ def check_grip_session(s, typed, rate_tol: float = 0.05) -> None:
 
 
 def test_slow_zone_keeps_the_normal_force_within_its_stated_overshoot(tmp_path):
-    # Slides with large vertical offsets drive Fz into the 6 N limit at 2 mm/s. Near the limit the
-    # move goes on at slow_zone_speed_mm_s, so the stage brakes from a crawl when the guard trips:
-    # the force stays within 1 % (0.06 N) of the limit. Without the slow zone it overshoots ~0.2 N.
-    def worst_fz(extra):
+    # Slides with large vertical offsets drive Fz into the 6 N limit. Near the limit the move goes
+    # on at slow_zone_speed_mm_s, so the stage brakes from a crawl when the guard trips: at the
+    # study's 2 mm/s the force stays within 1 % of the limit; at 6 mm/s the slow zone is what
+    # keeps the overshoot small (several times smaller than without it).
+    def worst_fz(*extra):
         cfg, typed = compose_app("force_calibration", [
             "positions.count=3", "press.repeats=0", "slide.repeats=2", "slide.z_offset_mm=1.0",
-            f"data_root={tmp_path / str(len(extra))}", "progress=false", *extra])
+            f"data_root={tmp_path / str(len(list(tmp_path.iterdir())))}", "progress=false", *extra])
         with build_rig(cfg, "platform") as rig:
-            results = run_campaign(typed, rig, {"config": {"extra": extra}, "backend": "sim"})
+            results = run_campaign(typed, rig, {"config": {"extra": list(extra)}, "backend": "sim"})
         assert any(r.stop_reason == "force_limit" for r in results), "no slide reached the limit"
         return max(float(load_session(r.path, warn=False).streams["wrench"]["force_n"][:, 2].max())
-                   for r in results), typed.safety.max_normal_force_n
+                   for r in results) - typed.safety.max_normal_force_n
 
-    worst, limit = worst_fz([])
-    assert worst <= limit * 1.01
-    unslowed, _ = worst_fz(["safety.slow_zone_speed_mm_s=1.0", "safety.slow_zone_fraction=0.99"])
-    assert unslowed - limit > 2 * (worst - limit)  # the slow zone is what keeps it small
+    no_zone = ("safety.slow_zone_speed_mm_s=1.0", "safety.slow_zone_fraction=0.99")
+    assert worst_fz() <= 0.06
+    fast = "slide.speed_mm_s=6"
+    assert worst_fz(fast, *no_zone) > 5 * worst_fz(fast)
 
 
 def test_ctrl_c_closes_the_trial_at_the_next_tick(tmp_path, hydra_dirs):
