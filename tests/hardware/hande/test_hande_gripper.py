@@ -9,31 +9,10 @@ import pytest
 from hardware.hande import HandEConfig, HandEGripper, wire
 from hardware.hande.emulator import HandEEmulator
 from hardware.interfaces import DeviceError
+from tests.hardware.waiting import healthy, wait_for
 
 CONTACT_MM = 36.0  # opening at which the skin cover meets the rod (sim.rig.gripper.contact_opening_mm)
 COUNT_MM = 50.0 / 255
-
-
-def warm(rt):
-    """Let the world's first advance (kernel compilation) pass before timing anything."""
-    t0 = time.monotonic()
-    while rt.world.t_s < 0.05 and time.monotonic() - t0 < 60:
-        time.sleep(0.01)
-
-
-def healthy(drv):
-    """No fault, allowing a stall on a loaded machine to clear with the next fresh reply
-    (a latched error, alarm or lost link never clears)."""
-    return wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 0.5)
-
-
-def wait_for(pred, timeout_s=3.0):
-    t0 = time.monotonic()
-    while not pred():
-        if time.monotonic() - t0 > timeout_s:
-            return False
-        time.sleep(0.003)
-    return True
 
 
 @pytest.fixture
@@ -44,7 +23,6 @@ def bench(realtime_world):
 
     def make(connect=True, cfg_kw=None, **emu_kw):
         rt = realtime_world("gripper", gripper__support_stiffness_n_per_mm=None)
-        warm(rt)
         emu = HandEEmulator(rt, **emu_kw)
         host, port = emu.start().split(":")
         drv = HandEGripper(HandEConfig(host=host, port=int(port), **(cfg_kw or {})))

@@ -10,30 +10,9 @@ import pytest
 from hardware.interfaces import DeviceError
 from hardware.platform import GrblPlatform, GrblPlatformConfig, wire
 from hardware.platform.emulator import GrblEmulator
+from tests.hardware.waiting import healthy, wait_for
 
 HOME = np.array([0.0, 0.0, 5.0])  # the simulated stage's home (sim.rig.platform.home_mm)
-
-
-def warm(rt):
-    """Let the world's first advance (kernel compilation) pass before timing anything."""
-    t0 = time.monotonic()
-    while rt.world.t_s < 0.05 and time.monotonic() - t0 < 60:
-        time.sleep(0.01)
-
-
-def healthy(drv):
-    """No fault, allowing a stall on a loaded machine to clear with the next fresh reply
-    (a latched error, alarm or lost link never clears)."""
-    return wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 0.5)
-
-
-def wait_for(pred, timeout_s=3.0):
-    t0 = time.monotonic()
-    while not pred():
-        if time.monotonic() - t0 > timeout_s:
-            return False
-        time.sleep(0.003)
-    return True
 
 
 @pytest.fixture
@@ -43,7 +22,6 @@ def bench(realtime_world):
 
     def make(connect=True, cfg_kw=None, **emu_kw):
         rt = realtime_world("platform")
-        warm(rt)
         emu = GrblEmulator(rt, **emu_kw)
         path = emu.start()
         drv = GrblPlatform(GrblPlatformConfig(port=path, connect_timeout_s=2.0, **(cfg_kw or {})))
