@@ -18,6 +18,8 @@ import numpy as np
 
 from hardware.interfaces import DeviceError, Rig
 from layerskin_exp.log import SessionFileError, SessionWriter, load_session
+from layerskin_exp.log.frames import FrameTree
+from layerskin_exp.log.view import SkinView
 from layerskin_exp.types import (
     GripperState,
     MarkerDetection,
@@ -111,6 +113,11 @@ class TrialLog:
         self.stop_reason: str | None = None
         self._last_image_seq: int | None = None
         self._noted_trip: str | None = None
+        # What Foxglove draws besides the raw streams: the frame tree's fixed part, CoP overlays.
+        calibration = getattr(rig.camera, "calibration", None) if rig.camera is not None else None
+        self.frames = FrameTree(writer, "gripper" if rig.arm is not None else "platform",
+                                calibration() if calibration is not None else None)
+        self.view = SkinView()
 
     def event(self, kind: str, message: str, **detail) -> None:
         t_ns = self.rig.clock.now_ns()
@@ -130,6 +137,9 @@ class TrialLog:
         frames = rig.skin.read_available()
         for f in frames:
             w.write(f)
+        if frames:
+            for topic, schema, payload in self.view.summary(frames[-1]):
+                w.write_view(topic, schema, payload, frames[-1].host_t_ns)
         wrenches: list[Wrench] = []
         if rig.ft is not None:
             wrenches = rig.ft.read_available()
@@ -164,8 +174,12 @@ class TrialLog:
             if self.save_images and detections and detections[-1].frame_seq != self._last_image_seq:
                 image = rig.camera.latest_image()
                 if image is not None:
-                    w.write_image(image, detections[-1].device_t_ns, detections[-1].host_t_ns)
-                    self._last_image_seq = detections[-1].frame_seq
+                    seq = detections[-1].frame_seq
+                    w.write_image(image, detections[-1].device_t_ns, detections[-1].host_t_ns, seq,
+                                  detections=[d for d in detections if d.frame_seq == seq])
+                    self._last_image_seq = seq
+        self.frames.update(rig.clock.now_ns(),
+                           None if self.last_gripper is None else float(self.last_gripper.position_mm))
         return frames, wrenches
 
 
