@@ -287,6 +287,7 @@ def _colour(msg, rgba) -> None:
 def outlines_payload(outlines_px, t_ns: int, rgba=(0.1, 1.0, 0.2, 1.0), thickness: float = 2.0) -> bytes:
     """ImageAnnotations: one closed outline per (K, 2) array of pixel corners (x, y)."""
     msg = ImageAnnotations()
+    msg.timestamp.FromNanoseconds(int(t_ns))
     for corners in outlines_px:
         a = msg.points.add(type=PointsAnnotation.LINE_LOOP, thickness=thickness)
         a.timestamp.FromNanoseconds(int(t_ns))
@@ -300,6 +301,7 @@ def outlines_payload(outlines_px, t_ns: int, rgba=(0.1, 1.0, 0.2, 1.0), thicknes
 def cop_payload(centre_px, t_ns: int, diameter_px: float = 1.5, rgba=(1.0, 0.1, 0.1, 1.0)) -> bytes:
     """ImageAnnotations: a filled dot at the centre of pressure (x, y pixels; none when NaN)."""
     msg = ImageAnnotations()
+    msg.timestamp.FromNanoseconds(int(t_ns))
     x, y = (float(v) for v in centre_px)
     if np.isfinite(x) and np.isfinite(y):
         c = msg.circles.add(diameter=diameter_px, thickness=0.3)
