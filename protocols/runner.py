@@ -9,6 +9,7 @@ complete is read back from the file itself.
 
 from __future__ import annotations
 
+import logging
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -30,6 +31,8 @@ from layerskin_exp.types import (
 )
 
 PARTIAL_SUFFIX = ".partial"
+
+log = logging.getLogger(__name__)
 
 
 def trial_rng(seed: int, *keys: int | str) -> np.random.Generator:
@@ -121,6 +124,8 @@ class TrialLog:
 
     def event(self, kind: str, message: str, **detail) -> None:
         t_ns = self.rig.clock.now_ns()
+        log.log(logging.WARNING if kind in ("error", "safety") else logging.INFO, "%s: %s: %s %s",
+                self.writer.path.name.removesuffix(".mcap" + PARTIAL_SUFFIX), kind, message, detail or "")
         self.writer.write(ProtocolEvent(kind=kind, message=message, host_t_ns=t_ns, device_t_ns=t_ns,
                                         detail=detail))
 
@@ -213,24 +218,29 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         metadata = {**metadata, "identity": identity}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + PARTIAL_SUFFIX)
+    log.info("trial %s -> %s", name, path)
     rig.begin_trial(labels)
     t0_ns = rig.clock.now_ns()
     writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True)
-    log = TrialLog(writer, rig, save_images)
+    trial = TrialLog(writer, rig, save_images)
     try:
-        body(log)
-        log.drain()
+        body(trial)
+        trial.drain()
     except BaseException as exc:
         rig.stop_motion()
         reason = _describe(exc)
         try:
-            log.drain()
+            trial.drain()
             detected_ns = getattr(exc, "detected_ns", None)  # a fault: when motion was stopped
-            log.event("error", reason, **({} if detected_ns is None else {"detected_ns": int(detected_ns)}))
+            trial.event("error", reason, **({} if detected_ns is None else {"detected_ns": int(detected_ns)}))
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
         writer.close(f"aborted: {reason}")
+        log.warning("trial %s aborted: %s (kept as %s)", name, reason, tmp)
         raise
     writer.close("complete", move_to=path)  # renamed under the writer's lock, fsynced
-    return TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
-                       peak_fz_n=log.peak_fz_n, peak_shear_n=log.peak_shear_n, stop_reason=log.stop_reason)
+    result = TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
+                         peak_fz_n=trial.peak_fz_n, peak_shear_n=trial.peak_shear_n,
+                         stop_reason=trial.stop_reason)
+    log.info("trial %s", result.summary())
+    return result

@@ -166,6 +166,9 @@ def test_reader_keeps_its_streams_and_aligned_times(grip_session):
         np.testing.assert_array_equal(a["t_ns"], s.clock_sync[name].to_host(a["device_t_ns"]))
         delay = a["host_t_ns"] - a["t_ns"]
         assert delay.min() >= -1_000_000 and np.median(delay) < 20_000_000, name
+    prov = s.metadata["provenance"]
+    assert prov["version"] and {"git_commit", "git_dirty", "overrides"} <= set(prov)
+    assert s.metadata["config"]["grip_depth"] == 6  # the resolved config beside it
     tf = s.streams["transforms"]
     assert tf["translation_m"].shape == (len(tf["child_frame_id"]), 3)
     tool = np.array(tf["child_frame_id"]) == "tool"
