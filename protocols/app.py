@@ -89,8 +89,14 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     prov = metadata["provenance"]
     log.info("layerskin-exp %s (commit %s%s) on the %s rig; overrides %s", prov["version"], prov["git_commit"],
              ", dirty" if prov["git_dirty"] else "", rig.backend, prov["overrides"])
+    live = None
+    if getattr(typed, "live", False):
+        from layerskin_exp.log.live import LiveView
+
+        live = LiveView(port=typed.live_port)
+        print(f"live view: open {live.url} in Foxglove (Open connection > Foxglove WebSocket)", flush=True)
     try:
-        return body(typed, rig, metadata)
+        return body(typed, rig, metadata, **({"live": live} if live is not None else {}))
     except KeyboardInterrupt:
         rig.stop_motion()
         print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
@@ -113,3 +119,5 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     finally:
         rig.stop_motion()
         rig.disconnect()
+        if live is not None:
+            live.close()

@@ -201,10 +201,11 @@ def _describe(exc: BaseException) -> str:
 
 
 def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
-              identity: str | None = None, save_images: bool = False) -> TrialResult:
+              identity: str | None = None, save_images: bool = False, live=None) -> TrialResult:
     """Run one trial into `path` (skipped when a complete file of the same identity is there).
 
     identity: the trial identity (protocols.identity), stored in the file's metadata.
+    live: a layerskin_exp.log.live.LiveView that also serves what the trial writes.
 
     body(log) drives the rig and calls log.drain() as the clock advances. If it raises (a device
     error, a refused command, Ctrl-C), motion is stopped first, the file is closed
@@ -222,6 +223,7 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     rig.begin_trial(labels)
     t0_ns = rig.clock.now_ns()
     writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True)
+    writer.live = live
     trial = TrialLog(writer, rig, save_images)
     try:
         body(trial)
