@@ -18,6 +18,7 @@ from hydra.errors import HydraException
 
 from layerskin_exp.config import ConfigError, format_config_error, validate
 
+
 def _conf_dir() -> Path:
     """The Hydra configs: `conf/` beside the package in a checkout, `layerskin_exp/conf` in an
     installed distribution (setup.py ships conf/ there)."""

@@ -75,7 +75,7 @@ def test_every_message_decodes_against_foxglove_schema_rules(grip_session):
         reader = make_reader(fh)
         summary = reader.get_summary()
         decoders = _decoders(summary)
-        for sid, schema in summary.schemas.items():
+        for _sid, schema in summary.schemas.items():
             if schema.encoding == "protobuf":
                 assert schema.name in FOXGLOVE_SCHEMAS
             else:
