@@ -36,11 +36,12 @@ from analysis.preprocess import layer_scale, two_layer_features
 from analysis.sessions import Campaign, load_campaign, sessions_problem
 from analysis.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
 from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
+from layerskin_exp.cli import CONF_DIR as _CONF_DIR
 from layerskin_exp.cli import EXIT_CONFIG, preflight, refuse
 from layerskin_exp.config import SkinConfig, validate
 
 AXES = ("Fx", "Fy", "Fz")
-CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
+CONF_DIR = str(_CONF_DIR)  # conf/ in a checkout, layerskin_exp/conf when installed
 
 
 def _clean(x):

@@ -18,8 +18,23 @@ from hydra.errors import HydraException
 
 from layerskin_exp.config import ConfigError, format_config_error, validate
 
-CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+
+def _conf_dir() -> Path:
+    """The Hydra configs: `conf/` beside the package in a checkout, `layerskin_exp/conf` in an
+    installed distribution (setup.py ships conf/ there)."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "conf", here / "conf"):
+        if (candidate / "grip_depth.yaml").is_file():
+            return candidate
+    return here.parent / "conf"
+
+
+CONF_DIR = _conf_dir()
 EXIT_CONFIG = 2
+# Launchers that need an optional extra: Hydra's own error ("Could not load ...") names no fix.
+LAUNCHER_EXTRAS = {"slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
+                   "submitit_slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
+                   "submitit_local": ("hydra_plugins.hydra_submitit_launcher", "slurm")}
 
 
 def refuse(err: Exception) -> None:
@@ -63,6 +78,8 @@ def preflight(config_name: str, argv: list[str]) -> None:
     if any(a in ("--help", "-h", "--hydra-help", "--info", "-i", "--cfg", "-c", "--shell-completion", "-sc",
                  "--config-path", "-cp", "--config-name", "-cn", "--config-dir", "-cd") for a in argv):
         return  # Hydra's own modes and alternative configs: let Hydra handle them
+    _check_launcher(argv)
+    _refuse_schema_options(argv)
     overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
     multirun = "-m" in argv or "--multirun" in argv
     try:
@@ -80,3 +97,31 @@ def preflight(config_name: str, argv: list[str]) -> None:
             except HydraException as e:
                 refuse(ConfigError(one_line(e)))
     GlobalHydra.instance().clear()
+
+
+def _check_launcher(argv: list[str]) -> None:
+    """hydra/launcher=slurm without the optional extra: say what to install, before Hydra fails."""
+    import importlib.util
+
+    for a in argv:
+        key, _, value = a.partition("=")
+        if key.lstrip("+~") != "hydra/launcher" or value not in LAUNCHER_EXTRAS:
+            continue
+        module, extra = LAUNCHER_EXTRAS[value]
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:
+            found = False
+        if not found:
+            refuse(ConfigError(f"hydra/launcher={value} needs the optional extra: "
+                               f"pip install 'layerskin-exp[{extra}]' (from a checkout: pip install -e '.[{extra}]')"))
+
+
+def _refuse_schema_options(argv: list[str]) -> None:
+    """`hardware=sim_schema`: a group's structured schema is what its options fill in, not an option."""
+    for a in argv:
+        key, sep, value = a.partition("=")
+        if sep and "." not in key and not key.startswith("hydra") and value.strip().endswith("_schema"):
+            refuse(ConfigError(f"{key.lstrip('+~')}={value}: '{value}' is the schema behind the "
+                               f"'{key.lstrip('+~')}' options, not an option; pick one of the files in "
+                               f"conf/{key.lstrip('+~')}/"))

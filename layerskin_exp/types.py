@@ -96,6 +96,22 @@ class GripperState:
 
 
 @dataclass(frozen=True, slots=True)
+class FrameTransform:
+    """Where `child_frame_id` is in `parent_frame_id` at host time host_t_ns: translation (3,) m
+    and rotation quaternion (4,) x, y, z, w, so that p_parent = R p_child + t.
+
+    The session's frame tree: base -> tool -> skin, base -> camera, camera -> marker_<id>
+    (see layerskin_exp.log.frames). Geometry, not a device sample: it has no device clock.
+    """
+
+    parent_frame_id: str
+    child_frame_id: str
+    translation_m: np.ndarray
+    rotation_xyzw: np.ndarray
+    host_t_ns: int
+
+
+@dataclass(frozen=True, slots=True)
 class ProtocolEvent:
     """A protocol happening: phase change, contact detected, stop reason, safety trip.
 

@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from hardware.interfaces import DeviceError
 from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, refuse
 from layerskin_exp.config import ConfigError, validate
+from layerskin_exp.provenance import provenance
 from protocols.runner import Terminated, check_termination, request_termination, termination_pending
 
 __all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "run_app"]
@@ -71,6 +72,7 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
     except ConfigError as e:
         refuse(e)
     except DeviceError as e:
+        log.error("device error before connecting: %s", one_line(e))
         print(f"error: {one_line(e)}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     with _sigterm_as_exception():
@@ -85,10 +87,22 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         print(f"error: could not connect the {rig.backend} rig: {one_line(e)}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     metadata = {"config": OmegaConf.to_container(cfg, resolve=True), "backend": rig.backend,
-                "calibration": rig.skin.calibration()}
+                "calibration": rig.skin.calibration(), "provenance": provenance()}
+    camera = getattr(rig.camera, "calibration", None) if rig.camera is not None else None
+    if camera is not None:
+        metadata["camera"] = camera()
+    prov = metadata["provenance"]
+    log.info("layerskin-exp %s (commit %s%s) on the %s rig; overrides %s", prov["version"], prov["git_commit"],
+             ", dirty" if prov["git_dirty"] else "", rig.backend, prov["overrides"])
+    live = None
+    if getattr(typed, "live", False):
+        from layerskin_exp.log.live import LiveView
+
+        live = LiveView(port=typed.live_port)
+        print(f"live view: open {live.url} in Foxglove (Open connection > Foxglove WebSocket)", flush=True)
     try:
         check_termination()  # SIGTERM while connecting
-        return body(typed, rig, metadata)
+        return body(typed, rig, metadata, **({"live": live} if live is not None else {}))
     except KeyboardInterrupt:
         rig.stop_motion()
         print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
@@ -104,9 +118,12 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         refuse(e)
     except Exception as e:
         rig.stop_motion()
+        log.error("run stopped: %s: %s", type(e).__name__, one_line(e))
         print(f"error: {type(e).__name__}: {one_line(e)} (motion stopped, the trial file is marked aborted; "
               "rerun the same command to resume)", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     finally:
         rig.stop_motion()
         rig.disconnect()
+        if live is not None:
+            live.close()

@@ -258,8 +258,9 @@ def run_slide(ctl: PlatformControl, trial: CalibrationTrial) -> None:
     ctl.lift(ctl.position_mm()[:2])
 
 
-def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict) -> list[TrialResult]:
-    """Run every trial not yet complete under cfg.data_root; returns the results of this run."""
+def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=None) -> list[TrialResult]:
+    """Run every trial not yet complete under cfg.data_root; returns the results of this run.
+    live: a LiveView that also serves each trial as it is written."""
     if rig.platform is None or rig.ft is None:
         raise ConfigError(f"hardware: backend {rig.backend!r} gave no platform/F-T sensor; the force "
                           "calibration needs the platform setup")
@@ -290,7 +291,7 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict) -> list[
 
             meta = {**metadata, "protocol": PROTOCOL, "plan": trial.labels}
             result = run_trial(rig, root / f"{trial.name}.mcap", trial.labels, meta, body,
-                               identity=identity[trial.name])
+                               identity=identity[trial.name], live=live)
             results.append(result)
             bar.update(1)
             if cfg.progress:

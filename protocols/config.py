@@ -184,6 +184,8 @@ class ForceCalibrationConfig:
     trial_timeout_s: float = 60.0
     tare_each_trial: bool = True
     progress: bool = True
+    live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
+    live_port: int = 8765
 
     def __post_init__(self) -> None:
         s = self.safety
@@ -293,6 +295,8 @@ class GripDepthConfig:
     control_period_s: float = 0.01
     trial_timeout_s: float = 300.0
     progress: bool = True
+    live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
+    live_port: int = 8765
 
     def __post_init__(self) -> None:
         s = self.safety

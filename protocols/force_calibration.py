@@ -11,16 +11,22 @@ from layerskin_exp.config import register_all
 
 register_all()
 
+from layerskin_exp.cli import CONF_DIR  # noqa: E402
 from protocols.app import preflight, run_app  # noqa: E402
 from protocols.calibration import run_campaign  # noqa: E402
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="force_calibration")
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="force_calibration")
 def main(cfg: DictConfig) -> dict:
     results = run_app(cfg, "platform", run_campaign)
     return {"summary": f"{len(results)} trials run", "trials": [r.as_dict() for r in results]}
 
 
-if __name__ == "__main__":
+def cli() -> None:
+    """Console script: refuse a bad command line as a whole, then let Hydra run it."""
     preflight("force_calibration", sys.argv[1:])
     main()
+
+
+if __name__ == "__main__":
+    cli()

@@ -141,7 +141,7 @@ def _total(frame) -> int:
     return int(frame.superficial.sum(dtype=np.int64) + frame.deep.sum(dtype=np.int64))
 
 
-def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict) -> TrialResult:
+def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) -> TrialResult:
     if rig.arm is None or rig.gripper is None:
         raise ConfigError(f"hardware: backend {rig.backend!r} gave no arm/gripper; the grip-depth protocol "
                           "needs the gripper setup")
@@ -175,4 +175,4 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict) -> TrialResul
 
     meta = {**metadata, "protocol": PROTOCOL, "plan": labels}
     return run_trial(rig, trial_path(cfg, metadata["config"]), labels, meta, body,
-                     identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images)
+                     identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live)

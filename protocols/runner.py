@@ -9,6 +9,7 @@ complete is read back from the file itself.
 
 from __future__ import annotations
 
+import logging
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -18,6 +19,8 @@ import numpy as np
 
 from hardware.interfaces import DeviceError, Rig
 from layerskin_exp.log import SessionFileError, SessionWriter, load_session
+from layerskin_exp.log.frames import FrameTree
+from layerskin_exp.log.view import SkinView
 from layerskin_exp.types import (
     GripperState,
     MarkerDetection,
@@ -28,6 +31,8 @@ from layerskin_exp.types import (
 )
 
 PARTIAL_SUFFIX = ".partial"
+
+log = logging.getLogger(__name__)
 
 
 def trial_rng(seed: int, *keys: int | str) -> np.random.Generator:
@@ -132,9 +137,16 @@ class TrialLog:
         self.stop_reason: str | None = None
         self._last_image_seq: int | None = None
         self._noted_trip: str | None = None
+        # What Foxglove draws besides the raw streams: the frame tree's fixed part, CoP overlays.
+        calibration = getattr(rig.camera, "calibration", None) if rig.camera is not None else None
+        self.frames = FrameTree(writer, "gripper" if rig.arm is not None else "platform",
+                                calibration() if calibration is not None else None)
+        self.view = SkinView()
 
     def event(self, kind: str, message: str, **detail) -> None:
         t_ns = self.rig.clock.now_ns()
+        log.log(logging.WARNING if kind in ("error", "safety") else logging.INFO, "%s: %s: %s %s",
+                self.writer.path.name.removesuffix(".mcap" + PARTIAL_SUFFIX), kind, message, detail or "")
         self.writer.write(ProtocolEvent(kind=kind, message=message, host_t_ns=t_ns, device_t_ns=t_ns,
                                         detail=detail))
 
@@ -151,6 +163,9 @@ class TrialLog:
         frames = rig.skin.read_available()
         for f in frames:
             w.write(f)
+        if frames:
+            for topic, schema, payload in self.view.summary(frames[-1]):
+                w.write_view(topic, schema, payload, frames[-1].host_t_ns)
         wrenches: list[Wrench] = []
         if rig.ft is not None:
             wrenches = rig.ft.read_available()
@@ -185,8 +200,12 @@ class TrialLog:
             if self.save_images and detections and detections[-1].frame_seq != self._last_image_seq:
                 image = rig.camera.latest_image()
                 if image is not None:
-                    w.write_image(image, detections[-1].device_t_ns, detections[-1].host_t_ns)
-                    self._last_image_seq = detections[-1].frame_seq
+                    seq = detections[-1].frame_seq
+                    w.write_image(image, detections[-1].device_t_ns, detections[-1].host_t_ns, seq,
+                                  detections=[d for d in detections if d.frame_seq == seq])
+                    self._last_image_seq = seq
+        self.frames.update(rig.clock.now_ns(),
+                           None if self.last_gripper is None else float(self.last_gripper.position_mm))
         return frames, wrenches
 
 
@@ -203,10 +222,11 @@ def _describe(exc: BaseException) -> str:
 
 
 def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
-              identity: str | None = None, save_images: bool = False) -> TrialResult:
+              identity: str | None = None, save_images: bool = False, live=None) -> TrialResult:
     """Run one trial into `path` (skipped when a complete file of the same identity is there).
 
     identity: the trial identity (protocols.identity), stored in the file's metadata.
+    live: a layerskin_exp.log.live.LiveView that also serves what the trial writes.
 
     body(log) drives the rig and calls log.drain() as the clock advances. If it raises (a device
     error, a refused command, Ctrl-C), motion is stopped first, the file is closed
@@ -221,24 +241,30 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         metadata = {**metadata, "identity": identity}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + PARTIAL_SUFFIX)
+    log.info("trial %s -> %s", name, path)
     rig.begin_trial(labels)
     t0_ns = rig.clock.now_ns()
     writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True)
-    log = TrialLog(writer, rig, save_images)
+    writer.live = live
+    trial = TrialLog(writer, rig, save_images)
     try:
-        body(log)
-        log.drain()
+        body(trial)
+        trial.drain()
     except BaseException as exc:
         rig.stop_motion()
         reason = _describe(exc)
         try:
-            log.drain()
+            trial.drain()
             detected_ns = getattr(exc, "detected_ns", None)  # a fault: when motion was stopped
-            log.event("error", reason, **({} if detected_ns is None else {"detected_ns": int(detected_ns)}))
+            trial.event("error", reason, **({} if detected_ns is None else {"detected_ns": int(detected_ns)}))
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
         writer.close(f"aborted: {reason}")
+        log.warning("trial %s aborted: %s (kept as %s)", name, reason, tmp)
         raise
     writer.close("complete", move_to=path)  # renamed under the writer's lock, fsynced
-    return TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
-                       peak_fz_n=log.peak_fz_n, peak_shear_n=log.peak_shear_n, stop_reason=log.stop_reason)
+    result = TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
+                         peak_fz_n=trial.peak_fz_n, peak_shear_n=trial.peak_shear_n,
+                         stop_reason=trial.stop_reason)
+    log.info("trial %s", result.summary())
+    return result

@@ -31,7 +31,7 @@ class SimArm(SimStreamMixin, Arm):
         p = snap[:, :3] + self._noise_rng.normal(0.0, self.cfg.position_noise_m, (len(t_s), 3))
         q = self._quats(snap[:, 3:12])
         seq, dev_ns, host_ns = (a.tolist() for a in self.stream.stamp(t_s))
-        self.stream.push_many(host_ns, [Pose(pi, qi, "tcp", d, h, k)
+        self.stream.push_many(host_ns, [Pose(pi, qi, "base", d, h, k)
                                         for pi, qi, d, h, k in zip(p, q, dev_ns, host_ns, seq, strict=True)])
 
     def _quats(self, rot9: np.ndarray) -> np.ndarray:

@@ -15,6 +15,8 @@ host timeline, "host_t_ns", "device_t_ns", "seq"; all (N,) int64):
     markers  marker_id (N,), position_m (N, 3), orientation_xyzw (N, 4), corners_px (N, 4, 2), frame_seq
     camera   image (N, H, W) uint8 (or a list if sizes differ)
     events   kind, message list[str], detail list[dict]  (t_ns = host_t_ns, no seq)
+    transforms  parent_frame_id, child_frame_id list[str], translation_m (N, 3), rotation_xyzw (N, 4)
+             (t_ns = host_t_ns; the frame tree of layerskin_exp.log.frames)
 Poses written with write_pose(p, topic) on other topics appear under their topic name.
 
 One live writer per file: SessionWriter holds an OS lock on its file until close; a second

@@ -1,4 +1,4 @@
-"""Command line: inspect a session file, or recover one whose writer died."""
+"""Command line: inspect a session file, recover one whose writer died, print the Foxglove layout."""
 
 from __future__ import annotations
 
@@ -78,7 +78,13 @@ def main(argv=None) -> int:
     p_recover = sub.add_parser("recover", help="rewrite a file whose writer died into a valid MCAP")
     p_recover.add_argument("input")
     p_recover.add_argument("output")
+    sub.add_parser("layout", help="print the Foxglove layout every session carries (JSON, for Layouts > Import)")
     args = parser.parse_args(argv)
+    if args.command == "layout":
+        from layerskin_exp.log.layout import session_layout
+
+        print(session_layout().to_json())
+        return 0
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # damage is listed in the report itself

@@ -120,7 +120,7 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         msgs.append("the session metadata record is damaged; its channels are read without it")
     metadata = {k: v for k, v in session_meta.items() if k not in ("format", "format_version")}
     for name, values in records.items():
-        if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC):
+        if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_LAYOUT):
             metadata[name] = values
     outcome = records.get(S.META_OUTCOME, {}).get("outcome")
     if outcome is not None and not isinstance(outcome, str):
@@ -133,7 +133,7 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
     stored = records.get(S.META_CLOCK_SYNC, {})
     clock_sync = {}
     for name, arrays in streams.items():
-        if name == "events":
+        if name in ("events", "transforms"):  # host-side records: no device clock
             arrays["t_ns"] = arrays["host_t_ns"].copy()
             continue
         cmap = None
@@ -208,6 +208,8 @@ def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None, lost
     groups: dict[str, list[ChannelMessages]] = {}
     for _cid, m in sc.messages.items():
         stream = m.channel.metadata.get("stream")
+        if stream is None and m.channel.metadata.get("view"):
+            continue  # a Foxglove view of data that a stream holds (Log, image annotations)
         if stream is None:
             msgs.append(f"topic {m.channel.topic} is not a layerskin stream; skipped")
             continue
@@ -233,6 +235,8 @@ def _decode_stream(sc: McapScan, stream: str, chans: list[ChannelMessages], msgs
         return _decode_markers(sc, chans)
     if stream == "camera":
         return _decode_camera(sc, chans[0])
+    if stream == "transforms":
+        return _decode_transforms(sc, chans[0])
     if chans[0].channel.message_encoding == "protobuf":
         return _decode_poses(sc, chans[0])
     return _decode_json(sc, chans[0], stream)
@@ -406,4 +410,24 @@ def _decode_camera(sc: McapScan, m: ChannelMessages) -> dict:
         out["image"] = np.stack(images)
     else:
         out["image"] = images
+    return out
+
+
+def _decode_transforms(sc: McapScan, m: ChannelMessages) -> dict:
+    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+
+    n = m.count
+    vals = np.empty((n, 7), np.float64)
+    parents, children = [], []
+    for i, payload in enumerate(sc.payloads(m)):
+        msg = FrameTransform.FromString(payload)
+        t, q = msg.translation, msg.rotation
+        vals[i] = (t.x, t.y, t.z, q.x, q.y, q.z, q.w)
+        parents.append(msg.parent_frame_id)
+        children.append(msg.child_frame_id)
+    out = _times(m)
+    out["parent_frame_id"] = parents
+    out["child_frame_id"] = children
+    out["translation_m"] = vals[:, :3].copy()
+    out["rotation_xyzw"] = vals[:, 3:].copy()
     return out

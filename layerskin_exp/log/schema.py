@@ -5,9 +5,18 @@ Foxglove Studio as it is; streams with no fitting Foxglove schema are JSON with 
 Every channel carries metadata {"stream": <reader stream name>, ...} so the reader groups
 channels by what they hold, not by topic spelling.
 
-Times: MCAP log_time = host receive ns, publish_time = device ns, sequence = device sequence
-number. JSON payloads repeat host_t_ns / device_t_ns / seq; protobuf payloads put the device
-time in their `timestamp`.
+Times (one host timeline for Foxglove): MCAP log_time = host receive ns; the `timestamp` of
+every Foxglove message is that same host time, so plots by receive time or by message time
+agree across devices. The device's own clock stays in the MCAP publish_time (and sequence =
+device sequence number); JSON payloads repeat host_t_ns / device_t_ns / seq. The reader maps
+device time onto the host timeline with the stored clock maps (t_ns), as before.
+
+Frames: every Foxglove message names its frame (skin images "skin", poses the frame they are
+expressed in, the camera image "camera"); FrameTransform messages on /tf relate them (see
+layerskin_exp.log.frames).
+
+Channels whose metadata has no "stream" key (/log, image annotations) are views for Foxglove of
+data that is already in a stream; the reader skips them.
 """
 
 from __future__ import annotations
@@ -16,6 +25,10 @@ import json
 
 import numpy as np
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.Log_pb2 import Log
+from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap_protobuf.schema import build_file_descriptor_set
@@ -32,6 +45,18 @@ TCP_TOPIC = "/arm/tcp"
 GRIPPER_TOPIC = "/gripper/state"
 EVENTS_TOPIC = "/events"
 CAMERA_TOPIC = "/camera/image"
+SKIN_SUMMARY_TOPIC = "/skin/summary"  # per-layer totals and CoP at display rate (a view)
+CAMERA_MARKERS_TOPIC = "/camera/markers"  # ImageAnnotations: detected marker outlines on the image
+TF_TOPIC = "/tf"
+LOG_TOPIC = "/log"  # protocol events again, as foxglove.Log for the Log panel
+
+SKIN_FRAME = "skin"
+CAMERA_FRAME = "camera"
+
+
+def cop_topic(layer: str) -> str:
+    """ImageAnnotations with the centre of pressure of one layer, drawn on its image."""
+    return f"{SKIN_TOPICS[layer]}/cop"
 
 
 def marker_pose_topic(marker_id: int) -> str:
@@ -48,10 +73,14 @@ META_LABELS = "labels"
 META_OUTCOME = "outcome"
 META_CLOCK_SYNC = "clock_sync"
 META_RECOVERED = "recovered"
+META_LAYOUT = "foxglove.layout"  # the Foxglove layout, as the SDK's MCAPWriter.write_layout stores it
 
 # ---------------------------------------------------------------------------- protobuf schemas
 
-PROTO_CLASSES = {cls.DESCRIPTOR.full_name: cls for cls in (RawImage, PoseInFrame, CompressedImage)}
+PROTO_CLASSES = {
+    cls.DESCRIPTOR.full_name: cls
+    for cls in (RawImage, PoseInFrame, CompressedImage, FrameTransform, Log, ImageAnnotations)
+}
 
 
 def proto_schema_data(cls) -> bytes:
@@ -98,6 +127,16 @@ JSON_SCHEMAS = {
             "marker_id": _INT,
             "frame_seq": _INT,
             "corners_px": {"type": "array", "items": {"type": "array", "items": _NUM}},
+        },
+    ),
+    "layerskin.SkinSummary": _object(
+        "layerskin.SkinSummary",
+        {
+            layer: {
+                "type": "object",
+                "properties": {"total_counts": _NUM, "cop_mm": {"type": "array", "items": _NUM}},
+            }
+            for layer in SKIN_TOPICS
         },
     ),
     "layerskin.ProtocolEvent": _object(
@@ -175,20 +214,24 @@ def _skin_tail() -> bytes:
 SKIN_TAIL = _skin_tail()
 """Bytes that precede the 512 pixel bytes at the end of every skin RawImage payload."""
 
+_SKIN_FRAME_FIELD = b"\x3a" + bytes((len(SKIN_FRAME),)) + SKIN_FRAME.encode()  # field 7, frame_id
+_SKIN_REST = _SKIN_FRAME_FIELD + SKIN_TAIL
+
 
 _last_sec: list = [None, b"", ()]  # one-entry cache: consecutive frames share their second
 _HEAD_START = [b"\x0a" + bytes((n,)) for n in range(128)]  # field 1 tag + submessage length
 
 
-def skin_head(device_t_ns: int) -> bytes:
+def skin_head(t_ns: int) -> bytes:
     """Everything of a skin foxglove.RawImage payload before its 512 pixel bytes.
 
-    head + pixels (16x16 little-endian uint16) equals RawImage(timestamp=device time, width=16,
-    height=16, encoding="mono16", step=32, data=pixels).SerializeToString() (fields in number
-    order, frame_id empty), built without a protobuf object per message. The pixels end the
-    message, which the reader relies on (and checks).
+    head + pixels (16x16 little-endian uint16) parses as RawImage(timestamp=t_ns, frame_id="skin",
+    width=16, height=16, encoding="mono16", step=32, data=pixels), built without a protobuf
+    object per message. frame_id (field 7) is written right after the timestamp rather than in
+    field-number order, so the pixels still end the message, which the reader relies on (and
+    checks); protobuf parsers accept fields in any order.
     """
-    sec, nsec = divmod(device_t_ns, 1_000_000_000)
+    sec, nsec = divmod(t_ns, 1_000_000_000)
     if sec != _last_sec[0]:
         ts = b"\x08" + _varint(sec) if sec else b""
         # Per nanosecond-varint length k (1..5): message start, seconds, nanos tag.
@@ -196,22 +239,74 @@ def skin_head(device_t_ns: int) -> bytes:
         _last_sec[0], _last_sec[1], _last_sec[2] = sec, ts, starts
     if nsec:
         v = _varint(nsec)
-        return _last_sec[2][len(v)] + v + SKIN_TAIL
+        return _last_sec[2][len(v)] + v + _SKIN_REST
     # The timestamp submessage is always present (even empty), as protobuf writes a set field.
     ts = _last_sec[1]
-    return _HEAD_START[len(ts)] + ts + SKIN_TAIL
+    return _HEAD_START[len(ts)] + ts + _SKIN_REST
 
 
-def skin_payload(device_t_ns: int, pixels: bytes) -> bytes:
+def skin_payload(t_ns: int, pixels: bytes) -> bytes:
     """A whole skin RawImage payload (see skin_head)."""
-    return skin_head(device_t_ns) + pixels
+    return skin_head(t_ns) + pixels
 
 
-def pose_payload(position_m, orientation_xyzw, frame_id: str, device_t_ns: int) -> bytes:
+def pose_payload(position_m, orientation_xyzw, frame_id: str, t_ns: int) -> bytes:
     msg = PoseInFrame(frame_id=frame_id)
-    msg.timestamp.FromNanoseconds(int(device_t_ns))
+    msg.timestamp.FromNanoseconds(int(t_ns))
     p = msg.pose.position
     p.x, p.y, p.z = (float(v) for v in position_m)
     q = msg.pose.orientation
     q.x, q.y, q.z, q.w = (float(v) for v in orientation_xyzw)
+    return msg.SerializeToString()
+
+
+def transform_payload(parent: str, child: str, translation_m, rotation_xyzw, t_ns: int) -> bytes:
+    msg = FrameTransform(parent_frame_id=parent, child_frame_id=child)
+    msg.timestamp.FromNanoseconds(int(t_ns))
+    t, q = msg.translation, msg.rotation
+    t.x, t.y, t.z = (float(v) for v in translation_m)
+    q.x, q.y, q.z, q.w = (float(v) for v in rotation_xyzw)
+    return msg.SerializeToString()
+
+
+# Protocol event kinds -> foxglove.Log level (anything else is INFO).
+LOG_LEVELS = {"error": Log.ERROR, "safety": Log.WARNING, "guard": Log.WARNING}
+
+
+def log_payload(kind: str, message: str, detail: dict, t_ns: int) -> bytes:
+    text = message if not detail else f"{message} {dumps(detail).decode()}"
+    msg = Log(level=LOG_LEVELS.get(kind, Log.INFO), message=text, name=kind)
+    msg.timestamp.FromNanoseconds(int(t_ns))
+    return msg.SerializeToString()
+
+
+def _colour(msg, rgba) -> None:
+    msg.r, msg.g, msg.b, msg.a = rgba
+
+
+def outlines_payload(outlines_px, t_ns: int, rgba=(0.1, 1.0, 0.2, 1.0), thickness: float = 2.0) -> bytes:
+    """ImageAnnotations: one closed outline per (K, 2) array of pixel corners (x, y)."""
+    msg = ImageAnnotations()
+    msg.timestamp.FromNanoseconds(int(t_ns))
+    for corners in outlines_px:
+        a = msg.points.add(type=PointsAnnotation.LINE_LOOP, thickness=thickness)
+        a.timestamp.FromNanoseconds(int(t_ns))
+        _colour(a.outline_color, rgba)
+        for x, y in corners:
+            p = a.points.add()
+            p.x, p.y = float(x), float(y)
+    return msg.SerializeToString()
+
+
+def cop_payload(centre_px, t_ns: int, diameter_px: float = 1.5, rgba=(1.0, 0.1, 0.1, 1.0)) -> bytes:
+    """ImageAnnotations: a filled dot at the centre of pressure (x, y pixels; none when NaN)."""
+    msg = ImageAnnotations()
+    msg.timestamp.FromNanoseconds(int(t_ns))
+    x, y = (float(v) for v in centre_px)
+    if np.isfinite(x) and np.isfinite(y):
+        c = msg.circles.add(diameter=diameter_px, thickness=0.3)
+        c.timestamp.FromNanoseconds(int(t_ns))
+        c.position.x, c.position.y = x, y
+        _colour(c.fill_color, rgba)
+        _colour(c.outline_color, (1.0, 1.0, 1.0, 1.0))
     return msg.SerializeToString()

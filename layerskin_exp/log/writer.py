@@ -9,6 +9,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform as FrameTransformMsg
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.Log_pb2 import Log
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap.opcode import Opcode
@@ -16,11 +19,13 @@ from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 
 import layerskin_exp
+from layerskin_exp.log import frames as F
 from layerskin_exp.log import schema as S
 from layerskin_exp.log.lock import WriterLock
 from layerskin_exp.sync import estimate_clock_map
 from layerskin_exp.types import (
     SKIN_SHAPE,
+    FrameTransform,
     GripperState,
     MarkerDetection,
     Pose,
@@ -42,7 +47,7 @@ _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none"
 _U32_MAX = 2**32 - 1
 _U64_MAX = 2**64 - 1
 _LE_U16 = np.dtype("<u2")
-_SKIN_PAIR_BYTES = 2 * (len(S.SKIN_TAIL) + S.SKIN_DATA_BYTES + 12 + 31)
+_SKIN_PAIR_BYTES = 2 * (len(S.skin_head(0)) + S.SKIN_DATA_BYTES + 12 + 31)
 # An MCAP Message record: opcode, record length, channel id, sequence, log time, publish time,
 # then the payload (MCAP spec, "Message (op=0x05)"); 31 bytes before the payload.
 _MESSAGE = struct.Struct("<BQHIQQ")
@@ -189,7 +194,10 @@ class SessionWriter:
             GripperState: self.write_gripper,
             MarkerDetection: self.write_marker,
             ProtocolEvent: self.write_event,
+            FrameTransform: self.write_transform,
         }
+        # A live view (layerskin_exp.live.LiveView) sees a decimated copy of what is written.
+        self.live = None
 
     def _start(self, metadata: dict, labels: dict, compression: str, chunk_span_ns: int, chunk_bytes: int) -> None:
         self._mcap = Writer(
@@ -238,7 +246,8 @@ class SessionWriter:
                 records[str(key)] = value
             else:
                 session[str(key)] = value
-        reserved = {S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_RECOVERED}
+        reserved = {S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_RECOVERED,
+                    S.META_LAYOUT}
         clash = reserved & set(records)
         if clash:
             raise ValueError(f"metadata keys {sorted(clash)} are reserved by the session log; rename them")
@@ -246,6 +255,10 @@ class SessionWriter:
         for name, value in records.items():
             self._add_metadata(name, value)
         self._add_metadata(S.META_LABELS, labels)
+        # Foxglove opens the file with this layout (both layers 0..4095, plots, 3D scene).
+        from layerskin_exp.log.layout import session_layout
+
+        self._mcap.add_metadata(S.META_LAYOUT, {"": session_layout().to_json()})
 
     def _add_metadata(self, name: str, values) -> None:
         # MCAP metadata maps str -> str: each value is stored as JSON so types come back.
@@ -357,7 +370,7 @@ class SessionWriter:
         dev, host, seq = int(frame.device_t_ns), int(frame.host_t_ns), int(frame.seq)
         if dev < 0 or host < 0 or not 0 <= seq <= _U32_MAX:
             self._check_times(host, dev, seq)
-        head = S.skin_head(dev)
+        head = S.skin_head(host)  # Foxglove time = host time (see schema)
         size = _MESSAGE_FIXED + len(head) + S.SKIN_DATA_BYTES
         pack = _MESSAGE.pack
         sup_id, deep_id = self._skin_sup, self._skin_deep
@@ -369,6 +382,8 @@ class SessionWriter:
         self._pending_log += (host, host)
         self._skin_dev.append(dev)
         self._skin_host.append(host)
+        if self.live is not None:
+            self.live.frame(frame, head)
         start = self._chunk_start_ns
         if start is None:
             self._chunk_start_ns = start = host
@@ -388,7 +403,10 @@ class SessionWriter:
         meta: dict | None = None,
     ) -> None:
         channel = self._channel(topic, schema, {"stream": stream, **(meta or {})})
-        self._add(channel, host, dev, seq, S.dumps(body))
+        payload = S.dumps(body)
+        self._add(channel, host, dev, seq, payload)
+        if self.live is not None:
+            self.live.message(topic, schema, payload, host)
         pairs = self._clock(stream)
         pairs[0].append(dev)
         pairs[1].append(host)
@@ -416,6 +434,8 @@ class SessionWriter:
             "position_mm": _vec(p.position_mm, 3, "position_mm"),
         }
         self._write_json(S.STAGE_TOPIC, "layerskin.StagePosition", "stage", host, dev, seq, body)
+        # The stage carries the indenter, its position given in the skin (= base) frame.
+        self._derived_transform(F.BASE, F.TOOL, np.asarray(body["position_mm"], float) * 1e-3, F.IDENTITY, host)
 
     def write_gripper(self, g: GripperState) -> None:
         self._check_open()
@@ -439,6 +459,9 @@ class SessionWriter:
         self._check_open()
         stream = "tcp" if topic == S.TCP_TOPIC else topic
         self._write_pose(pose, topic, stream, {}, int(pose.seq), int(pose.device_t_ns), int(pose.host_t_ns))
+        if topic == S.TCP_TOPIC:  # the TCP pose in its frame is where the tool frame is
+            self._derived_transform(pose.frame_id, F.TOOL, pose.position_m, pose.orientation_xyzw,
+                                    int(pose.host_t_ns))
 
     def _write_pose(self, pose: Pose, topic: str, stream: str, meta: dict, seq: int, dev: int, host: int):
         channel = self._channel(topic, PoseInFrame, {"stream": stream, **meta})
@@ -446,9 +469,11 @@ class SessionWriter:
             _vec(pose.position_m, 3, "position_m"),
             _vec(pose.orientation_xyzw, 4, "orientation_xyzw"),
             pose.frame_id,
-            dev,
+            host,
         )
         self._add(channel, host, dev, seq, payload)
+        if self.live is not None:
+            self.live.message(topic, PoseInFrame, payload, host)
         pairs = self._clock(stream)
         pairs[0].append(dev)
         pairs[1].append(host)
@@ -478,6 +503,37 @@ class SessionWriter:
             {"stream": "markers", **meta, "part": "detection"},
         )
         self._add(channel, host, dev, seq, S.dumps(body))
+        self._derived_transform(m.pose.frame_id, F.marker_frame(mid), m.pose.position_m, m.pose.orientation_xyzw,
+                                host)
+
+    def write_transform(self, tf: FrameTransform) -> None:
+        """A foxglove.FrameTransform on /tf (reader stream "transforms")."""
+        self._check_open()
+        self._transform(tf.parent_frame_id, tf.child_frame_id, tf.translation_m, tf.rotation_xyzw, int(tf.host_t_ns))
+
+    def _derived_transform(self, parent: str, child: str, translation_m, rotation_xyzw, host: int) -> None:
+        t, q = _vec(translation_m, 3, "translation_m"), _vec(rotation_xyzw, 4, "rotation_xyzw")
+        if None in t or None in q:
+            return  # a pose with NaN (lost tracking) has its own record; no frame to place
+        self._transform(parent, child, t, q, host)
+
+    def _transform(self, parent: str, child: str, translation_m, rotation_xyzw, host: int) -> None:
+        channel = self._channel(S.TF_TOPIC, FrameTransformMsg, {"stream": "transforms"})
+        payload = S.transform_payload(parent, child, _vec(translation_m, 3, "translation_m"),
+                                      _vec(rotation_xyzw, 4, "rotation_xyzw"), host)
+        self._add(channel, host, host, 0, payload)
+        if self.live is not None:
+            self.live.message(S.TF_TOPIC, FrameTransformMsg, payload, host, key=child)
+
+    def write_view(self, topic: str, schema, payload: bytes, host_t_ns: int) -> None:
+        """A message for Foxglove only, derived from data a stream already holds (image
+        annotations, display-rate skin summaries): schema is a Foxglove protobuf class or a JSON
+        schema name of schema.JSON_SCHEMAS. The reader skips these channels."""
+        self._check_open()
+        channel = self._channel(topic, schema, {"view": "foxglove"})
+        self._add(channel, int(host_t_ns), int(host_t_ns), 0, payload)
+        if self.live is not None:
+            self.live.message(topic, schema, payload, int(host_t_ns))
 
     def write_event(self, e: ProtocolEvent) -> None:
         """Protocol events are rare and matter most after a crash: flushed at once."""
@@ -492,10 +548,21 @@ class SessionWriter:
         }
         channel = self._channel(S.EVENTS_TOPIC, "layerskin.ProtocolEvent", {"stream": "events"})
         self._add(channel, host, dev, 0, S.dumps(body))
+        # The same event for Foxglove's Log panel.
+        log_channel = self._channel(S.LOG_TOPIC, Log, {"view": "foxglove"})
+        log_payload = S.log_payload(body["kind"], body["message"], body["detail"], host)
+        self._add(log_channel, host, host, 0, log_payload)
+        if self.live is not None:
+            self.live.message(S.LOG_TOPIC, Log, log_payload, host, key=None)
         self.flush()
 
-    def write_image(self, gray_uint8: np.ndarray, device_t_ns: int, host_t_ns: int, seq: int = 0) -> None:
-        """A camera image (H, W) uint8 (or (H, W, 3) BGR) as a PNG foxglove.CompressedImage."""
+    def write_image(self, gray_uint8: np.ndarray, device_t_ns: int, host_t_ns: int, seq: int = 0,
+                    detections=()) -> None:
+        """A camera image (H, W) uint8 (or (H, W, 3) BGR) as a PNG foxglove.CompressedImage.
+
+        detections: the MarkerDetections found in this image; their outlines go on
+        /camera/markers as foxglove.ImageAnnotations with the image's timestamp.
+        """
         self._check_open()
         img = np.asarray(gray_uint8)
         if img.dtype != np.uint8 or img.ndim not in (2, 3):
@@ -505,13 +572,17 @@ class SessionWriter:
         ok, png = cv2.imencode(".png", img)
         if not ok:
             raise ValueError(f"could not PNG-encode an image of shape {img.shape}")
-        msg = CompressedImage(format="png", frame_id="camera", data=png.tobytes())
-        msg.timestamp.FromNanoseconds(int(device_t_ns))
+        msg = CompressedImage(format="png", frame_id=S.CAMERA_FRAME, data=png.tobytes())
+        msg.timestamp.FromNanoseconds(int(host_t_ns))
         channel = self._channel(S.CAMERA_TOPIC, CompressedImage, {"stream": "camera"})
         self._add(channel, int(host_t_ns), int(device_t_ns), int(seq), msg.SerializeToString())
         pairs = self._clock("camera")
         pairs[0].append(int(device_t_ns))
         pairs[1].append(int(host_t_ns))
+        if detections:
+            outlines = [np.asarray(d.corners_px, float) for d in detections]
+            self.write_view(S.CAMERA_MARKERS_TOPIC, ImageAnnotations,
+                            S.outlines_payload(outlines, int(host_t_ns)), int(host_t_ns))
 
     # ------------------------------------------------------------------ closing
 

@@ -1,8 +1,10 @@
 """Look at the simulated skin: both layers' counts under a press and under a slide.
 
-    python -m layerskin_exp.sim.preview [out=PATH] [seed=N]
+    python -m layerskin_exp.sim.preview [out=PATH] [seed=N] [sim.KEY=VALUE ...] [skin.KEY=VALUE ...]
+    python -m layerskin_exp.sim.preview out=soft.png sim.spacer.modulus=20
 
-Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of
+sim.* and skin.* are the same overrides the protocols take (conf/sim/, conf/skin/), checked the
+same way; seed=N is sim.seed=N. Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of
 pressure marked (baseline-subtracted counts as weights) and the applied force in the titles.
 """
 
@@ -19,7 +21,9 @@ def _cop(counts: np.ndarray, base: np.ndarray, xs: np.ndarray) -> np.ndarray:
     return np.array([p.sum(axis=0) @ xs / tot, p.sum(axis=1) @ xs / tot])
 
 
-def render(out: str = "skin_preview.png", seed: int = 0) -> str:
+def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) -> str:
+    """Write the preview PNG to `out`; sim (SimConfig) / skin (SkinConfig) default to the defaults
+    with sim.seed = seed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -29,8 +33,9 @@ def render(out: str = "skin_preview.png", seed: int = 0) -> str:
     from layerskin_exp.sim.config import SimConfig
     from layerskin_exp.sim.skin import SkinModel
 
-    sim, skin = SimConfig(seed=seed), SkinConfig()
-    m = SkinModel(sim, skin, "hemisphere", np.random.default_rng(seed))
+    sim = sim if sim is not None else SimConfig(seed=seed)
+    skin = skin if skin is not None else SkinConfig()
+    m = SkinModel(sim, skin, "hemisphere", np.random.default_rng(sim.seed))
     xs = skin.taxel_centres_mm()
     idle = m.frames([m.step(0.0, np.array([0.0, 0.0, 1.0]))], np.array([0.0]))
     cases = []
@@ -64,9 +69,47 @@ def render(out: str = "skin_preview.png", seed: int = 0) -> str:
     return out
 
 
+def configs(overrides: list[str]):
+    """(SimConfig, SkinConfig) from conf/ with sim.* / skin.* overrides, validated as the protocols
+    validate them (a bad key or value exits with code 2 and one line)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+
+    from layerskin_exp.cli import CONF_DIR, one_line, refuse
+    from layerskin_exp.config import ConfigError, register_all, validate
+
+    register_all()
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            typed = validate(compose(config_name="force_calibration", overrides=overrides))
+    except ConfigError as e:
+        refuse(e)
+    except HydraException as e:
+        refuse(ConfigError(one_line(e)))
+    finally:
+        GlobalHydra.instance().clear()
+    return typed.sim, typed.skin
+
+
 def main(argv: list[str]) -> None:
-    opts = dict(a.split("=", 1) for a in argv if "=" in a)
-    path = render(opts.get("out", "skin_preview.png"), int(opts.get("seed", 0)))
+    if any(a in ("-h", "--help") for a in argv):
+        print(__doc__.strip())
+        return
+    out, overrides = "skin_preview.png", []
+    for a in argv:
+        key, sep, value = a.partition("=")
+        if not sep or not (key in ("out", "seed") or key.lstrip("+~").startswith(("sim.", "skin."))):
+            print(f"error: {a!r}: expected out=PATH, seed=N, sim.KEY=VALUE or skin.KEY=VALUE (see --help)",
+                  file=sys.stderr)
+            sys.exit(2)
+        if key == "out":
+            out = value
+        else:
+            overrides.append(f"sim.seed={value}" if key == "seed" else a)
+    sim, skin = configs(overrides)
+    path = render(out, sim=sim, skin=skin)
     print(f"wrote {path}")
 
 

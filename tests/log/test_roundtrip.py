@@ -126,7 +126,8 @@ def test_other_pose_topics_become_their_own_stream(tmp_path):
 
 
 def test_skin_payload_is_the_protobuf_encoding(tmp_path):
-    """The hand-built RawImage bytes equal protobuf's own serialisation, and decode back."""
+    """The hand-built RawImage bytes parse as the same message protobuf builds (frame_id "skin"),
+    end with the pixels, and decode back."""
     # Every varint length of the seconds and nanoseconds fields, consecutive calls within one
     # second (the writer caches the seconds part) and across seconds.
     nanos = (0, 1, 127, 128, 16_383, 16_384, 2_097_151, 2_097_152, 268_435_455, 268_435_456, 999_999_999)
@@ -134,11 +135,13 @@ def test_skin_payload_is_the_protobuf_encoding(tmp_path):
     devs = [999, 1_000_000_000, 5_123_456_789] + [s * 1_000_000_000 + n for s in secs for n in nanos]
     for dev in devs:
         f = frame(dev % 97)
-        expected = RawImage(width=16, height=16, encoding="mono16", step=32, data=f.superficial.tobytes())
+        expected = RawImage(width=16, height=16, encoding="mono16", step=32, data=f.superficial.tobytes(),
+                            frame_id="skin")
         expected.timestamp.FromNanoseconds(dev)
         payload = S.skin_payload(dev, f.superficial.tobytes())
-        assert payload == expected.SerializeToString()
         back = RawImage.FromString(payload)
+        assert back == expected and len(payload) == len(expected.SerializeToString())
+        assert payload.endswith(S.SKIN_TAIL + f.superficial.tobytes())
         assert back.timestamp.ToNanoseconds() == dev
         np.testing.assert_array_equal(np.frombuffer(back.data, "<u2").reshape(16, 16), f.superficial)
 

@@ -1,0 +1,37 @@
+"""`python -m protocols.live PROTOCOL [overrides]`: run a protocol and watch it in Foxglove.
+
+    python -m protocols.live grip_depth hardware=loopback grip_depth=9     # (lsx-live ...)
+    python -m protocols.live force_calibration positions.count=2 live_port=8766
+
+The same as the protocol's own command with live=true: a Foxglove WebSocket server on
+127.0.0.1:live_port serves both layer maps, their CoP, force, poses, the frame tree and the
+events, thinned to display rate. In Foxglove: Open connection > Foxglove WebSocket >
+ws://127.0.0.1:8765, then Layouts > Import the file `python -m layerskin_exp.log layout`
+writes (the layout every session file carries). The simulated rig (hardware=sim) runs much
+faster than real time; hardware=loopback runs in real time.
+"""
+
+from __future__ import annotations
+
+import sys
+
+PROTOCOLS = {"force_calibration": "protocols.force_calibration", "grip_depth": "protocols.grip_depth",
+             "calibrate": "protocols.force_calibration", "grip": "protocols.grip_depth"}
+
+
+def cli(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in PROTOCOLS:
+        print(__doc__.strip(), file=sys.stderr if argv and argv[0] not in ("-h", "--help") else sys.stdout)
+        return 0 if argv and argv[0] in ("-h", "--help") else 2
+    import importlib
+
+    module = importlib.import_module(PROTOCOLS[argv[0]])
+    rest = [a for a in argv[1:] if not a.startswith("live=")]
+    sys.argv = [f"{sys.argv[0]} {argv[0]}", "live=true", *rest]
+    module.cli()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(cli())
