@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from hardware.interfaces import DeviceError
 from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, refuse
 from layerskin_exp.config import ConfigError, validate
+from layerskin_exp.log import SessionInUseError
 from layerskin_exp.provenance import provenance
 from protocols.runner import Terminated, check_termination, request_termination, termination_pending
 
@@ -116,6 +117,11 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     except ConfigError as e:
         rig.stop_motion()
         refuse(e)
+    except SessionInUseError as e:  # another run holds this trial's file: nothing was written here
+        rig.stop_motion()
+        log.error("run refused: %s", one_line(e))
+        print(f"error: {one_line(e)}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
     except Exception as e:
         rig.stop_motion()
         log.error("run stopped: %s: %s", type(e).__name__, one_line(e))

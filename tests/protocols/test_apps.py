@@ -242,3 +242,25 @@ def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs
             proc.kill()
     (partial,) = data.glob("force_calibration/*/*.partial")  # the trial in progress, closed at a tick
     assert load_session(partial, warn=False).outcome == outcome
+
+
+def test_second_run_on_a_trial_in_progress_refuses_naming_the_other(tmp_path, hydra_dirs):
+    # Two processes on one trial (e.g. launched twice with different sim.seed): the second refuses
+    # at once, names the first, and does not claim to have marked anything aborted.
+    from omegaconf import OmegaConf
+
+    from layerskin_exp.log import SessionWriter
+    from protocols.grip import trial_path
+
+    data = tmp_path / "data"
+    args = [*TINY_GRIP, "progress=false", f"data_root={data}"]
+    cfg, typed = compose_app("grip_depth", args)
+    path = trial_path(typed, OmegaConf.to_container(cfg, resolve=True))
+    path.parent.mkdir(parents=True)
+    holder = SessionWriter(path.with_name(path.name + ".partial"), metadata={}, labels={})
+    try:
+        r = run_cli("protocols.grip_depth", [*args, *hydra_dirs], tmp_path)
+    finally:
+        holder.close("aborted: test")
+    assert r.returncode == 1
+    assert f"pid {os.getpid()}" in r.stderr and "marked aborted" not in r.stderr, r.stderr
