@@ -186,6 +186,7 @@ class DownsampleStream:
         self.pre = pre
         self.factor, self.h = int(pre.downsample), int(pre.ma_window) // 2
         self.w = (_tap_weights(pre.ma_window, pre.downsample) / (pre.ma_window * pre.downsample)).astype(np.float32)
+        self.w_t = _tap_weights(pre.ma_window, pre.downsample) / (pre.ma_window * pre.downsample)  # float64
         self.inv_scale = (1.0 / pre._scale())[:, None, None]
         self.reset()
 
@@ -217,7 +218,8 @@ class DownsampleStream:
             o = taps[0][0] * self.w[0]
             for j in range(1, n_taps):
                 o += taps[j][0] * self.w[j]
-            t_k = round(sum(float(wj) * t for wj, (_, t) in zip(self.w, taps, strict=True)))
+            t0 = taps[0][1]  # relative to the first tap: ns since boot do not fit a float64 mantissa's ns
+            t_k = t0 + round(sum(wj * (t - t0) for wj, (_, t) in zip(self.w_t, taps, strict=True)))
             self.pending.append((self.k, o, t_k))
             self.k += 1
         if self.baseline is not None and self.pending:
