@@ -46,7 +46,7 @@ class CnnConfig:
     segment_windows: int = 64  # windows per contiguous segment in a batch (frames encoded once)
     max_train_windows: int | None = None  # per-epoch subsample of training windows (demo)
     device: str = "auto"  # auto | cpu | cuda
-    torch_threads: int | None = None  # None: default_torch_threads(device), set by the entry point
+    torch_threads: int | None = None  # None: default_torch_threads (1), set by the report for its run
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -64,7 +64,7 @@ class CnnConfig:
         require(self.device in ("auto", "cpu", "cuda"), "analysis.cnn.device", self.device,
                 "must be auto, cpu or cuda")
         require(self.torch_threads is None or self.torch_threads >= 1, "analysis.cnn.torch_threads",
-                self.torch_threads, "must be >= 1 or null (all cores)")
+                self.torch_threads, "must be >= 1 or null (the default, one thread)")
 
 
 @dataclass
