@@ -145,7 +145,7 @@ class OnlineEstimator:
         self.est = estimator
         self.model = estimator.force_model
         self.model.model_.to("cpu").eval()
-        if threads is not None:  # the caller's process decides; one thread is fastest for one frame
+        if threads is not None and backend == "torch":  # one thread is fastest for one frame
             torch.set_num_threads(threads)
         self.layers, self.seq_len = self.model.layers, self.model.seq_len
         norm = self.model.norm_

@@ -32,6 +32,8 @@ TCP_TOPIC = "/arm/tcp"
 GRIPPER_TOPIC = "/gripper/state"
 EVENTS_TOPIC = "/events"
 CAMERA_TOPIC = "/camera/image"
+ESTIMATE_FORCE_TOPIC = "/estimate/force"
+ESTIMATE_SLIP_TOPIC = "/estimate/slip"
 
 
 def marker_pose_topic(marker_id: int) -> str:
@@ -78,6 +80,10 @@ JSON_SCHEMAS = {
         "layerskin.Wrench", {**_TIMES, "status": _INT, "force_n": _VEC3, "torque_nm": _VEC3}
     ),
     "layerskin.StagePosition": _object("layerskin.StagePosition", {**_TIMES, "position_mm": _VEC3}),
+    "layerskin.ForceEstimate": _object("layerskin.ForceEstimate", {**_TIMES, "force_n": _VEC3}),
+    "layerskin.SlipEstimate": _object(
+        "layerskin.SlipEstimate", {**_TIMES, "score": _NUM, "slip": {"type": "boolean"}}
+    ),
     "layerskin.GripperState": _object(
         "layerskin.GripperState",
         {
