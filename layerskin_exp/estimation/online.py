@@ -100,16 +100,21 @@ class _TorchBackend:
     """Frame encoder in PyTorch; per frame the heads' input projections are cached (numpy heads)."""
 
     def __init__(self, model) -> None:
+        self.layers = model.layers
         self.encoder = model.model_.encoder
         self.heads = GruHeads(model.model_)
+        norm = model.norm_
+        self.x_mean, self.x_inv_std = norm["x_mean"][:, None, None], (1.0 / norm["x_std"])[:, None, None]
+        self.y_mean, self.y_std = norm["y_mean"], norm["y_std"]
 
-    def encode(self, x: np.ndarray) -> np.ndarray:
+    def encode(self, maps: np.ndarray) -> np.ndarray:
+        x = (input_channels(maps[None], self.layers)[0] - self.x_mean) * self.x_inv_std
         with torch.inference_mode():
-            enc = self.encoder(torch.from_numpy(x)[None])[0].numpy()
+            enc = self.encoder(torch.from_numpy(np.ascontiguousarray(x, np.float32))[None])[0].numpy()
         return self.heads.project(enc)
 
     def force(self, window: list) -> np.ndarray:
-        return self.heads.run(window)
+        return self.heads.run(window) * self.y_std + self.y_mean
 
 
 class _OnnxBackend:
@@ -147,11 +152,7 @@ class OnlineEstimator:
         self.model.model_.to("cpu").eval()
         if threads is not None and backend == "torch":  # one thread is fastest for one frame
             torch.set_num_threads(threads)
-        self.layers, self.seq_len = self.model.layers, self.model.seq_len
-        norm = self.model.norm_
-        self.x_mean = norm["x_mean"][:, None, None]
-        self.x_inv_std = (1.0 / norm["x_std"])[:, None, None]
-        self.y_mean, self.y_std = norm["y_mean"], norm["y_std"]
+        self.seq_len = self.model.seq_len
         if backend == "torch":
             self.backend = _TorchBackend(self.model)
         elif backend == "onnx":
@@ -175,13 +176,6 @@ class OnlineEstimator:
         self.cache: deque = deque(maxlen=self.seq_len)
         self.latest: Estimate | None = None
 
-    def encode(self, maps: np.ndarray) -> np.ndarray:
-        """Scaled maps (2, 16, 16) -> what the cache keeps for the frame."""
-        if self.backend_name == "onnx":
-            return self.backend.encode(maps)
-        x = (input_channels(maps[None], self.layers)[0] - self.x_mean) * self.x_inv_std
-        return self.backend.encode(np.ascontiguousarray(x, np.float32))
-
     def update(self, superficial_counts, deep_counts, t_ns: int) -> Estimate | None:
         frame = np.stack([np.asarray(superficial_counts), np.asarray(deep_counts)])
         done = self.stream.push(frame, t_ns)
@@ -191,11 +185,9 @@ class OnlineEstimator:
                                        self.latest.slip_score, self.latest.slip, False)
             return self.latest
         for k, maps, t_k in done:
-            self.cache.append(self.encode(maps))
+            self.cache.append(self.backend.encode(maps))  # each frame encoded once
             window = [self.cache[0]] * (self.seq_len - len(self.cache)) + list(self.cache)
             force = self.backend.force(window)
-            if self.backend_name == "torch":
-                force = force * self.y_std + self.y_mean
             score, flag = np.nan, False
             if self.slip is not None:
                 tot = maps.sum(axis=(-2, -1))
