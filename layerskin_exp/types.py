@@ -115,7 +115,8 @@ class SkinEstimate:
     """A live estimate from the skin (layerskin_exp.estimation.OnlineEstimator).
 
     force_n: (3,) Fx, Fy, Fz in N; slip_score in MAD units of the detector's training envelope
-    (None without a slip detector); slip: score at or above the fitted threshold.
+    (None without a slip detector); slip: this frame confirms a slip event (a score peak at or
+    above the fitted threshold, one frame earlier).
     frame: index of the downsampled frame; device_t_ns: its time on the skin clock (the filter's
     centre); host_t_ns: receive time of the raw frame that completed it.
     """

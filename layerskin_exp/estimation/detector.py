@@ -140,8 +140,12 @@ class SlipDetector:
 
 
 class SlipStream:
-    """The detector's score one sample at a time: update(x) -> (score, flag = score >= threshold).
+    """The detector one sample at a time: update(x) -> (score, slip).
 
+    slip is True at the sample that confirms a detected event: the score has just fallen after a
+    local maximum (a plateau counts once, at its middle, as scipy's find_peaks takes it) at or
+    above the threshold; the event itself was one sample (or half a plateau) earlier. The events
+    are those of `SlipDetector.events` on the whole signal (tested).
     The band-pass is scipy's transposed direct form II, section by section, with its state kept
     between samples; the envelope keeps the last `window` squared differences.
     """
@@ -159,6 +163,9 @@ class SlipStream:
         self.prev_y = 0.0
         self.ring = [0.0] * self.w
         self.i = 0
+        self.prev_s: float | None = None
+        self.rise_at: int | None = None  # where the score last rose: a peak's plateau starts there
+        self.last_peak: int | None = None  # sample index of the last confirmed event
 
     def update(self, x: float) -> tuple[float, bool]:
         x = float(x)
@@ -179,4 +186,14 @@ class SlipStream:
         self.i += 1
         env = (sum(self.ring) / self.w) ** 0.5
         s = (env - self.median) * self.inv_mad
-        return s, s >= self.threshold
+        n, prev, event = self.i - 1, self.prev_s, False
+        if prev is not None:
+            if s > prev:
+                self.rise_at = n
+            elif s < prev and self.rise_at is not None:
+                event = prev >= self.threshold
+                if event:
+                    self.last_peak = (self.rise_at + n - 1) // 2
+                self.rise_at = None
+        self.prev_s = s
+        return s, event

@@ -28,9 +28,11 @@ from layerskin_exp.estimation.preprocess import DownsampleStream
 
 @dataclass(frozen=True, slots=True)
 class Estimate:
-    """force_n (3,) Fx, Fy, Fz in N; slip_score in MAD units (NaN without a detector); slip: the
-    score at or above the fitted threshold; t_ns: time of the downsampled frame (the filter's
-    centre, on the frames' clock); frame: its index k; new: computed at this update."""
+    """force_n (3,) Fx, Fy, Fz in N; slip_score in MAD units (NaN without a detector); slip: this
+    frame confirms a slip event (the score peaked at the previous frame, at or above the fitted
+    threshold; the detector's latency offset is fitted on that peak's time); t_ns: time of the
+    downsampled frame (the filter's centre, on the frames' clock); frame: its index k; new:
+    computed at this update."""
 
     t_ns: int
     frame: int

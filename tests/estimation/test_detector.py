@@ -43,10 +43,22 @@ def test_stream_equals_whole_signal_score():
     rng = np.random.default_rng(1)
     det, trials = _fitted(rng)
     _, x, _ = trials[1]
+    x = np.r_[x, np.full(5, x[-1])]  # flat at the end: the last peak falls and is confirmed
+    x[200:204] = x[199] + 0.5  # a pulse in the cue: one more event
     st = det.stream()
     got = np.array([st.update(v) for v in x], dtype=object)
     np.testing.assert_allclose(got[:, 0].astype(float), det.score_samples(x), rtol=1e-9, atol=1e-9)
-    assert list(got[:, 1]) == list(det.score_samples(x) >= det.threshold_)
+    # Events confirmed live are the offline events; each confirmed within one sample past its peak
+    # (or its plateau's end).
+    peaks = []
+    for n in np.flatnonzero(got[:, 1].astype(bool)):
+        st2 = det.stream()
+        for v in x[: n + 1]:
+            st2.update(v)
+        peaks.append(st2.last_peak)
+    assert len(peaks) >= 3
+    t = np.arange(x.size) / FS
+    np.testing.assert_allclose(t[peaks] + det.offset_s_, det.events(x, t), atol=1e-12)
 
 
 def test_envelope_against_an_independent_causal_computation():
