@@ -106,6 +106,23 @@ def _slip(r, s) -> list[str]:
     return lines + [""]
 
 
+def _slip_causal(r) -> list[str]:
+    sc, off = r.get("slip_causal") or {}, r.get("slip") or {}
+    if not sc:
+        return []
+    lines = ["## Slip detection live: causal vs offline (trial-macro F1, LOTO)", "",
+             "Causal: causal band-pass, backward difference, trailing RMS envelope, normalisation frozen at "
+             "fit (what OnlineEstimator runs). Offline: the study's zero-phase pipeline. Same trials, truth, "
+             "threshold grid and LOTO settings.", "",
+             "| motion | cue | Global causal (offline) | Grip causal (offline) | Oracle causal (offline) |",
+             "|---|---|---|---|---|"]
+    for motion, cues in sc.items():
+        for cue, v in cues.items():
+            cells = [_pair(v.get(k), _get(off, motion, cue, k)) for k in ("global", "grip", "oracle")]
+            lines.append(f"| {motion} | {cue} | " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
 def write_markdown(path, r: dict, figures: list[str]) -> None:
     s = r["study"]
     inp = r.get("inputs", {})
@@ -113,7 +130,7 @@ def write_markdown(path, r: dict, figures: list[str]) -> None:
              f"Sessions: `{inp.get('sessions_dir')}` — {inp.get('files')} files, {inp.get('calibration_trials')} "
              f"calibration trials ({inp.get('press_trials')} press, {inp.get('slide_trials')} slide), "
              f"{inp.get('grip_trials')} grip trials. Skipped files: {inp.get('skipped') or 'none'}.", ""]
-    lines += _force(r, s) + _characterization(r, s) + _tracking(r, s) + _slip(r, s)
+    lines += _force(r, s) + _characterization(r, s) + _tracking(r, s) + _slip(r, s) + _slip_causal(r)
     if r.get("skipped"):
         lines += ["## Skipped sections", ""] + [f"- **{k}**: {v}" for k, v in r["skipped"].items()] + [""]
     if figures:

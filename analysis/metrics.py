@@ -1,4 +1,4 @@
-"""Regression metrics (scikit-learn's, per column) and the trial-level split."""
+"""Regression metrics (scikit-learn's, per column)."""
 
 from __future__ import annotations
 
@@ -23,21 +23,3 @@ def mae(y_true: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
     y_true = np.asarray(y_true, np.float64)
     out = skm.mean_absolute_error(y_true, np.asarray(y_pred, np.float64), multioutput="raw_values")
     return out if y_true.ndim > 1 else out[0]
-
-
-def split_trials(trial_ids, fractions=(0.70, 0.15, 0.15), seed: int = 0) -> tuple[np.ndarray, ...]:
-    """Shuffle distinct trial ids with a fixed seed and cut them 70/15/15 (train, val, test).
-
-    Returns three sorted arrays of trial ids; every trial is in exactly one. With fewer than
-    three trials the later parts may be empty.
-    """
-    ids = np.unique(np.asarray(trial_ids))
-    rng = np.random.default_rng(seed)
-    perm = rng.permutation(ids)
-    n = len(ids)
-    n_val = int(round(fractions[1] * n))
-    n_test = int(round(fractions[2] * n))
-    if n >= 3:
-        n_val, n_test = max(1, n_val), max(1, n_test)
-    n_train = n - n_val - n_test
-    return (np.sort(perm[:n_train]), np.sort(perm[n_train:n_train + n_val]), np.sort(perm[n_train + n_val:]))

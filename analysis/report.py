@@ -1,7 +1,10 @@
 """`python -m analysis.report sessions=DIR out=DIR [analysis=demo|default|paper]`
 
 Turns a folder of session files into the study's tables and figures, ours beside the study's:
-out/results.json, out/predictions.npz, out/report.md, out/*.png, out/models/*.pt.
+out/results.json, out/predictions.npz, out/report.md, out/*.png, out/models/*.pt (estimator artifacts:
+each carries the preprocessing from raw counts with the model; T-s5.pt also the causal slip detector,
+ready for OnlineEstimator.from_artifact and `python -m layerskin_exp.estimation.export`).
+The estimators come from layerskin_exp.estimation; this module orchestrates them and writes tables.
 A missing input (no calibration campaign, no shear trials, no grip sessions, no markers) skips
 the sections that need it with the reason in results.json and report.md.
 """
@@ -16,6 +19,7 @@ from pathlib import Path
 
 import hydra
 import numpy as np
+import torch
 from omegaconf import DictConfig
 from tqdm.auto import tqdm
 
@@ -27,18 +31,24 @@ from analysis.characterization import (
     repeatability,
     uniformity,
 )
-from analysis.cnn import CnnGruForceModel
 from analysis.config import AnalysisConfig, ReportConfig
-from analysis.linear import LinearForceModel, linear_features
 from analysis.markdown import write_markdown
-from analysis.metrics import mae, r2_score, split_trials
-from analysis.preprocess import layer_scale, two_layer_features
+from analysis.metrics import mae, r2_score
 from analysis.sessions import Campaign, load_campaign, sessions_problem
-from analysis.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
 from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
 from layerskin_exp.cli import CONF_DIR as _CONF_DIR
 from layerskin_exp.cli import EXIT_CONFIG, preflight, refuse
 from layerskin_exp.config import SkinConfig, validate
+from layerskin_exp.estimation.artifact import CAUSAL_CUES, Estimator
+from layerskin_exp.estimation.cnn import CnnGruForceModel, default_torch_threads
+from layerskin_exp.estimation.detector import SlipDetector
+from layerskin_exp.estimation.linear import LinearForceModel, linear_features
+from layerskin_exp.estimation.preprocess import Preprocessor
+from layerskin_exp.estimation.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
+from layerskin_exp.estimation.splits import split_trials
+from layerskin_exp.features import two_layer_features
+
+LIVE_SLIP_CUE = "interlayer"  # the cue of the slip detector saved with the T-s5 artifact
 
 AXES = ("Fx", "Fy", "Fz")
 CONF_DIR = str(_CONF_DIR)  # conf/ in a checkout, layerskin_exp/conf when installed
@@ -66,6 +76,7 @@ class Analysis:
         self.cfg, self.a, self.skin = cfg, cfg.analysis, cfg.skin
         self.out = Path(cfg.out)
         self.results: dict = {"force": {}, "heights": {}, "characterization": {}, "tracking": {}, "slip": {},
+                               "slip_causal": {},
                                "study": study.ALL, "skipped": {}, "inputs": {}, "timing_s": {}}
         self.figures: list[str] = []
         self.ts5: CnnGruForceModel | None = None
@@ -88,14 +99,14 @@ class Analysis:
                                   "skipped_files": [{"file": f.name, "reason": f.reason, "detail": f.detail}
                                                     for f in camp.skipped_files]}
         # Per-layer scale from the calibration campaign (else the grip sessions), applied to all.
+        self.pre = Preprocessor.from_config(self.a.preprocess)
         src = [t.maps for t in camp.calibration] or [t.maps for t in camp.grip]
         if not src:
-            self.scale = np.ones(2, np.float32)
+            self.pre.layer_scale_ = self.scale = np.ones(2, np.float32)
             return
-        self.scale = layer_scale(src, self.a.preprocess.scale_percentile)
-        inv = (1.0 / self.scale)[None, :, None, None]
+        self.scale = self.pre.fit(src).layer_scale_
         for t in [*camp.calibration, *camp.grip]:
-            t.maps *= inv
+            self.pre.scale(t.maps)
         self.results["inputs"]["layer_scale_counts"] = self.scale
 
     def _calibration_arrays(self):
@@ -130,7 +141,7 @@ class Analysis:
             model.fit(X[m_tr], y[m_tr], trial[m_tr], X[m_va], y[m_va], trial[m_va])
             self.results["timing_s"][f"train_{name}"] = time.perf_counter() - t0
             preds[name] = model.predict(X[m_te], trial[m_te])
-            model.save(models_dir / f"{name}.pt")
+            Estimator(self.pre, model).save(models_dir / f"{name}.pt")
             history[name] = model.history
             if name == "T-s5":
                 self.ts5 = model
@@ -285,16 +296,20 @@ class Analysis:
             return
         sc = self.a.slip
         feats = getattr(self, "grip_feats", None) or self._grip_features()
-        out = {}
+        out, causal = {}, {}
         self.slip_fig_data = {}
+        # One nominal rate for the causal detector (its filters are designed once, as live).
+        fs_nominal = float(np.median([1.0 / np.median(np.diff(t.t_s)) for t in grip]))
+        live = {"signals": [], "t_s": [], "truths": []}
         for motion in ("translation", "torsion"):
             idx = [i for i, t in enumerate(grip) if t.motion == motion and t.vision_t_s.size > 1]
             if len(idx) < 2:
                 self.skip(f"slip.{motion}", f"{len(idx)} {motion} trial(s) with marker poses; LOTO needs 2")
                 continue
             truths = {i: vision_slip_events(grip[i].vision_t_s, grip[i].vision_sig, sc) for i in idx}
+            det = SlipDetector.from_config(sc, fs_nominal)
             for cue in sc.cues:
-                trials, traces = [], []
+                trials, traces, causal_trials = [], [], []
                 for i in idx:
                     t = grip[i]
                     sig = self._cue_signal(cue, i, feats[i])
@@ -305,13 +320,29 @@ class Analysis:
                     ct, cs = candidates(t.t_s, score)
                     trials.append(CueTrial(ct, cs, truths[i], t.grip_depth_mm))
                     traces.append((i, score))
+                    if cue in CAUSAL_CUES:
+                        # The causal detector's score is its envelope through (x - median)/MAD frozen at
+                        # fit: a monotone map, so thresholds on the envelope pick the same detections.
+                        ct, cs = candidates(t.t_s, det.envelope(sig))
+                        causal_trials.append(CueTrial(ct, cs, truths[i], t.grip_depth_mm))
+                        if cue == LIVE_SLIP_CUE:
+                            live["signals"].append(sig)
+                            live["t_s"].append(t.t_s)
+                            live["truths"].append(truths[i])
                 if not trials:
                     self.skip(f"slip.{motion}.{cue}", "needs the T-s5 force model (add T-s5 to analysis.cnn.configurations)")
                     continue
                 r = evaluate_loto(trials, sc)
                 out.setdefault(motion, {})[cue] = r
+                if causal_trials:
+                    causal.setdefault(motion, {})[cue] = evaluate_loto(causal_trials, sc)
                 if cue == "interlayer":
                     self.slip_fig_data[motion] = (trials, traces, r["grip_choice"])
+        self.results["slip_causal"] = causal
+        if live["signals"] and self.ts5 is not None:
+            det = SlipDetector.from_config(sc, fs_nominal).fit(live["signals"], live["t_s"], live["truths"])
+            Estimator(self.pre, self.ts5, det, LIVE_SLIP_CUE).save(self.out / "models" / "T-s5.pt")
+            self.results["slip_live_detector"] = {"cue": LIVE_SLIP_CUE, **det.to_dict()}
         self.results["slip"] = out
         if self.a.figures:
             self._slip_figures()
@@ -345,6 +376,14 @@ class Analysis:
 
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
+        threads = torch.get_num_threads()
+        torch.set_num_threads(self.a.cnn.torch_threads or default_torch_threads(self.a.cnn.device))
+        try:
+            return self._run()
+        finally:
+            torch.set_num_threads(threads)
+
+    def _run(self) -> dict:
         stages = [("load sessions", self.load), ("force estimation", self.force),
                   ("characterisation", self.characterization), ("tracking", self.tracking),
                   ("slip detection", self.slip), ("write report", self.write)]
@@ -386,8 +425,6 @@ def main(cfg: DictConfig) -> None:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         sys.exit(EXIT_CONFIG)
-    if rc.analysis.cnn.torch_threads is None:
-        rc.analysis.cnn.torch_threads = os.cpu_count()
     res = Analysis(rc).run()
     print(f"report written to {Path(rc.out) / 'report.md'} ({len(res['skipped'])} section(s) skipped)")
 

@@ -21,8 +21,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from analysis.config import PreprocessConfig
-from analysis.preprocess import preprocess_counts, smooth_downsample
 from analysis.tracking import torsion_reference_deg, translation_reference_mm
+from layerskin_exp.estimation.preprocess import preprocess_counts, smooth_downsample
 from layerskin_exp.log import SessionFileError, SessionWarning, load_session
 
 

@@ -12,9 +12,9 @@ import time
 
 import numpy as np
 
-from analysis.preprocess import smooth_downsample, subtract_baseline, two_layer_features
 from layerskin_exp.config import SkinConfig
-from layerskin_exp.features import layer_features
+from layerskin_exp.estimation.preprocess import smooth_downsample, subtract_baseline
+from layerskin_exp.features import layer_features, two_layer_features
 
 
 def _vectorised(counts, base, scale, skin):

@@ -2,7 +2,7 @@
 
 Slip F1 table — what evaluate_loto fills once per (motion, cue): F1 for every (trial, latency
 offset, threshold) cell, at the full campaign's size per trial (~600 candidates, ~150 vision
-events over 67 s, 41 offsets, 40 thresholds). Fast path: analysis.slip.f1_table (one
+events over 67 s, 41 offsets, 40 thresholds). Fast path: layerskin_exp.estimation.slip.f1_table (one
 time-ordered sweep for all cells at once). Baseline, measured in the same run on the same trials:
 the previous code, one maximum matching (scipy linear_sum_assignment on the within-tolerance pair
 matrix) per cell.
@@ -17,8 +17,8 @@ import time
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from analysis.config import SlipConfig
-from analysis.slip import CueTrial, f1_score, f1_table
+from layerskin_exp.estimation.config import SlipConfig
+from layerskin_exp.estimation.slip import CueTrial, f1_score, f1_table
 
 
 def _match_hungarian(d, t, tol):

@@ -2,7 +2,7 @@
 
 (a) naive: every window's T frames go through the encoder separately (B·T encodings per batch);
 (b) shared: a batch is a few contiguous segments of windows and each distinct frame is encoded
-    once (≈ B + segments·(T−1) encodings). Same loss and gradients (tests/analysis/test_models.py).
+    once (≈ B + segments·(T−1) encodings). Same loss and gradients (tests/estimation/test_models.py).
 """
 
 from __future__ import annotations
@@ -12,15 +12,15 @@ import time
 import numpy as np
 import torch
 
-from analysis.cnn import (
+from layerskin_exp.estimation.cnn import (
     CnnGru,
     batch_forward,
     naive_plan,
     segment_batches,
     shared_plan,
-    trial_starts,
     weighted_smooth_l1,
 )
+from layerskin_exp.estimation.splits import trial_starts
 
 
 def _samples_per_s(plan, model, opt, x, y, batches, starts, seq_len, w) -> float:

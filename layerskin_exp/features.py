@@ -64,12 +64,24 @@ def moments(maps: np.ndarray, skin: SkinConfig | None = None) -> Moments:
     return Moments(total=f[0], sx=f[1], sy=f[2], sxx=f[3], syy=f[4], sxy=f[5])
 
 
+def cop_and_angle(m: Moments, eps: float = DEFAULT_EPS) -> tuple[np.ndarray, np.ndarray]:
+    """The one definition of the CoP and the PCA angle, from raw moments (fields of shape (...)).
+
+    c = Σ p_ij (x_j, y_i) / (ε + p) -> (..., 2) mm; θ = ½ atan2(2 C_xy, C_xx − C_yy) -> (...) rad,
+    from the pressure-weighted coordinate covariances, θ in (−π/2, π/2] from +x towards +y.
+    """
+    d = eps + m.total
+    cx, cy = m.sx / d, m.sy / d
+    cxx = m.sxx / d - cx * cx
+    cyy = m.syy / d - cy * cy
+    cxy = m.sxy / d - cx * cy
+    return np.stack([cx, cy], axis=-1), 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+
+
 def centre_of_pressure(maps: np.ndarray, skin: SkinConfig | None = None,
                        eps: float = DEFAULT_EPS) -> np.ndarray:
     """c = Σ p_ij (x_j, y_i) / (ε + p). maps (..., 16, 16) -> (..., 2) in mm (x, y)."""
-    m = moments(maps, skin)
-    d = eps + m.total
-    return np.stack([m.sx / d, m.sy / d], axis=-1)
+    return cop_and_angle(moments(maps, skin), eps)[0]
 
 
 def pca_angle(maps: np.ndarray, skin: SkinConfig | None = None, eps: float = DEFAULT_EPS) -> np.ndarray:
@@ -77,16 +89,7 @@ def pca_angle(maps: np.ndarray, skin: SkinConfig | None = None, eps: float = DEF
 
     maps (..., 16, 16) -> (...), θ in (−π/2, π/2], measured from +x towards +y.
     """
-    return _angle_from_moments(moments(maps, skin), eps)
-
-
-def _angle_from_moments(m: Moments, eps: float) -> np.ndarray:
-    d = eps + m.total
-    cx, cy = m.sx / d, m.sy / d
-    cxx = m.sxx / d - cx * cx
-    cyy = m.syy / d - cy * cy
-    cxy = m.sxy / d - cx * cy
-    return 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+    return cop_and_angle(moments(maps, skin), eps)[1]
 
 
 def layer_features(maps: np.ndarray, skin: SkinConfig | None = None,
@@ -96,9 +99,21 @@ def layer_features(maps: np.ndarray, skin: SkinConfig | None = None,
     Returns {"total": (...), "cop_mm": (..., 2), "angle_rad": (...)}.
     """
     m = moments(maps, skin)
-    d = eps + m.total
-    return {"total": m.total, "cop_mm": np.stack([m.sx / d, m.sy / d], axis=-1),
-            "angle_rad": _angle_from_moments(m, eps)}
+    cop, angle = cop_and_angle(m, eps)
+    return {"total": m.total, "cop_mm": cop, "angle_rad": angle}
+
+
+def two_layer_features(maps: np.ndarray, skin: SkinConfig | None = None,
+                       eps: float = DEFAULT_EPS) -> dict[str, np.ndarray]:
+    """Features of both layers of preprocessed maps (K, 2, 16, 16), [superficial, deep].
+
+    Returns per-layer totals p_s, p_d (K,), CoPs cop_s, cop_d (K, 2) mm, angles angle_s, angle_d
+    (K,) rad, and the inter-layer shift dc = cop_s − cop_d (K, 2) mm.
+    """
+    m = moments(maps, skin)  # fields (K, 2)
+    cop, ang = cop_and_angle(m, eps)  # (K, 2 layers, 2), (K, 2 layers)
+    return {"p_s": m.total[:, 0], "p_d": m.total[:, 1], "cop_s": cop[:, 0], "cop_d": cop[:, 1],
+            "angle_s": ang[:, 0], "angle_d": ang[:, 1], "dc": cop[:, 0] - cop[:, 1]}
 
 
 def interlayer_shift(superficial: np.ndarray, deep: np.ndarray, skin: SkinConfig | None = None,

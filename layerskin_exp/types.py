@@ -126,6 +126,25 @@ class ProtocolEvent:
     detail: dict = field(default_factory=dict)
 
 
+@dataclass(frozen=True, slots=True)
+class SkinEstimate:
+    """A live estimate from the skin (layerskin_exp.estimation.OnlineEstimator).
+
+    force_n: (3,) Fx, Fy, Fz in N; slip_score in MAD units of the detector's training envelope
+    (None without a slip detector); slip: this frame confirms a slip event (a score peak at or
+    above the fitted threshold, one frame earlier).
+    frame: index of the downsampled frame; device_t_ns: its time on the skin clock (the filter's
+    centre); host_t_ns: receive time of the raw frame that completed it.
+    """
+
+    force_n: np.ndarray
+    slip_score: float | None
+    slip: bool
+    frame: int
+    device_t_ns: int
+    host_t_ns: int
+
+
 @dataclass(slots=True)
 class StreamHealth:
     """Health counters every acquired stream reports the same way."""

@@ -298,9 +298,14 @@ class GripDepthConfig:
     progress: bool = True
     live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
     live_port: int = 8765
+    # An estimator artifact (the report's out/models/T-s5.pt): when set, every skin frame goes
+    # through the online estimator and the session logs /estimate/force and /estimate/slip.
+    estimator: str | None = None
 
     def __post_init__(self) -> None:
         s = self.safety
+        require(self.estimator is None or Path(self.estimator).is_file(), "estimator", self.estimator,
+                "must be an estimator artifact file (the report writes out/models/T-s5.pt), or null")
         require(0 < self.grip_depth <= s.max_grip_depth_mm, "grip_depth", self.grip_depth,
                 f"must be > 0 mm and at most safety.max_grip_depth_mm={s.max_grip_depth_mm}")
         require(self.trial >= 0, "trial", self.trial, "must be a trial index >= 0")

@@ -4,7 +4,9 @@ Open the jaws, measure the skin baseline, close slowly until the sum of both lay
 subtracted) exceeds `approach.threshold_counts` for `approach.consecutive_frames` frames in a
 row, stop, close a further `grip_depth` mm, run the trajectory (arm translation along X0 or
 torsion about the skin normal), release. Logs skin frames, TCP pose, gripper state, marker poses
-(and optionally images) and events.
+(and optionally images) and events. With `estimator` set, each skin frame also goes through
+the online estimator and the live force and slip estimates are logged (/estimate/force,
+/estimate/slip): the session carries its own preload estimate.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from hardware.interfaces import Rig
 from layerskin_exp.config import ConfigError
+from layerskin_exp.types import SkinEstimate
 from protocols.config import GripDepthConfig, TrajectoryConfig
 from protocols.identity import design_id, trial_identity
 from protocols.loop import ControlLoop, DeviceTimeout
@@ -141,6 +144,23 @@ def _total(frame) -> int:
     return int(frame.superficial.sum(dtype=np.int64) + frame.deep.sum(dtype=np.int64))
 
 
+def log_estimates(log: TrialLog, online) -> None:
+    """From now on, every skin frame the log drains goes through `online` (an OnlineEstimator)
+    and each new estimate is written to the session beside the frames."""
+    drain = log.drain
+
+    def drain_and_estimate():
+        frames, wrenches = drain()
+        for f in frames:
+            e = online.update(f.superficial, f.deep, f.device_t_ns)
+            if e is not None and e.new:
+                score = None if e.slip_score != e.slip_score else e.slip_score  # NaN: no slip detector
+                log.writer.write(SkinEstimate(e.force_n, score, e.slip, e.frame, e.t_ns, f.host_t_ns))
+        return frames, wrenches
+
+    log.drain = drain_and_estimate
+
+
 def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) -> TrialResult:
     if rig.arm is None or rig.gripper is None:
         raise ConfigError(f"hardware: backend {rig.backend!r} gave no arm/gripper; the grip-depth protocol "
@@ -148,8 +168,15 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) ->
     safety = Safety(cfg.safety, rig)
     safety.check_grip_depth(cfg.grip_depth)
     labels = trial_labels(cfg)
+    online = None
+    if cfg.estimator:  # loaded before the trial starts: a bad artifact refuses the run, not a trial half-way
+        from layerskin_exp.estimation import OnlineEstimator
+
+        online = OnlineEstimator.from_artifact(cfg.estimator)
 
     def body(log: TrialLog) -> None:
+        if online is not None:
+            log_estimates(log, online)
         ctl = GripControl(log, safety, cfg)
         a = cfg.approach
         log.event("phase", "open")

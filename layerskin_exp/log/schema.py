@@ -57,6 +57,8 @@ CAMERA_FRAME = "camera"
 def cop_topic(layer: str) -> str:
     """ImageAnnotations with the centre of pressure of one layer, drawn on its image."""
     return f"{SKIN_TOPICS[layer]}/cop"
+ESTIMATE_FORCE_TOPIC = "/estimate/force"
+ESTIMATE_SLIP_TOPIC = "/estimate/slip"
 
 
 def marker_pose_topic(marker_id: int) -> str:
@@ -107,6 +109,10 @@ JSON_SCHEMAS = {
         "layerskin.Wrench", {**_TIMES, "status": _INT, "force_n": _VEC3, "torque_nm": _VEC3}
     ),
     "layerskin.StagePosition": _object("layerskin.StagePosition", {**_TIMES, "position_mm": _VEC3}),
+    "layerskin.ForceEstimate": _object("layerskin.ForceEstimate", {**_TIMES, "force_n": _VEC3}),
+    "layerskin.SlipEstimate": _object(
+        "layerskin.SlipEstimate", {**_TIMES, "score": _NUM, "slip": {"type": "boolean"}}
+    ),
     "layerskin.GripperState": _object(
         "layerskin.GripperState",
         {

@@ -30,6 +30,7 @@ from layerskin_exp.types import (
     MarkerDetection,
     Pose,
     ProtocolEvent,
+    SkinEstimate,
     StagePosition,
     TwoLayerFrame,
     Wrench,
@@ -195,6 +196,7 @@ class SessionWriter:
             MarkerDetection: self.write_marker,
             ProtocolEvent: self.write_event,
             FrameTransform: self.write_transform,
+            SkinEstimate: self.write_estimate,
         }
         # A live view (layerskin_exp.live.LiveView) sees a decimated copy of what is written.
         self.live = None
@@ -423,6 +425,18 @@ class SessionWriter:
             "torque_nm": _vec(w.torque_nm, 3, "torque_nm"),
         }
         self._write_json(S.WRENCH_TOPIC, "layerskin.Wrench", "wrench", host, dev, seq, body)
+
+    def write_estimate(self, e: SkinEstimate) -> None:
+        """A live estimate: the force on /estimate/force (reader stream "estimate_force"), the slip
+        score and flag on /estimate/slip ("estimate_slip") when there is a score; seq = frame."""
+        self._check_open()
+        host, dev, seq = int(e.host_t_ns), int(e.device_t_ns), int(e.frame)
+        times = {"host_t_ns": host, "device_t_ns": dev, "seq": seq}
+        body = {**times, "force_n": _vec(e.force_n, 3, "force_n")}
+        self._write_json(S.ESTIMATE_FORCE_TOPIC, "layerskin.ForceEstimate", "estimate_force", host, dev, seq, body)
+        if e.slip_score is not None:
+            body = {**times, "score": float(e.slip_score), "slip": bool(e.slip)}
+            self._write_json(S.ESTIMATE_SLIP_TOPIC, "layerskin.SlipEstimate", "estimate_slip", host, dev, seq, body)
 
     def write_stage(self, p: StagePosition) -> None:
         self._check_open()

@@ -45,7 +45,18 @@ def test_report_writes_results_predictions_markdown_and_figures(campaign, tmp_pa
     assert "0.914" in md and "Slip-event detection" in md
     for f in res["figures"]:
         assert (tmp_path / f).stat().st_size > 1000
-    assert (tmp_path / "models" / "T-s5.pt").exists()
+    # The saved T-s5 model is an estimator artifact: raw counts to newtons with the slip detector.
+    from layerskin_exp.estimation import Estimator
+
+    est = Estimator.load(tmp_path / "models" / "T-s5.pt")
+    np.testing.assert_allclose(est.preprocessor.layer_scale_, data["inputs"]["layer_scale_counts"], rtol=1e-6)
+    assert est.slip_detector is not None and est.slip_cue == "interlayer"
+    # The causal detector's F1 is reported beside the offline one for the causal cues, same protocol.
+    causal = data["slip_causal"]["translation"]
+    assert set(causal) == {"interlayer", "superficial", "f_xyz", "f_z"}
+    assert causal["interlayer"]["n_truth_events"] == data["slip"]["translation"]["interlayer"]["n_truth_events"]
+    assert 0.0 <= causal["interlayer"]["grip"] <= 1.0
+    assert "causal vs offline" in md
 
 
 def test_missing_grip_sessions_are_skipped_with_a_reason(campaign, tmp_path):

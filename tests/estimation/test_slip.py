@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analysis.config import SlipConfig
-from analysis.slip import (
+from layerskin_exp.estimation.config import SlipConfig
+from layerskin_exp.estimation.slip import (
     CueTrial,
     candidates,
     cue_score,
@@ -115,7 +115,7 @@ def test_loto_settings_learn_offset_and_grip_thresholds():
 
 
 def test_matched_pairs_agree_with_match_events():
-    from analysis.slip import matched_pairs
+    from layerskin_exp.estimation.slip import matched_pairs
 
     d, t = [1.08, 1.22, 3.0], [1.00, 1.15, 5.0]
     di, ti = matched_pairs(d, t, 0.1)

@@ -1,4 +1,6 @@
-"""Slip-event detection: vision ground truth, tactile cue scores, matching, fitted detectors.
+"""Slip-event detection offline: vision ground truth, acausal cue scores, matching, LOTO settings.
+
+The causal detector that can run live is `layerskin_exp.estimation.detector.SlipDetector`.
 
 All times are in seconds on the session's common timeline.
 """
@@ -13,7 +15,7 @@ from scipy.signal import butter, find_peaks, sosfiltfilt
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_bipartite_matching
 
-from analysis.config import SlipConfig
+from layerskin_exp.estimation.config import SlipConfig
 
 MAD_TO_SIGMA = 1.4826
 
@@ -32,7 +34,7 @@ def match_events(detected, truth, tolerance: float) -> tuple[int, int, int]:
     and both ends of that run move forward with the detection), where one sweep in time order is
     a maximum matching: the earliest detection takes the earliest true event in its reach, and
     an event out of reach of the current detection is out of reach of every later one on that
-    side. tests/analysis/test_slip.py checks it against scipy's linear_sum_assignment.
+    side. tests/estimation/test_slip.py checks it against scipy's linear_sum_assignment.
     """
     d, t = _sorted_finite(detected), _sorted_finite(truth)
     n_d, n_t = int(np.asarray(detected).size), int(np.asarray(truth).size)

@@ -1,4 +1,4 @@
-"""The study's temporal multi-head CNN–GRU force model (PyTorch), sklearn-style.
+"""The study's temporal multi-head CNN–GRU force model (PyTorch), scikit-learn manners.
 
 Architecture (SPEC §6): a shared frame encoder — conv 3×3 C→32 stride 1, 32→64 stride 2,
 64→64 stride 1 (padding 1, ReLU), flatten 4096, linear → 64 with ReLU, dropout 0.1 — applied to
@@ -9,21 +9,21 @@ Training encodes each frame once per batch: a batch is made of a few contiguous 
 windows, the union of their frames is encoded, and every window gathers its T encodings from
 it (a frame shared by T windows is encoded once, not T times). The loss is the same as encoding
 each window on its own (tests check loss and gradients agree).
+
+Training keeps the accelerator busy: the data, the epoch's batch plan (one copy per epoch) and the
+validation set live on the device, and the host reads one number pair (train and validation
+loss) per epoch, never per step.
 """
 
 from __future__ import annotations
-
-import copy
-import os
-from dataclasses import asdict
 
 import numpy as np
 import torch
 from torch import nn
 from tqdm.auto import tqdm
 
-from analysis.config import CnnConfig
-from analysis.metrics import split_trials
+from layerskin_exp.estimation.config import CnnConfig
+from layerskin_exp.estimation.splits import split_trials, trial_starts, window_indices
 
 LAYER_MODES = {"T": 3, "S": 1, "D": 1}
 
@@ -81,19 +81,6 @@ class CnnGru(nn.Module):
         return self.heads(self.encode(x.reshape(b * t, *x.shape[2:])).reshape(b, t, -1))
 
 
-def trial_starts(trials: np.ndarray) -> np.ndarray:
-    """For every frame, the index of the first frame of its trial. trials (N,) contiguous ids."""
-    trials = np.asarray(trials)
-    new = np.r_[True, trials[1:] != trials[:-1]]
-    return np.maximum.accumulate(np.where(new, np.arange(len(trials)), 0))
-
-
-def window_indices(ends: np.ndarray, starts: np.ndarray, seq_len: int) -> np.ndarray:
-    """(B, T) frame indices of the windows ending at `ends`; frames before a trial's start repeat it."""
-    idx = ends[:, None] - (seq_len - 1) + np.arange(seq_len)[None, :]
-    return np.maximum(idx, starts[ends][:, None])
-
-
 def naive_plan(ends: np.ndarray, starts: np.ndarray, seq_len: int) -> tuple[np.ndarray, np.ndarray]:
     """Every window's frames gathered separately: (frame_idx (B*T,), positions (B, T))."""
     win = window_indices(ends, starts, seq_len)
@@ -147,12 +134,44 @@ def segment_batches(ends: np.ndarray, starts: np.ndarray, segment: int, batch_si
             for a in range(0, len(order), per_batch)]
 
 
+def plan_epoch(batches: list[np.ndarray], starts: np.ndarray, seq_len: int):
+    """The shared plans of a whole epoch, concatenated for one host-to-device copy.
+
+    Returns (frame_idx (ΣF,), positions (ΣB, T) into each batch's own frames, ends (ΣB,),
+    frame_bounds, window_bounds): batch b is frame_idx[frame_bounds[b]:frame_bounds[b+1]] etc.
+    """
+    plans = [shared_plan(ends, starts, seq_len) for ends in batches]
+    fb = np.cumsum([0] + [len(f) for f, _ in plans]).tolist()
+    wb = np.cumsum([0] + [len(e) for e in batches]).tolist()
+    if not plans:
+        return np.zeros(0, np.int64), np.zeros((0, seq_len), np.int64), np.zeros(0, np.int64), fb, wb
+    return (np.concatenate([f for f, _ in plans]).astype(np.int64),
+            np.concatenate([p for _, p in plans]).astype(np.int64),
+            np.concatenate(batches).astype(np.int64), fb, wb)
+
+
 def resolve_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name == "cuda" and not torch.cuda.is_available():
         raise RuntimeError("analysis.cnn.device=cuda but no CUDA device is visible; use auto or cpu")
     return torch.device(name)
+
+
+def default_torch_threads(device: str = "auto") -> int:
+    """CPU threads for training: one. The model's ops are small (16x16 maps), so intra-op threads
+    mostly synchronise: one thread trained a CPU epoch faster than all cores both on a 16-core
+    H100 host and on a 2-core machine (benchmarks/train_epoch), and with a GPU the host only
+    launches kernels."""
+    del device  # the same answer for CPU and GPU today; kept so callers say which they train on
+    return 1
+
+
+def _to(a: np.ndarray, dev: torch.device) -> torch.Tensor:
+    t = torch.from_numpy(np.ascontiguousarray(a))
+    if dev.type == "cuda":
+        return t.pin_memory().to(dev, non_blocking=True)
+    return t
 
 
 class CnnGruForceModel:
@@ -162,6 +181,8 @@ class CnnGruForceModel:
     y: (N, 3) force in N; trials: (N,) trial id of each frame (frames of a trial contiguous).
     The prediction for frame n uses the window of `seq_len` frames ending at n (the trial's first
     frame repeated before its start), so every frame gets one.
+    Fitted state: model_ (CnnGru, eval mode), norm_ (input channel and force mean/std),
+    history_ (per epoch train and validation loss).
     """
 
     def __init__(self, configuration: str = "T-s5", config: CnnConfig | None = None, progress: bool = False) -> None:
@@ -169,24 +190,36 @@ class CnnGruForceModel:
         self.layers, self.seq_len = parse_configuration(configuration)
         self.config = config or CnnConfig()
         self.progress = progress
-        self.model: CnnGru | None = None
-        self.norm: dict[str, np.ndarray] = {}
-        self.history: list[dict] = []
+
+    @property
+    def history(self) -> list[dict]:
+        return getattr(self, "history_", [])
 
     # -- data --------------------------------------------------------------------------------
     def _inputs(self, X: np.ndarray) -> np.ndarray:
         x = input_channels(np.asarray(X), self.layers)
-        return (x - self.norm["x_mean"][None, :, None, None]) / self.norm["x_std"][None, :, None, None]
+        return (x - self.norm_["x_mean"][None, :, None, None]) / self.norm_["x_std"][None, :, None, None]
 
     def _device(self) -> torch.device:
         return resolve_device(self.config.device)
 
+    def _check_fitted(self) -> None:
+        if getattr(self, "model_", None) is None:
+            raise RuntimeError("CnnGruForceModel.predict before fit or load: call fit(X, y) first")
+
     # -- training ----------------------------------------------------------------------------
     def fit(self, X, y, trials=None, X_val=None, y_val=None, trials_val=None) -> CnnGruForceModel:
-        """Train with early stopping on validation loss; without X_val, 15 % of the trials are held out."""
+        """Train with early stopping on validation loss; without X_val, 15 % of the trials are held out.
+
+        Seeded from config.seed through a forked RNG: the caller's global torch RNG is untouched.
+        """
+        dev = self._device()
+        with torch.random.fork_rng(devices=[dev.index or 0] if dev.type == "cuda" else []):
+            torch.manual_seed(self.config.seed)
+            return self._fit(dev, X, y, trials, X_val, y_val, trials_val)
+
+    def _fit(self, dev, X, y, trials, X_val, y_val, trials_val) -> CnnGruForceModel:
         cfg = self.config
-        torch.set_num_threads(cfg.torch_threads or os.cpu_count() or 1)
-        torch.manual_seed(cfg.seed)
         rng = np.random.default_rng(cfg.seed)
         X, y = np.asarray(X), np.asarray(y, np.float32)
         trials = np.zeros(len(X), np.int64) if trials is None else np.asarray(trials)
@@ -198,88 +231,100 @@ class CnnGruForceModel:
                 va = tr[-1:]
             m_tr, m_va = np.isin(trials, tr), np.isin(trials, va)
             X, y, trials, X_val, y_val, trials_val = X[m_tr], y[m_tr], trials[m_tr], X[m_va], y[m_va], trials[m_va]
+        trials_val = np.zeros(len(X_val), np.int64) if trials_val is None else np.asarray(trials_val)
         ch = input_channels(X, self.layers)
-        self.norm = {"x_mean": ch.mean(axis=(0, 2, 3)).astype(np.float32),
-                     "x_std": (ch.std(axis=(0, 2, 3)) + 1e-6).astype(np.float32),
-                     "y_mean": y.mean(axis=0).astype(np.float32), "y_std": (y.std(axis=0) + 1e-6).astype(np.float32)}
+        self.norm_ = {"x_mean": ch.mean(axis=(0, 2, 3)).astype(np.float32),
+                      "x_std": (ch.std(axis=(0, 2, 3)) + 1e-6).astype(np.float32),
+                      "y_mean": y.mean(axis=0).astype(np.float32), "y_std": (y.std(axis=0) + 1e-6).astype(np.float32)}
         del ch
-        dev = self._device()
-        self.model = CnnGru(LAYER_MODES[self.layers], cfg.dropout).to(dev)
-        opt = torch.optim.Adam(self.model.parameters(), lr=cfg.lr)
+        self.model_ = model = CnnGru(LAYER_MODES[self.layers], cfg.dropout).to(dev)
+        opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, fused=dev.type == "cuda")
         w = torch.tensor(cfg.axis_weights, dtype=torch.float32, device=dev)
-        x_t = torch.as_tensor(self._inputs(X), device=dev)
-        y_t = torch.as_tensor((y - self.norm["y_mean"]) / self.norm["y_std"], device=dev)
+        x_t = _to(self._inputs(X), dev)
+        y_t = _to((y - self.norm_["y_mean"]) / self.norm_["y_std"], dev)
+        xv_t = _to(self._inputs(X_val), dev)
+        yv_t = _to((np.asarray(y_val, np.float32) - self.norm_["y_mean"]) / self.norm_["y_std"], dev)
+        win_v = _to(window_indices(np.arange(len(X_val)), trial_starts(trials_val), self.seq_len), dev)
         starts = trial_starts(trials)
-        yv_n = (np.asarray(y_val, np.float32) - self.norm["y_mean"]) / self.norm["y_std"]
+        self.history_ = []
         best, best_state, stale = np.inf, None, 0
         bar = tqdm(range(cfg.max_epochs), desc=f"{self.configuration} epochs", leave=False, disable=not self.progress)
         for epoch in bar:
-            self.model.train()
+            model.train()
             batches = segment_batches(np.arange(len(X)), starts, cfg.segment_windows, cfg.batch_size, rng,
                                       cfg.max_train_windows)
-            train_loss = 0.0
-            for ends in batches:
-                fidx, pos = shared_plan(ends, starts, self.seq_len)
-                loss = weighted_smooth_l1(batch_forward(self.model, x_t, fidx, pos),
-                                          y_t[torch.as_tensor(ends, device=dev)], w, cfg.smooth_l1_beta)
+            fidx, pos, ends, fb, wb = (_to(a, dev) if isinstance(a, np.ndarray) else a
+                                       for a in plan_epoch(batches, starts, self.seq_len))
+            loss_sum = torch.zeros((), device=dev)
+            for b in range(len(batches)):
+                enc = model.encode(x_t[fidx[fb[b]:fb[b + 1]]])
+                loss = weighted_smooth_l1(model.heads(enc[pos[wb[b]:wb[b + 1]]]), y_t[ends[wb[b]:wb[b + 1]]], w,
+                                          cfg.smooth_l1_beta)
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 opt.step()
-                train_loss += loss.item() * len(ends)
-            train_loss /= max(1, sum(len(b) for b in batches))
-            pred_v = self._predict_normalised(X_val, trials_val)
-            val_loss = float(weighted_smooth_l1(torch.as_tensor(pred_v), torch.as_tensor(yv_n),
-                                                w.cpu(), cfg.smooth_l1_beta))
-            self.history.append({"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss})
+                loss_sum += loss.detach() * (wb[b + 1] - wb[b])
+            val = weighted_smooth_l1(self._predict_tensor(xv_t, win_v), yv_t, w, cfg.smooth_l1_beta)
+            train_loss, val_loss = torch.stack([loss_sum / max(1, wb[-1]), val]).tolist()  # the epoch's one sync
+            self.history_.append({"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss})
             bar.set_postfix(train=f"{train_loss:.4f}", val=f"{val_loss:.4f}")
             if val_loss < best - 1e-6:
                 best, stale = val_loss, 0
-                best_state = copy.deepcopy(self.model.state_dict())
+                best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
             else:
                 stale += 1
                 if stale >= cfg.patience:
                     break
         if best_state is not None:
-            self.model.load_state_dict(best_state)
-        self.model.eval()
+            model.load_state_dict(best_state)
+        model.eval()
         return self
 
     # -- inference ---------------------------------------------------------------------------
     @torch.no_grad()
-    def _predict_normalised(self, X, trials=None, chunk: int = 4096) -> np.ndarray:
-        if self.model is None:
-            raise RuntimeError("CnnGruForceModel.predict before fit or load: call fit(X, y) first")
-        self.model.eval()
-        dev = next(self.model.parameters()).device
+    def _predict_tensor(self, x: torch.Tensor, win: torch.Tensor, chunk: int = 4096) -> torch.Tensor:
+        """Normalised inputs (N, C, 16, 16) and windows (M, T) on the device -> (M, 3) normalised force."""
+        was_training = self.model_.training
+        self.model_.eval()
+        if len(x) == 0:
+            return torch.zeros(0, 3, device=x.device)
+        enc = torch.cat([self.model_.encode(x[a:a + chunk]) for a in range(0, len(x), chunk)])
+        out = torch.cat([self.model_.heads(enc[win[a:a + chunk]]) for a in range(0, len(win), chunk)])
+        self.model_.train(was_training)
+        return out
+
+    def _predict_normalised(self, X, trials=None) -> np.ndarray:
+        self._check_fitted()
+        dev = next(self.model_.parameters()).device
         trials = np.zeros(len(X), np.int64) if trials is None else np.asarray(trials)
-        x = self._inputs(np.asarray(X))
-        enc = torch.cat([self.model.encode(torch.as_tensor(x[a:a + chunk], device=dev))
-                         for a in range(0, len(x), chunk)]) if len(x) else torch.zeros(0, 64, device=dev)
-        win = window_indices(np.arange(len(x)), trial_starts(trials), self.seq_len)
-        out = [self.model.heads(enc[torch.as_tensor(win[a:a + chunk], device=dev)]).cpu()
-               for a in range(0, len(win), chunk)]
-        return torch.cat(out).numpy() if out else np.zeros((0, 3), np.float32)
+        if len(X) == 0:
+            return np.zeros((0, 3), np.float32)
+        x = _to(self._inputs(np.asarray(X)), dev)
+        win = _to(window_indices(np.arange(len(X)), trial_starts(trials), self.seq_len), dev)
+        return self._predict_tensor(x, win).cpu().numpy()
 
     def predict(self, X, trials=None) -> np.ndarray:
         """(N, 2, 16, 16) maps (+ trial ids) -> (N, 3) force in N."""
-        return self._predict_normalised(X, trials) * self.norm["y_std"] + self.norm["y_mean"]
+        return self._predict_normalised(X, trials) * self.norm_["y_std"] + self.norm_["y_mean"]
 
-    # -- checkpoints -------------------------------------------------------------------------
-    def save(self, path) -> None:
-        """state_dict + configuration + normalisation statistics, loadable with weights_only=True."""
-        if self.model is None:
-            raise RuntimeError("nothing to save: fit the model first")
-        torch.save({"state_dict": {k: v.cpu() for k, v in self.model.state_dict().items()},
-                    "configuration": self.configuration, "config": asdict(self.config),
-                    "norm": {k: torch.as_tensor(v) for k, v in self.norm.items()}}, path)
+    # -- state -------------------------------------------------------------------------------
+    def state(self) -> dict:
+        """Everything fitted, as tensors and plain values (torch.load(weights_only=True) reads it)."""
+        self._check_fitted()
+        from dataclasses import asdict
+
+        return {"state_dict": {k: v.detach().cpu() for k, v in self.model_.state_dict().items()},
+                "configuration": self.configuration, "config": asdict(self.config),
+                "norm": {k: torch.as_tensor(v) for k, v in self.norm_.items()},
+                "history": [dict(h) for h in self.history]}
 
     @classmethod
-    def load(cls, path, device: str = "auto") -> CnnGruForceModel:
-        ck = torch.load(path, map_location="cpu", weights_only=True)
-        cfg = CnnConfig(**{**ck["config"], "device": device})
-        obj = cls(ck["configuration"], cfg)
-        obj.norm = {k: v.numpy() for k, v in ck["norm"].items()}
-        obj.model = CnnGru(LAYER_MODES[obj.layers], cfg.dropout)
-        obj.model.load_state_dict(ck["state_dict"])
-        obj.model.to(obj._device()).eval()
+    def from_state(cls, st: dict, device: str = "auto") -> CnnGruForceModel:
+        cfg = CnnConfig(**{**st["config"], "device": device})
+        obj = cls(st["configuration"], cfg)
+        obj.norm_ = {k: v.numpy() for k, v in st["norm"].items()}
+        obj.model_ = CnnGru(LAYER_MODES[obj.layers], cfg.dropout)
+        obj.model_.load_state_dict(st["state_dict"])
+        obj.model_.to(obj._device()).eval()
+        obj.history_ = list(st.get("history", []))
         return obj
