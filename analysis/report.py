@@ -349,7 +349,7 @@ class Analysis:
 
     def _slip_figures(self) -> None:
         from analysis.figures import slip_detections
-        from analysis.slip import detect, matched_pairs
+        from layerskin_exp.estimation.slip import detect, matched_pairs
 
         for motion, (trials, traces, choice) in self.slip_fig_data.items():
             rep = self._representative(motion)
