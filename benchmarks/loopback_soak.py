@@ -13,6 +13,7 @@ bench adds, which a real board does not put on the host).
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 
@@ -40,6 +41,7 @@ def run() -> dict:
     path = emulator.start()
     reader = SkinBoardReader(SkinBoardConfig(port=path), validate(cfg.skin))
     reader.connect()
+    gc.freeze()  # as protocols.app does for real-time rigs: short full collections
     received, seq_errors, last_seq, fault, in_flight = 0, 0, None, None, 0
 
     def drain() -> None:
@@ -60,10 +62,11 @@ def run() -> dict:
         wall = time.monotonic() - t0
         cpu_drv = _thread_cpu_s(reader._thread) - cpu0_drv
         cpu_bench = (_thread_cpu_s(rt._thread) - cpu0_world) + (_thread_cpu_s(emulator._thread) - cpu0_emu)
-        emulator.stop()  # then take what reached the pty; frames still queued in the emulator never left it
-        in_flight = -(-len(emulator._pending) // FRAME_LEN)
-        time.sleep(0.1)
+        emulator.stall(1e9)  # the board stops scanning; what it already queued goes out and is read
+        time.sleep(0.2)
         drain()
+        emulator.stop()
+        in_flight = -(-len(emulator._pending) // FRAME_LEN)  # queued but never sent (0 unless the pty filled)
     finally:
         reader.disconnect()
         emulator.stop()

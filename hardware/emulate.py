@@ -12,6 +12,7 @@ unless --host says otherwise.
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import signal
 import sys
@@ -67,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     rt.start()
     try:
         where = emulator.start()
+        gc.freeze()  # keep full collections (which stop every thread) short while serving
         print(f"{args.device} emulator listening on {where} (simulated {setup} rig, seed {sim_cfg.seed}); "
               "Ctrl-C to stop", flush=True)
         while not done.wait(0.2):

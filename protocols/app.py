@@ -9,6 +9,7 @@ send). Rerunning the same command resumes.
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 import signal
 import sys
@@ -87,6 +88,11 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         rig.disconnect()
         print(f"error: could not connect the {rig.backend} rig: {one_line(e)}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
+    if not rig.clock.is_virtual:
+        # Everything built so far (modules, configs, drivers) leaves the garbage collector's reach:
+        # a full collection stops every thread, and over this heap it took ~200 ms, which the
+        # drivers' threads see as every stream stalling at once. Frozen, it takes milliseconds.
+        gc.freeze()
     metadata = {"config": OmegaConf.to_container(cfg, resolve=True), "backend": rig.backend,
                 "calibration": rig.skin.calibration(), "provenance": provenance()}
     camera = getattr(rig.camera, "calibration", None) if rig.camera is not None else None

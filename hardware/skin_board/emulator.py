@@ -154,8 +154,9 @@ class SkinBoardEmulator:
                     self.stall(self.stalls.pop(0)[1])
                 with self.rt.lock:
                     frames = self.rt.rig.skin.read_available()
-                if now < self._stall_until:
+                if now < self._stall_until:  # the board stops scanning; bytes already queued still go out
                     self.counts["stalled_frames"] += len(frames)
+                    self._flush()
                     continue
                 for f in frames:
                     self._queue_frame(f)
