@@ -1,7 +1,9 @@
 """Loopback soak: the skin board driver reading the pty emulator at 424 frame pairs/s for minutes.
 
 Checks that acquisition keeps up indefinitely: every frame the emulator wrote is received (no
-unexplained drops: a drop must show as a sequence gap counted in the stream's health), and
+unexplained drops: a drop must show as a sequence gap counted in the stream's health), counts the
+receive gaps longer than the 50 ms stall limit (on a shared machine, CPU starvation of this
+process shows there first), and
 reports the CPU share of the driver's receive thread (per-thread CPU clock) against the frame
 period, with the emulator and the simulated world running in the same process as on
 `hardware=loopback`. Baseline: the same figures for the emulator + world alone (the load the
@@ -42,7 +44,8 @@ def run() -> dict:
     reader = SkinBoardReader(SkinBoardConfig(port=path), validate(cfg.skin))
     reader.connect()
     gc.freeze()  # as protocols.app does for real-time rigs: short full collections
-    received, seq_errors, last_seq, fault, in_flight = 0, 0, None, None, 0
+    received, seq_errors, last_seq, in_flight = 0, 0, None, 0
+    gaps = {"max_ms": 0.0, "over_50ms": 0, "last_host_ns": None}
 
     def drain() -> None:
         nonlocal received, seq_errors, last_seq
@@ -51,14 +54,18 @@ def run() -> dict:
                 seq_errors += 1
             last_seq = f.seq
             received += 1
+            if gaps["last_host_ns"] is not None:
+                gap_ms = (f.host_t_ns - gaps["last_host_ns"]) / 1e6
+                gaps["max_ms"] = max(gaps["max_ms"], gap_ms)
+                gaps["over_50ms"] += gap_ms > 50
+            gaps["last_host_ns"] = f.host_t_ns
 
     cpu0_world, cpu0_emu = _thread_cpu_s(rt._thread), _thread_cpu_s(emulator._thread)
     cpu0_drv, t0 = _thread_cpu_s(reader._thread), time.monotonic()
     try:
-        while time.monotonic() - t0 < seconds and fault is None:
+        while time.monotonic() - t0 < seconds:  # a stall is counted (receive gaps), not a reason to stop
             time.sleep(0.01)
             drain()
-            fault = reader.fault(time.monotonic_ns())
         wall = time.monotonic() - t0
         cpu_drv = _thread_cpu_s(reader._thread) - cpu0_drv
         cpu_bench = (_thread_cpu_s(rt._thread) - cpu0_world) + (_thread_cpu_s(emulator._thread) - cpu0_emu)
@@ -75,7 +82,8 @@ def run() -> dict:
     h = reader.health
     return {
         "soak_s": round(wall, 1),
-        "ended_by_fault": fault,
+        "max_receive_gap_ms": round(gaps["max_ms"], 1),
+        "receive_gaps_over_50ms": gaps["over_50ms"],
         "world_worst_lag_ms": round(1e3 * rt.lag_s, 1),
         "frames_received": received,
         "frame_rate_hz": round(received / wall, 1),
