@@ -16,6 +16,7 @@ import logging
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import hydra
@@ -407,12 +408,8 @@ class Analysis:
 
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
-        threads = torch.get_num_threads()
-        torch.set_num_threads(self.a.cnn.torch_threads or default_torch_threads(self.a.cnn.device))
-        try:
+        with deterministic_torch(self.a.cnn.torch_threads or default_torch_threads(self.a.cnn.device)):
             return self._run()
-        finally:
-            torch.set_num_threads(threads)
 
     def _run(self) -> dict:
         self.results["provenance"] = {**provenance(), "analysis_preset": self.preset, "config_file": "config.yaml"}
@@ -431,6 +428,30 @@ class Analysis:
             self.results["timing_s"][name] = time.perf_counter() - t0
             log.info("stage %s done in %.1f s", name, self.results["timing_s"][name])
         return self.results
+
+
+@contextmanager
+def deterministic_torch(threads: int):
+    """Torch settings under which a report re-run on the same sessions gives the same numbers.
+
+    Seeds alone are not enough on a GPU: the training step gathers shared frame encodings by
+    index, whose backward pass accumulates with atomic adds in whatever order the threads finish,
+    and cuDNN may pick non-deterministic convolution algorithms. The T-s5 model then differs in
+    its last bits from run to run, and the cues built on its force (f_xyz, f_z, the preload, the
+    live detector) move in the third decimal. Deterministic kernels cost little for this model.
+    The intra-op thread count is fixed too: CPU reductions split by thread. Restored on exit."""
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # deterministic cuBLAS (read at first use)
+    saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled(),
+             torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark)
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(True, warn_only=True)  # warn, not fail, on an op without one
+    torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark = True, False
+    try:
+        yield
+    finally:
+        torch.set_num_threads(saved[0])
+        torch.use_deterministic_algorithms(saved[1])
+        torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark = saved[2], saved[3]
 
 
 def run_report(sessions, out, analysis: AnalysisConfig | None = None, skin: SkinConfig | None = None,
