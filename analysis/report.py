@@ -189,10 +189,8 @@ class Analysis:
         if self.a.figures:
             from analysis.figures import force_scatter
 
-            show = {k: preds[k] for k in ("linear", "T-s5") if k in preds}
-            if len(show) < 2 and len(preds) > 1:
-                show[list(preds)[1]] = preds[list(preds)[1]]
-            force_scatter(self.out / "force_pred_vs_ref.png", y[m_te], show, progress[m_te])
+            force_scatter(self.out / "force_pred_vs_ref.png", y[m_te], preds, progress[m_te], self.results["force"],
+                          study.FORCE_RANGE_N)
             self.figures.append("force_pred_vs_ref.png")
 
     def characterization(self) -> None:
