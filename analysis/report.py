@@ -1,7 +1,8 @@
 """`python -m analysis.report sessions=DIR out=DIR [analysis=demo|default|paper]`
 
 Turns a folder of session files into the study's tables and figures, ours beside the study's:
-out/results.json, out/predictions.npz, out/report.md, out/*.png, out/models/*.pt (estimator artifacts:
+out/results.json, out/predictions.npz, out/report.md, out/config.yaml (the resolved config), out/*.png,
+out/models/*.pt (estimator artifacts:
 each carries the preprocessing from raw counts with the model; T-s5.pt also the causal slip detector,
 ready for OnlineEstimator.from_artifact and `python -m layerskin_exp.estimation.export`).
 The estimators come from layerskin_exp.estimation; this module orchestrates them and writes tables.
