@@ -21,12 +21,64 @@ def _get(d, *keys):
     return d
 
 
+def _produced_by(r) -> list[str]:
+    """What made this report and on how much data; models not to compare with the study yet."""
+    p, d = r.get("provenance") or {}, r.get("data") or {}
+    commit = p.get("git_commit")
+    commit = "none (not a git checkout)" if commit is None else f"`{commit[:12]}`" + (
+        " (**dirty**: uncommitted changes)" if p.get("git_dirty") else " (clean)")
+    lines = ["## Produced by", "",
+             f"- analysis preset: **{p.get('analysis_preset') or 'custom (library call)'}**; resolved config in "
+             f"`{p.get('config_file', 'config.yaml')}`",
+             f"- {p.get('package', 'layerskin-exp')} {p.get('version')}, git commit {commit}, Python {p.get('python')}"]
+    if p.get("overrides"):
+        lines.append("- overrides: " + " ".join(f"`{o}`" for o in p["overrides"]))
+    if d:
+        lines.append(f"- data: {d.get('sessions_used')} sessions used, {d.get('sessions_skipped')} skipped; "
+                     f"{d.get('calibration_trials')} calibration trials ({d.get('calibration_frames')} frames), "
+                     f"{d.get('grip_trials')} grip trials ({d.get('grip_frames')} frames)")
+    sp = d.get("split")
+    if sp:
+        lines.append("- force split (train/val/test): " + " / ".join(
+            f"{sp[k]['trials']} trials, {sp[k]['frames']} frames" for k in ("train", "val", "test")))
+    fr = d.get("force_range_n")
+    if fr:
+        lines.append("- force range in the data: " + _ranges(fr) + " (study: " + _study_ranges(r["study"]) + ")")
+    training = r.get("force_training") or {}
+    for name, t in training.items():
+        state = "early stopping triggered" if t.get("early_stopped") else "early stopping not triggered"
+        flag = "" if t.get("converged", True) else " — **not converged**: " + "; ".join(t.get("caveats", []))
+        lines.append(f"- {name}: {t.get('epochs')}/{t.get('max_epochs')} epochs, best at epoch "
+                     f"{t.get('best_epoch')}, {state}{flag}")
+    if any(not t.get("converged", True) for t in training.values()):
+        lines += ["", "> **Caveat:** the models marked not converged had not finished learning; their rows are "
+                  "not a comparison with the study's (train longer, e.g. `analysis=default` or `analysis=paper`)."]
+    return lines + [""]
+
+
+def _ranges(fr) -> str:
+    out = [f"{ax} {_f(fr[ax]['min_n'], 2)} to {_f(fr[ax]['max_n'], 2)} N" for ax in ("Fx", "Fy", "Fz") if ax in fr]
+    if "test_shear_p5_p95_n" in fr:
+        lo, hi = fr["test_shear_p5_p95_n"]
+        out.append(f"test shear |Fxy| 5–95 % {_f(lo, 2)}–{_f(hi, 2)} N")
+    return ", ".join(out)
+
+
+def _study_ranges(s) -> str:
+    fr = s.get("force_range_n", {})
+    return (f"Fx, Fy within about ±{fr['Fx']['max_n']:g} N, |Fz| up to about {fr['abs_Fz_max_n']:g} N"
+            if fr else "not stated")
+
+
 def _force(r, s) -> list[str]:
     models = list(r["force"])
     if not models:
         return []
-    lines = ["## Force estimation (test trials)", "", "R² and MAE (N) per axis; ours (study).", "",
-             "| axis | metric | " + " | ".join(models) + " |", "|---|---|" + "---|" * len(models)]
+    training = r.get("force_training") or {}
+    header = [m + (" ⚠" if not training.get(m, {}).get("converged", True) else "") for m in models]
+    lines = ["## Force estimation (test trials)", "", "R² and MAE (N) per axis; ours (study). "
+             "⚠: model not converged (see Produced by).", "",
+             "| axis | metric | " + " | ".join(header) + " |", "|---|---|" + "---|" * len(models)]
     for ax in ("Fx", "Fy", "Fz"):
         for met, label in (("r2", "R²"), ("mae", "MAE (N)")):
             cells = [_pair(_get(r["force"], m, ax, met), _get(s["force"], m, ax, met)) for m in models]
@@ -34,6 +86,20 @@ def _force(r, s) -> list[str]:
     sp = r.get("force_split", {})
     lines += ["", f"Split by trial: {sp.get('train_trials')}/{sp.get('val_trials')}/{sp.get('test_trials')} "
               f"train/val/test trials, {sp.get('test_frames')} test frames (seed {sp.get('seed')}).", ""]
+    fr = (r.get("data") or {}).get("force_range_n")
+    if fr:
+        lines += ["Reference force ranges — a narrower range is easier data, so higher R² here is not by itself "
+                  "a better model:", "", "| axis | ours (N) | study (N) |", "|---|---|---|"]
+        st = s.get("force_range_n", {})
+        for ax in ("Fx", "Fy"):
+            theirs = f"{st[ax]['min_n']:g} to {st[ax]['max_n']:g}" if ax in st else "–"
+            lines.append(f"| {ax} | {_f(fr[ax]['min_n'], 2)} to {_f(fr[ax]['max_n'], 2)} | {theirs} |")
+        abs_fz = max(abs(fr["Fz"]["min_n"]), abs(fr["Fz"]["max_n"]))
+        lines.append(f"| \\|Fz\\| max | {_f(abs_fz, 2)} | {st.get('abs_Fz_max_n', '–')} |")
+        if "test_shear_p5_p95_n" in fr:
+            lo, hi = fr["test_shear_p5_p95_n"]
+            lines.append(f"| test shear \\|Fxy\\| 5–95 % | {_f(lo, 2)}–{_f(hi, 2)} | – |")
+        lines.append("")
     return lines
 
 
@@ -126,10 +192,10 @@ def _slip_causal(r) -> list[str]:
 def write_markdown(path, r: dict, figures: list[str]) -> None:
     s = r["study"]
     inp = r.get("inputs", {})
-    lines = ["# layerskin-exp report", "",
-             f"Sessions: `{inp.get('sessions_dir')}` — {inp.get('files')} files, {inp.get('calibration_trials')} "
-             f"calibration trials ({inp.get('press_trials')} press, {inp.get('slide_trials')} slide), "
-             f"{inp.get('grip_trials')} grip trials. Skipped files: {inp.get('skipped') or 'none'}.", ""]
+    lines = ["# layerskin-exp report", ""] + _produced_by(r)
+    lines += [f"Sessions: `{inp.get('sessions_dir')}` — {inp.get('files')} files, {inp.get('calibration_trials')} "
+              f"calibration trials ({inp.get('press_trials')} press, {inp.get('slide_trials')} slide), "
+              f"{inp.get('grip_trials')} grip trials. Skipped files: {inp.get('skipped') or 'none'}.", ""]
     lines += _force(r, s) + _characterization(r, s) + _tracking(r, s) + _slip(r, s) + _slip_causal(r)
     if r.get("skipped"):
         lines += ["## Skipped sections", ""] + [f"- **{k}**: {v}" for k, v in r["skipped"].items()] + [""]

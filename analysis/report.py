@@ -1,7 +1,8 @@
 """`python -m analysis.report sessions=DIR out=DIR [analysis=demo|default|paper]`
 
 Turns a folder of session files into the study's tables and figures, ours beside the study's:
-out/results.json, out/predictions.npz, out/report.md, out/*.png, out/models/*.pt (estimator artifacts:
+out/results.json, out/predictions.npz, out/report.md, out/config.yaml (the resolved config), out/*.png,
+out/models/*.pt (estimator artifacts:
 each carries the preprocessing from raw counts with the model; T-s5.pt also the causal slip detector,
 ready for OnlineEstimator.from_artifact and `python -m layerskin_exp.estimation.export`).
 The estimators come from layerskin_exp.estimation; this module orchestrates them and writes tables.
@@ -12,15 +13,17 @@ the sections that need it with the reason in results.json and report.md.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import hydra
 import numpy as np
 import torch
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from tqdm.auto import tqdm
 
 from analysis import study
@@ -34,6 +37,7 @@ from analysis.characterization import (
 from analysis.config import AnalysisConfig, ReportConfig
 from analysis.markdown import write_markdown
 from analysis.metrics import mae, r2_score
+from analysis.run_info import convergence_caveats, force_ranges, training_state
 from analysis.sessions import Campaign, load_campaign, sessions_problem
 from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
 from layerskin_exp.cli import CONF_DIR as _CONF_DIR
@@ -47,6 +51,9 @@ from layerskin_exp.estimation.preprocess import Preprocessor
 from layerskin_exp.estimation.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
 from layerskin_exp.estimation.splits import split_trials
 from layerskin_exp.features import two_layer_features
+from layerskin_exp.provenance import provenance
+
+log = logging.getLogger(__name__)
 
 LIVE_SLIP_CUE = "interlayer"  # the cue of the slip detector saved with the T-s5 artifact
 
@@ -72,10 +79,12 @@ def _clean(x):
 class Analysis:
     """One report run. Stages fill self.results; figures and arrays go to self.out."""
 
-    def __init__(self, cfg: ReportConfig) -> None:
+    def __init__(self, cfg: ReportConfig, preset: str | None = None) -> None:
+        """preset: the name of the analysis preset the config came from (Hydra's choice), for the record."""
         self.cfg, self.a, self.skin = cfg, cfg.analysis, cfg.skin
+        self.preset = preset
         self.out = Path(cfg.out)
-        self.results: dict = {"force": {}, "heights": {}, "characterization": {}, "tracking": {}, "slip": {},
+        self.results: dict = {"provenance": {}, "data": {}, "force": {}, "heights": {}, "characterization": {}, "tracking": {}, "slip": {},
                                "slip_causal": {},
                                "study": study.ALL, "skipped": {}, "inputs": {}, "timing_s": {}}
         self.figures: list[str] = []
@@ -86,6 +95,7 @@ class Analysis:
 
     def skip(self, section: str, reason: str) -> None:
         self.results["skipped"][section] = reason
+        log.info("skipped %s: %s", section, reason)
 
     # -- stages ---------------------------------------------------------------------------
     def load(self) -> None:
@@ -98,6 +108,13 @@ class Analysis:
                                   "skipped": dict(camp.skipped),
                                   "skipped_files": [{"file": f.name, "reason": f.reason, "detail": f.detail}
                                                     for f in camp.skipped_files]}
+        self.results["data"] = {"sessions_used": len(camp.calibration) + len(camp.grip),
+                                "sessions_skipped": len(camp.skipped_files),
+                                "calibration_trials": len(camp.calibration), "grip_trials": len(camp.grip),
+                                "calibration_frames": int(sum(len(t.t_s) for t in camp.calibration)),
+                                "grip_frames": int(sum(len(t.t_s) for t in camp.grip))}
+        log.info("sessions: %d used, %d skipped (%s)", self.results["data"]["sessions_used"],
+                 len(camp.skipped_files), dict(camp.skipped) or "none")
         # Per-layer scale from the calibration campaign (else the grip sessions), applied to all.
         self.pre = Preprocessor.from_config(self.a.preprocess)
         src = [t.maps for t in camp.calibration] or [t.maps for t in camp.grip]
@@ -135,9 +152,14 @@ class Analysis:
         models_dir = self.out / "models"
         models_dir.mkdir(parents=True, exist_ok=True)
         history = {}
+        self.results["data"]["split"] = {
+            part: {"trials": len(ids), "frames": int(m.sum())}
+            for part, ids, m in (("train", tr, m_tr), ("val", va, m_va), ("test", te, m_te))}
+        self.results["data"]["force_range_n"] = force_ranges(y, m_te)
         for name in tqdm(self.a.cnn.configurations, desc="CNN-GRU models", leave=False, disable=not self.a.progress):
             model = CnnGruForceModel(name, self.a.cnn, progress=self.a.progress)
             t0 = time.perf_counter()
+            log.info("training %s on %d frames", name, int(m_tr.sum()))
             model.fit(X[m_tr], y[m_tr], trial[m_tr], X[m_va], y[m_va], trial[m_va])
             self.results["timing_s"][f"train_{name}"] = time.perf_counter() - t0
             preds[name] = model.predict(X[m_te], trial[m_te])
@@ -150,18 +172,26 @@ class Analysis:
             self.results["force"][name] = {ax: {"r2": r2[i], "mae": err[i]} for i, ax in enumerate(AXES)}
         self.results["force_split"] = {"train_trials": len(tr), "val_trials": len(va), "test_trials": len(te),
                                        "test_frames": int(m_te.sum()), "seed": sp.seed}
-        self.results["force_training"] = {k: {"epochs": len(h), "best_val_loss": min(e["val_loss"] for e in h)}
-                                          for k, h in history.items() if h}
+        linear_r2 = {ax: v["r2"] for ax, v in self.results["force"]["linear"].items()}
+        training = {}
+        for k, h in history.items():
+            st = training_state(h, self.a.cnn.max_epochs, self.a.cnn.patience)
+            st["caveats"] = convergence_caveats(
+                st, {ax: v["r2"] for ax, v in self.results["force"][k].items()}, linear_r2)
+            st["converged"] = not st["caveats"]
+            training[k] = st
+            log.info("%s: %d/%d epochs, early stopping %s%s", k, st["epochs"], st["max_epochs"],
+                     "triggered" if st["early_stopped"] else "not triggered",
+                     "; NOT CONVERGED: " + "; ".join(st["caveats"]) if st["caveats"] else "")
+        self.results["force_training"] = training
         np.savez_compressed(self.out / "predictions.npz", reference=y[m_te], trial=trial[m_te],
                             progress=progress[m_te], axes=np.array(AXES),
                             **{f"pred_{k}": v for k, v in preds.items()})
         if self.a.figures:
             from analysis.figures import force_scatter
 
-            show = {k: preds[k] for k in ("linear", "T-s5") if k in preds}
-            if len(show) < 2 and len(preds) > 1:
-                show[list(preds)[1]] = preds[list(preds)[1]]
-            force_scatter(self.out / "force_pred_vs_ref.png", y[m_te], show, progress[m_te])
+            force_scatter(self.out / "force_pred_vs_ref.png", y[m_te], preds, progress[m_te], self.results["force"],
+                          study.FORCE_RANGE_N)
             self.figures.append("force_pred_vs_ref.png")
 
     def characterization(self) -> None:
@@ -366,6 +396,7 @@ class Analysis:
 
     def write(self) -> None:
         self.results["figures"] = self.figures
+        (self.out / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.structured(self.cfg)))
         (self.out / "results.json").write_text(json.dumps(_clean(self.results), indent=1))
         write_markdown(self.out / "report.md", _clean(self.results), self.figures)
         skipped = self.results["inputs"].get("skipped_files")
@@ -376,14 +407,14 @@ class Analysis:
 
     def run(self) -> dict:
         self.out.mkdir(parents=True, exist_ok=True)
-        threads = torch.get_num_threads()
-        torch.set_num_threads(self.a.cnn.torch_threads or default_torch_threads(self.a.cnn.device))
-        try:
+        with deterministic_torch(self.a.cnn.torch_threads or default_torch_threads(self.a.cnn.device)):
             return self._run()
-        finally:
-            torch.set_num_threads(threads)
 
     def _run(self) -> dict:
+        self.results["provenance"] = {**provenance(), "analysis_preset": self.preset, "config_file": "config.yaml"}
+        log.info("report %s -> %s (analysis preset %s, layerskin-exp %s, commit %s%s)", self.cfg.sessions, self.out,
+                 self.preset, self.results["provenance"]["version"], self.results["provenance"]["git_commit"],
+                 ", dirty" if self.results["provenance"]["git_dirty"] else "")
         stages = [("load sessions", self.load), ("force estimation", self.force),
                   ("characterisation", self.characterization), ("tracking", self.tracking),
                   ("slip detection", self.slip), ("write report", self.write)]
@@ -391,15 +422,50 @@ class Analysis:
         for name, fn in bar:
             bar.set_postfix_str(name)
             t0 = time.perf_counter()
+            log.info("stage: %s", name)
             fn()
             self.results["timing_s"][name] = time.perf_counter() - t0
+            log.info("stage %s done in %.1f s", name, self.results["timing_s"][name])
         return self.results
 
 
-def run_report(sessions, out, analysis: AnalysisConfig | None = None, skin: SkinConfig | None = None) -> dict:
-    """Library entry point: the same as the command line."""
+@contextmanager
+def deterministic_torch(threads: int):
+    """Torch settings under which a report re-run on the same sessions gives the same numbers.
+
+    Seeds alone are not enough on a GPU: the training step gathers shared frame encodings by
+    index, whose backward pass accumulates with atomic adds in whatever order the threads finish,
+    and cuDNN may pick non-deterministic convolution algorithms. The T-s5 model then differs in
+    its last bits from run to run, and the cues built on its force (f_xyz, f_z, the preload, the
+    live detector) move in the third decimal. Deterministic kernels cost little for this model.
+    The intra-op thread count is fixed too: CPU reductions split by thread. Restored on exit."""
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # deterministic cuBLAS (read at first use)
+    saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled(),
+             torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark)
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(True, warn_only=True)  # warn, not fail, on an op without one
+    torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark = True, False
+    try:
+        yield
+    finally:
+        torch.set_num_threads(saved[0])
+        torch.use_deterministic_algorithms(saved[1])
+        torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark = saved[2], saved[3]
+
+
+def run_report(sessions, out, analysis: AnalysisConfig | None = None, skin: SkinConfig | None = None,
+               preset: str | None = None) -> dict:
+    """Library entry point: the same as the command line. preset: a name for the record (report.md,
+    results.json); the config itself is `analysis`."""
     return Analysis(ReportConfig(sessions=str(sessions), out=str(out), analysis=analysis or AnalysisConfig(),
-                                 skin=skin or SkinConfig())).run()
+                                 skin=skin or SkinConfig()), preset).run()
+
+
+def _hydra_preset() -> str | None:
+    """The analysis preset chosen for this Hydra run (analysis=demo|default|paper)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    return HydraConfig.get().runtime.choices.get("analysis") if HydraConfig.initialized() else None
 
 
 def _out_problem(out) -> str:
@@ -425,7 +491,7 @@ def main(cfg: DictConfig) -> None:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         sys.exit(EXIT_CONFIG)
-    res = Analysis(rc).run()
+    res = Analysis(rc, _hydra_preset()).run()
     print(f"report written to {Path(rc.out) / 'report.md'} ({len(res['skipped'])} section(s) skipped)")
 
 

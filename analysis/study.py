@@ -58,8 +58,11 @@ HEIGHTS = {
     "highest_bin": {"fz_n": [5.0, 6.5], "h_x_mm": 4.84, "h_y_mm": 6.53, "r2_x": 0.626, "r2_y": 0.725},
 }
 
+# The study's calibration campaign: shear within about ±2 N on each axis, normal load up to about 6.2 N.
+FORCE_RANGE_N = {"Fx": {"min_n": -2.0, "max_n": 2.0}, "Fy": {"min_n": -2.0, "max_n": 2.0}, "abs_Fz_max_n": 6.2}
+
 PRELOAD_N = {"6": 1.85, "9": 2.82, "12": 3.74, "15": 4.38}  # T-s5 estimate of the grip preload
 SLIP_LATENCY_MS = {"before": 82, "after": 10}  # median tactile lead over vision
 
 ALL = {"force": FORCE, "slip": SLIP, "tracking": TRACKING, "characterization": CHARACTERIZATION,
-       "heights": HEIGHTS, "preload_n": PRELOAD_N, "slip_latency_ms": SLIP_LATENCY_MS}
+       "heights": HEIGHTS, "force_range_n": FORCE_RANGE_N, "preload_n": PRELOAD_N, "slip_latency_ms": SLIP_LATENCY_MS}

@@ -57,6 +57,14 @@ def test_report_writes_results_predictions_markdown_and_figures(campaign, tmp_pa
     assert causal["interlayer"]["n_truth_events"] == data["slip"]["translation"]["interlayer"]["n_truth_events"]
     assert 0.0 <= causal["interlayer"]["grip"] <= 1.0
     assert "causal vs offline" in md
+    # The report says what produced it and how far its models got.
+    assert md.startswith("# layerskin-exp report\n\n## Produced by")
+    assert data["provenance"]["version"] and "git_dirty" in data["provenance"]
+    assert data["force_training"]["T-s5"]["epochs"] == 1 and not data["force_training"]["T-s5"]["converged"]
+    assert "not converged" in md and "study: Fx, Fy within about" in md
+    split = data["data"]["split"]
+    assert sum(p["frames"] for p in split.values()) == data["data"]["calibration_frames"]
+    assert "max_epochs: 1" in (tmp_path / "config.yaml").read_text()
 
 
 def test_missing_grip_sessions_are_skipped_with_a_reason(campaign, tmp_path):
