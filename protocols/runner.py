@@ -255,8 +255,10 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         reason = _describe(exc)
         try:
             trial.drain()
-            detected_ns = getattr(exc, "detected_ns", None)  # a fault: when motion was stopped
-            trial.event("error", reason, **({} if detected_ns is None else {"detected_ns": int(detected_ns)}))
+            # A device fault the rig latched (its watchdog stopped motion then), whichever error
+            # ended the trial: a command to a hung device may fail before the loop sees the fault.
+            first = rig.first_fault()
+            trial.event("error", reason, **({} if first is None else {"fault": first[0], "detected_ns": int(first[1])}))
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
         writer.close(f"aborted: {reason}")

@@ -62,12 +62,15 @@ def test_stalled_stream_on_loopback_stops_safely(tmp_path, hydra_dirs, app, devi
     assert r.returncode == 1, r.stderr[-3000:]
     (partial,) = data.glob(f"{app}/*/*.partial")
     s = load_session(partial, warn=False)
-    assert "stalled" in s.outcome and not s.complete, s.outcome
+    assert not s.complete
+    ev = s.streams["events"]
+    (error,) = [d for k, d in zip(ev["kind"], ev["detail"], strict=True) if k == "error"]
+    # the rig's watchdog latched the stall (a command to the hung device may fail first and end the
+    # trial; for the UR, ur_rtde then also drops the link)
+    assert "stalled" in error["fault"] or (device == "ur5e" and "link lost" in error["fault"]), error
     # motion was stopped within 50 ms of the stream's last sample (host receive times in the file):
     # the rig's watchdog asks every device every 5 ms, whatever the protocol thread is doing
     last_ns = int(s.streams[stream]["host_t_ns"][-1])
-    ev = s.streams["events"]
-    (error,) = [d for k, d in zip(ev["kind"], ev["detail"], strict=True) if k == "error"]
     assert error["detected_ns"] - last_ns <= 50e6 + 10e6, (error["detected_ns"] - last_ns) / 1e6
 
 

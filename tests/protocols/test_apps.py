@@ -226,14 +226,16 @@ def test_slow_zone_keeps_the_normal_force_within_its_stated_overshoot(tmp_path):
 ])
 def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs, sig, code, outcome):
     data = tmp_path / "data"
-    args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", f"data_root={data}", "progress=false",
-            *hydra_dirs]
+    # a 15 s hold makes a press trial last far longer than the gap between trials: the signal lands
+    # inside the first press
+    args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", "press.hold_s=15", f"data_root={data}",
+            "progress=false", *hydra_dirs]
     proc = popen_cli("protocols.force_calibration", args, tmp_path)
     try:
         deadline = time.monotonic() + 200
-        while not list(data.glob("force_calibration/*/*.mcap")) and proc.poll() is None \
+        while not list(data.glob("force_calibration/*/*press*.partial")) and proc.poll() is None \
                 and time.monotonic() < deadline:
-            time.sleep(0.02)
+            time.sleep(0.005)
         assert proc.poll() is None, "the campaign ended before the signal could be sent"
         proc.send_signal(sig)
         assert proc.wait(timeout=60) == code
