@@ -23,23 +23,26 @@ def make_cfg():
     return app_config
 
 
-@pytest.fixture
-def realtime_world():
-    """Factory: a started RealtimeWorld for "platform" or "gripper" (stopped at teardown).
-
-    What the loopback emulators run on: rt.rig holds the simulated twins; use `with rt.lock:`.
-    """
+def start_realtime_world(setup: str = "platform", seed: int = 0, period_s: float = 0.002, **rig_overrides):
+    """A started RealtimeWorld for "platform" or "gripper": what the loopback emulators run on.
+    rt.rig holds the simulated twins; use `with rt.lock:`. The caller stops it."""
     from hardware.sim.realtime import RealtimeWorld
     from layerskin_exp.config import validate
 
+    cfg = app_config("sim", seed, **rig_overrides)
+    rt = RealtimeWorld.from_config(validate(cfg.sim), validate(cfg.skin), setup, period_s)
+    rt.start()
+    return rt
+
+
+@pytest.fixture
+def realtime_world():
+    """Factory: start_realtime_world(...) per call, each stopped at teardown."""
     started = []
 
-    def make(setup: str = "platform", seed: int = 0, period_s: float = 0.002, **rig_overrides):
-        cfg = app_config("sim", seed, **rig_overrides)
-        rt = RealtimeWorld.from_config(validate(cfg.sim), validate(cfg.skin), setup, period_s)
-        rt.start()
-        started.append(rt)
-        return rt
+    def make(*args, **kwargs):
+        started.append(start_realtime_world(*args, **kwargs))
+        return started[-1]
 
     yield make
     for rt in started:

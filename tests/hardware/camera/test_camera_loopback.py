@@ -9,18 +9,13 @@ import pytest
 from hardware.camera import CameraConfig, CameraEmulator, FakeCapture, OpenCVMarkerCamera
 from hardware.interfaces import DeviceError
 from layerskin_exp.config import ConfigError
+from tests.hardware.conftest import start_realtime_world
 
 
 @pytest.fixture(scope="module")
 def rt():
     """One gripper world for the module; one emulator takes the twin's frames at a time."""
-    from hardware.sim.realtime import RealtimeWorld
-    from layerskin_exp.config import validate
-    from tests.hardware.conftest import app_config
-
-    cfg = app_config("sim", 0)
-    world = RealtimeWorld.from_config(validate(cfg.sim), validate(cfg.skin), "gripper")
-    world.start()
+    world = start_realtime_world("gripper")
     yield world
     world.stop()
 

@@ -10,18 +10,13 @@ import pytest
 from hardware.interfaces import DeviceError
 from hardware.netft import NetFTConfig, NetFTEmulator, NetFTSensor, wire
 from layerskin_exp.config import ConfigError
+from tests.hardware.conftest import start_realtime_world
 
 
 @pytest.fixture(scope="module")
 def rt():
     """One platform world for the module (building one takes seconds); one emulator drains it at a time."""
-    from hardware.sim.realtime import RealtimeWorld
-    from layerskin_exp.config import validate
-    from tests.hardware.conftest import app_config
-
-    cfg = app_config("sim", 0)
-    world = RealtimeWorld.from_config(validate(cfg.sim), validate(cfg.skin), "platform")
-    world.start()
+    world = start_realtime_world("platform")
     yield world
     world.stop()
 
