@@ -2,7 +2,8 @@
 
 At each contact position: `press.repeats` normal presses to `press.target_normal_n`, then
 `slide.repeats` shear slides from a `slide.preload_n` preload in a random in-plane direction,
-with a random vertical offset reached over the first `slide.z_ramp_mm` of travel. A slide stops
+with a random vertical offset: the vertical part of one straight move to the skin edge, or (with
+`slide.z_ramp_mm` set) reached over the first z_ramp_mm of in-plane travel. A slide stops
 at |(Fx, Fy)| >= `slide.shear_stop_n` ("shear_reached"), at the skin edge ("skin_edge"), or when
 the normal-force guard trips ("force_limit"). One session file per trial; the plan (positions,
 directions, offsets) follows from the seed and the trial's labels, so a resumed campaign plans
@@ -230,11 +231,13 @@ def run_slide(ctl: PlatformControl, trial: CalibrationTrial) -> None:
     start = ctl.position_mm()
     direction = np.array([np.cos(trial.direction_rad), np.sin(trial.direction_rad)])
     travel_mm = distance_to_edge_mm(start[:2], direction, SKIN_HALF_WIDTH_MM - cfg.slide.edge_margin_mm)
-    ramp_mm = min(cfg.slide.z_ramp_mm, travel_mm)
+    z_ramp = travel_mm if cfg.slide.z_ramp_mm is None else cfg.slide.z_ramp_mm
+    ramp_mm = min(z_ramp, travel_mm)
     z_lo, z_hi = cfg.safety.platform_min_mm[2], cfg.approach.clearance_mm
-    z_end = float(np.clip(start[2] + trial.z_offset_mm * ramp_mm / cfg.slide.z_ramp_mm, z_lo, z_hi))
-    waypoints = [np.array([*(start[:2] + ramp_mm * direction), z_end]),
-                 np.array([*(start[:2] + travel_mm * direction), z_end])]
+    z_end = float(np.clip(start[2] + trial.z_offset_mm * ramp_mm / max(z_ramp, 1e-9), z_lo, z_hi))
+    waypoints = [np.array([*(start[:2] + ramp_mm * direction), z_end])]
+    if ramp_mm < travel_mm:
+        waypoints.append(np.array([*(start[:2] + travel_mm * direction), z_end]))
     log.event("phase", "slide", direction_rad=trial.direction_rad, z_offset_mm=trial.z_offset_mm,
               travel_mm=travel_mm, start_mm=start.tolist())
 

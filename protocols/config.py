@@ -163,7 +163,9 @@ class SlideConfig:
     repeats: int = 4
     preload_n: float = 3.0  # normal load the slide starts from
     z_offset_mm: float = 0.5  # vertical offset drawn uniform in [-z_offset_mm, z_offset_mm]
-    z_ramp_mm: float = 1.0  # in-plane travel over which the vertical offset is applied
+    # in-plane travel over which the vertical offset is applied; None: the offset is the vertical
+    # part of the slide's one straight move to the edge (the study's "random displacement along Z")
+    z_ramp_mm: float | None = None
     speed_mm_s: float = 2.0
     shear_stop_n: float = 2.0  # stop when |(Fx, Fy)| reaches this
     edge_margin_mm: float = 0.5  # "skin edge": tip this far inside the sensing area
@@ -200,7 +202,8 @@ class ForceCalibrationConfig:
                 f"must be > 0 and below safety.max_normal_force_n={s.max_normal_force_n}")
         require(0 < self.slide.shear_stop_n, "slide.shear_stop_n", self.slide.shear_stop_n, "must be > 0 N")
         require(0 <= self.slide.z_offset_mm <= 2.0, "slide.z_offset_mm", self.slide.z_offset_mm, "must be in [0, 2] mm")
-        require(self.slide.z_ramp_mm > 0, "slide.z_ramp_mm", self.slide.z_ramp_mm, "must be > 0 mm")
+        require(self.slide.z_ramp_mm is None or self.slide.z_ramp_mm > 0, "slide.z_ramp_mm", self.slide.z_ramp_mm,
+                "must be > 0 mm, or null (spread over the whole slide)")
         require(0 <= self.slide.edge_margin_mm < SKIN_HALF_WIDTH_MM, "slide.edge_margin_mm",
                 self.slide.edge_margin_mm, f"must be in [0, {SKIN_HALF_WIDTH_MM}) mm")
         require(self.press.hold_s >= 0, "press.hold_s", self.press.hold_s, "must be >= 0 s")

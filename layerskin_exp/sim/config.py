@@ -122,12 +122,12 @@ class SheetConfig:
     of the two films crossed) laminated around the Velostat. Sets the superficial sheet's
     bending rigidity, which spreads the indenter's load over the lattice (`laminate`).
 
-    `bonded`: whether the films act as the faces of a sandwich about the Velostat (D = 5.7 N mm
-    with the defaults) or bend on their own (0.11 N mm). A sandwich needs the interfaces to carry
-    the core's shear flow, ~V / d ~ 1 MPa a few mm from a 3 N contact; electrodes that must touch
-    the Velostat are held by lamination at the rim and by friction (~mu p, tens of kPa) over the
-    active area, so the true sheet lies between the two. The default (bonded) is the paper's
-    "laminating"; `validate` and the campaign figures differ markedly between the two."""
+    `interface`: how the films hold to the Velostat. They must touch it to conduct, so over the
+    active area nothing but friction holds them (lamination seals the rim): "friction" (default)
+    lets each film stick where friction mu p can carry the sandwich's shear flow and slip where
+    it cannot (`laminate.FrictionInterface`). The bounds: "bonded" (a glued sandwich, D = 5.7 N mm
+    with the defaults) and "unbonded" (the films and core bend on their own, 0.11 N mm).
+    `interface_friction`: the film-Velostat friction coefficient."""
 
     film_modulus_mpa: float = 2500.0  # polyimide
     film_thickness_mm: float = 0.025
@@ -136,7 +136,8 @@ class SheetConfig:
     electrode_fill: float = 0.8  # 1.2 mm electrodes at 1.5 mm pitch
     velostat_modulus_mpa: float = 150.0
     velostat_thickness_mm: float = 0.1
-    bonded: bool = True  # laminated: the films act as the faces of a sandwich about the Velostat
+    interface: str = "friction"  # friction | bonded | unbonded
+    interface_friction: float = 0.3  # copper / polyimide on carbon-loaded polyolefin
 
     def __post_init__(self) -> None:
         for key in ("film_modulus_mpa", "film_thickness_mm", "copper_modulus_mpa", "copper_thickness_mm",
@@ -144,15 +145,33 @@ class SheetConfig:
             _positive(getattr(self, key), f"sim.sheet.{key}")
         require(self.electrode_fill is not None and 0 < self.electrode_fill <= 1, "sim.sheet.electrode_fill",
                 self.electrode_fill, "must lie in (0, 1]")
+        require(self.interface in ("friction", "bonded", "unbonded"), "sim.sheet.interface", self.interface,
+                "must be 'friction', 'bonded' or 'unbonded'")
+        require(self.interface_friction is not None and self.interface_friction >= 0, "sim.sheet.interface_friction",
+                self.interface_friction, "must be >= 0")
 
-    @property
-    def rigidity_n_mm(self) -> float:
-        """Bending rigidity D of the sheet (N mm), see laminate.sheet_rigidity_n_mm."""
+    def _rigidity(self, bonded: bool) -> float:
         from layerskin_exp.sim.laminate import sheet_rigidity_n_mm
 
         return sheet_rigidity_n_mm(self.film_modulus_mpa, self.film_thickness_mm, self.copper_modulus_mpa,
                                    self.copper_thickness_mm, self.electrode_fill, self.velostat_thickness_mm,
-                                   self.velostat_modulus_mpa, self.bonded)
+                                   self.velostat_modulus_mpa, bonded)
+
+    @property
+    def rigidity_n_mm(self) -> float:
+        """Bending rigidity D of the sheet (N mm) where its films slip (friction, unbonded) or
+        stick (bonded); see laminate.sheet_rigidity_n_mm."""
+        return self._rigidity(self.interface == "bonded")
+
+    @property
+    def sandwich_rigidity_n_mm(self) -> float:
+        """D of the fully bonded sandwich (what sticking films give)."""
+        return self._rigidity(True)
+
+    @property
+    def film_separation_mm(self) -> float:
+        """Distance between the two electrode films' mid-planes (the sandwich's lever arm)."""
+        return self.velostat_thickness_mm + self.film_thickness_mm + self.copper_thickness_mm
 
 
 @dataclass

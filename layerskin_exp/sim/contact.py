@@ -28,7 +28,12 @@ import numpy as np
 from scipy.special import i0e
 
 from layerskin_exp.sim.config import SimConfig
-from layerskin_exp.sim.laminate import PlateOnFoundation, cover_stiffness_n_per_mm3, pad_radius_mm
+from layerskin_exp.sim.laminate import (
+    FrictionInterface,
+    PlateOnFoundation,
+    cover_stiffness_n_per_mm3,
+    pad_radius_mm,
+)
 from layerskin_exp.sim.spacer import SpacerLaw
 
 KPA_MM2_TO_N = 1e-3
@@ -95,8 +100,13 @@ def _solver(sim: SimConfig, kind: str) -> PlateOnFoundation:
     radius = sim.contact.hemisphere_radius_mm if kind == "hemisphere" else sim.contact.rod_diameter_mm / 2
     g_p = sim.spacer.shear_modulus_kpa * KPA_MM2_TO_N * sim.spacer.thickness / 3.0  # Vlasov: G h / 3
     k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, sim.cover.thickness, sim.spacer.confinement_length)
-    return PlateOnFoundation(kind, law, sim.sheet.rigidity_n_mm, g_p, k_c, radius,
-                             pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM)
+    sheet = sim.sheet
+    interface = None
+    if sheet.interface == "friction":
+        interface = FrictionInterface(sheet.rigidity_n_mm, sheet.sandwich_rigidity_n_mm, sheet.film_separation_mm,
+                                      sheet.interface_friction)
+    return PlateOnFoundation(kind, law, sheet.rigidity_n_mm, g_p, k_c, radius,
+                             pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM, interface=interface)
 
 
 def build_tables(sim: SimConfig, kind: str) -> ContactTables:
@@ -118,12 +128,12 @@ def build_tables(sim: SimConfig, kind: str) -> ContactTables:
     found1 = np.zeros((n_delta, n_x))
     comp = np.zeros((n_delta, n_x))
     load = np.zeros(n_delta)
-    w = None
+    w = eta = None
     for k, dl in enumerate(delta):
         if dl <= 0.0:
             continue
-        sol = plate.solve(float(dl), w)
-        w = sol.w_mm
+        sol = plate.solve(float(dl), w, eta_start=eta)
+        w, eta = sol.w_mm, sol.composite
         contact[k], found[k], comp[k] = sol.contact_kpa, sol.foundation_kpa, np.maximum(w, 0.0)
         load[k] = plate.load(sol)
         resp = plate.couple(sol)

@@ -89,6 +89,26 @@ class LaminateSolution:
     contact_kpa: np.ndarray  # (n,) pressure between indenter and cover
     foundation_kpa: np.ndarray  # (n,) pressure the lattice carries (negative: pulling the sheet)
     iterations: int
+    rigidity_n_mm: np.ndarray | None = None  # (n,) the sheet's bending rigidity at this state
+    composite: np.ndarray | None = None  # (n,) degree of sandwich action (1 bonded .. 0 slipping)
+
+
+@dataclass
+class FrictionInterface:
+    """The electrode films held to the Velostat by friction only (they must touch it to conduct).
+
+    A sandwich needs its interfaces to carry the core's shear flow tau = Q / d (Q the sheet's
+    transverse shear force per width, d the distance between the films); friction carries at
+    most mu p, p the pressure clamping the films to the core. Where mu p >= tau the films stick
+    and the sheet bends as the sandwich; where it is less they slide, carrying mu p, and only
+    that fraction of the sandwich action survives (a rigid-plastic shear connection, the
+    partial-interaction reading of a composite beam). Locally the rigidity is
+    D = D_own + eta (D_sandwich - D_own), eta = min(1, mu p / tau)."""
+
+    own_n_mm: float  # films and core bending on their own
+    sandwich_n_mm: float  # the fully bonded sandwich
+    separation_mm: float  # d, between the films' mid-planes
+    friction: float  # film-Velostat friction coefficient
 
 
 @dataclass
@@ -119,11 +139,12 @@ class PlateOnFoundation:
 
     def __init__(self, kind: str, law: SpacerLaw, rigidity_n_mm: float, pasternak_n_per_mm: float,
                  cover_n_per_mm3: float, indenter_radius_mm: float, pad_radius_mm: float,
-                 step_mm: float = 0.05):
+                 step_mm: float = 0.05, interface: FrictionInterface | None = None):
         if kind not in ("hemisphere", "rod"):
             raise ValueError(f"kind={kind!r}: must be 'hemisphere' or 'rod'")
         self.kind, self.law = kind, law
         self.rigidity, self.pasternak, self.k_cover = rigidity_n_mm, pasternak_n_per_mm, cover_n_per_mm3
+        self.interface = interface
         self.radius = indenter_radius_mm
         self.step = step_mm
         reach = pad_radius_mm + 3.0  # a free margin beyond the edge, where nothing carries load
@@ -138,20 +159,45 @@ class PlateOnFoundation:
             self.area = np.full(self.x.shape, step_mm)  # per mm of rod length
         on_pad = np.abs(self.x) <= pad_radius_mm
         self.on_pad = on_pad
-        lap = laplacian(kind, len(self.x), step_mm)
-        # lap (D lap w) with D = 0 off the pad: bending moment and shear vanish at the edge;
-        # a vanishing stiffness there keeps the cut-off margin determined (it carries no load).
-        d = np.where(on_pad, rigidity_n_mm, 1e-9 * rigidity_n_mm)
-        gp = np.where(on_pad, pasternak_n_per_mm, 0.0)
-        self._linear = (lap @ sp.diags(d) @ lap - sp.diags(gp) @ lap).tocsc() + sp.eye(len(self.x)) * 1e-9
+        self._lap = laplacian(kind, len(self.x), step_mm)
+        self._lap1 = laplacian_m1(len(self.x), step_mm) if kind == "hemisphere" else self._lap
         self.z_ind = self.indenter_height(self.x)
-        self._d, self._gp = d, gp
-        if kind == "hemisphere":
-            lap1 = laplacian_m1(len(self.x), step_mm)
-            self._linear1 = (lap1 @ sp.diags(d) @ lap1 - sp.diags(gp) @ lap1).tocsc()
-        else:
-            self._linear1 = self._linear
+        self._gp = np.where(on_pad, pasternak_n_per_mm, 0.0)
+        self._linear, self._linear1 = self._operators(np.full(len(self.x), rigidity_n_mm))
         self._e_lat = law.e_lat_kpa * KPA / law.h_mm  # tension side: the bonded lattice, linear
+
+    def _operators(self, rigidity: np.ndarray) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """lap (D lap w) - G_p lap w for a rigidity field D (axisymmetric and first angular mode).
+        D = 0 off the pad: bending moment and shear vanish at the edge; a vanishing stiffness
+        there keeps the cut-off margin determined (it carries no load)."""
+        d = sp.diags(np.where(self.on_pad, rigidity, 1e-9 * self.rigidity))
+        gp = sp.diags(self._gp)
+        lin = (self._lap @ d @ self._lap - gp @ self._lap).tocsc() + sp.eye(len(self.x), format="csc") * 1e-9
+        lin1 = (self._lap1 @ d @ self._lap1 - gp @ self._lap1).tocsc() if self.kind == "hemisphere" else lin
+        return lin, lin1
+
+    def composite_degree(self, w_mm: np.ndarray, contact: np.ndarray, found: np.ndarray,
+                         rigidity: np.ndarray) -> np.ndarray:
+        """eta(x) of `FrictionInterface` at a solved state (pressures in N/mm^2)."""
+        itf = self.interface
+        net = contact - found  # load the sheet hands on (down positive)
+        if self.kind == "hemisphere":
+            inside = np.cumsum(net * self.area) / (2.0 * np.pi)  # int_0^r net r dr
+            with np.errstate(invalid="ignore", divide="ignore"):
+                total = np.where(self.x > 0, inside / np.maximum(self.x, 1e-12), 0.0)
+        else:
+            mid = len(self.x) // 2
+            c = np.cumsum(net) * self.step
+            total = c - c[mid]  # from the axis outwards, odd across it
+        # the lattice walls (Pasternak) carry G_p |w'| of it; the sheet carries the rest
+        shear = np.abs(total) - self._gp * np.abs(np.gradient(w_mm, self.step))
+        shear = np.maximum(shear, 0.0)
+        sandwich_share = (itf.sandwich_n_mm - itf.own_n_mm) / np.maximum(rigidity, 1e-12)
+        demand = shear * np.clip(sandwich_share, 0.0, 1.0) / itf.separation_mm
+        clamp = np.maximum(0.5 * (contact + found), 0.0)  # mean pressure through the sheet
+        capacity = itf.friction * clamp
+        eta = np.where(demand > capacity, capacity / np.maximum(demand, 1e-15), 1.0)
+        return np.where(self.on_pad, eta, 0.0)
 
     def indenter_height(self, x_mm: np.ndarray) -> np.ndarray:
         """Height of the indenter's surface above its lowest point (inf beyond its radius)."""
@@ -174,10 +220,33 @@ class PlateOnFoundation:
         return p, slope
 
     def solve(self, delta_mm: float, w_start: np.ndarray | None = None, tol: float = 1e-9,
-              max_iter: int = 60) -> LaminateSolution:
-        """Equilibrium at indentation delta (Newton with backtracking on the residual)."""
+              max_iter: int = 60, eta_start: np.ndarray | None = None) -> LaminateSolution:
+        """Equilibrium at indentation delta. With a `FrictionInterface` the rigidity field follows
+        the state: solve, update eta from the solved pressures (under-relaxed), solve again until
+        eta settles."""
+        if self.interface is None:
+            rig = np.full(len(self.x), self.rigidity)
+            return self._solve_fixed(delta_mm, self._linear, rig, w_start, tol, max_iter)
+        itf = self.interface
+        eta = np.ones(len(self.x)) if eta_start is None else eta_start.copy()
+        sol = None
+        for _ in range(40):
+            rig = itf.own_n_mm + eta * (itf.sandwich_n_mm - itf.own_n_mm)
+            lin, _ = self._operators(rig)
+            sol = self._solve_fixed(delta_mm, lin, rig, w_start if sol is None else sol.w_mm, tol, max_iter)
+            new = self.composite_degree(sol.w_mm, sol.contact_kpa * KPA, sol.foundation_kpa * KPA, rig)
+            change = float(np.max(np.abs(new - eta)))
+            eta = 0.5 * eta + 0.5 * new
+            if change < 2e-3:
+                break
+        sol.composite = eta
+        sol.rigidity_n_mm = itf.own_n_mm + eta * (itf.sandwich_n_mm - itf.own_n_mm)
+        return sol
+
+    def _solve_fixed(self, delta_mm: float, a, rigidity: np.ndarray, w_start: np.ndarray | None, tol: float,
+                     max_iter: int) -> LaminateSolution:
+        """Newton with backtracking on the residual, for a fixed rigidity field."""
         w = np.zeros(len(self.x)) if w_start is None else w_start.copy()
-        a = self._linear
         kc = self.k_cover
 
         def residual(w):
@@ -204,7 +273,7 @@ class PlateOnFoundation:
             w, res, slope, gap, norm = w_new, r_new, sl_new, gap_new, n_new
         pf, _ = self.foundation(w)
         pc = kc * np.maximum(delta_mm - self.z_ind - w, 0.0)
-        return LaminateSolution(delta_mm, w, pc / KPA, pf / KPA, it)
+        return LaminateSolution(delta_mm, w, pc / KPA, pf / KPA, it, rigidity, None)
 
     def couple(self, sol: LaminateSolution) -> CoupleResponse:
         """Response to a unit couple of the shear about the deep plane (see CoupleResponse).
@@ -222,7 +291,8 @@ class PlateOnFoundation:
         touching = pc > 0.0
         stiff = slope + self.k_cover * touching
         load = -np.gradient(pc, self.step) / fz  # sign: the deep pressure moves along the shear
-        jac = self._linear1 + sp.diags(stiff)
+        lin1 = self._linear1 if sol.rigidity_n_mm is None else self._operators(sol.rigidity_n_mm)[1]
+        jac = lin1 + sp.diags(stiff)
         if self.kind == "hemisphere":
             load[0] = 0.0
             jac = jac.tolil()

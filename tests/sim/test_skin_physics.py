@@ -114,7 +114,7 @@ def test_moment_balance_of_the_shear_is_shared_by_lattice_and_indenter():
     lattice_share = plate.first_moment(resp.foundation_kpa)
     indenter_share = -plate.first_moment(resp.contact_kpa)
     assert lattice_share + indenter_share == pytest.approx(1.0, abs=0.01)
-    assert 0.5 < lattice_share < 1.0 and indenter_share > 0
+    assert 0.2 < lattice_share < 1.0 and indenter_share > 0
     states = [m.step(k * 1e-3, np.array([0.0, 0.0, -2.0])) for k in range(20)]
     for k in range(60):  # slide 0.6 mm diagonally, stays stuck
         states.append(m.step(0.02 + k * 1e-3, np.array([0.01 * (k + 1), 0.005 * (k + 1), -2.0])))
