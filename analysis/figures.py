@@ -1,4 +1,4 @@
-"""Report figures (matplotlib, Agg): predicted vs reference force, tracking traces, slip detections."""
+"""Report figures (matplotlib, Agg): predicted vs reference force, characterisation, tracking traces, slip detections."""
 
 from __future__ import annotations
 
@@ -134,3 +134,81 @@ def slip_figure(t_s, score, truth_s, detected_s, tp_det, fn_truth, threshold, ti
     handles = ev.get_legend_handles_labels()[0] + ax.get_legend_handles_labels()[0]
     fig.legend(handles=handles, loc="outside right center", fontsize=7, frameon=False)
     return fig
+
+
+def characterization_figure(presses, shear_n: list[np.ndarray], dc_mm: list[np.ndarray], heights: dict | None,
+                            matched_load_n: float, shear_band_n: tuple[float, float], study: dict) -> plt.Figure:
+    """The calibration campaign's characterisation in three panels, ours beside the study's.
+
+    (a) each press's loading ramp, summed response (both layers) against F_z, one colour per
+    position, with the matched load of the uniformity CV marked; (b) the inter-layer CoP shift
+    |Δc| against |F_shear| over the slides (a random 20 000 frames), the trial-wise medians in
+    the shear band and the study's median and 10-90 % range; (c) the effective heights h_x, h_y
+    fitted per normal-load bin (marker size: fit R²), the study's lowest and highest bins."""
+    from analysis.characterization import loading_curve
+
+    fig, axs = plt.subplots(1, 3, figsize=(15.0, 4.4), constrained_layout=True)
+    ax = axs[0]
+    positions = sorted({p.position for p in presses})
+    cmap = plt.get_cmap("viridis", max(len(positions), 2))
+    colour = {pos: cmap(i) for i, pos in enumerate(positions)}
+    for p in presses:
+        load, resp = loading_curve(p.fz_n, p.response)
+        ax.plot(load, resp, lw=0.5, alpha=0.5, color=colour[p.position])
+    ax.axvline(matched_load_n, color="k", ls="--", lw=0.8)
+    uni = study.get("uniformity", {})
+    ax.set(xlabel="F_z (N)", ylabel="summed response (counts above baseline)",
+           title=f"(a) loading ramps, {len(positions)} positions\nstudy: CV {uni.get('cv', float('nan')):.3f} "
+                 f"at {uni.get('matched_load_n', matched_load_n):g} N")
+
+    ax = axs[1]
+    if shear_n:
+        s = np.concatenate(shear_n)
+        d = np.linalg.norm(np.concatenate(dc_mm), axis=1)
+        pick = np.random.default_rng(0).permutation(s.size)[:20000]
+        ax.scatter(s[pick], d[pick], s=2, alpha=0.15, color="C0", rasterized=True, label="slide frames")
+        lo, hi = shear_band_n
+        med = [float(np.median(np.linalg.norm(dd[(ss >= lo) & (ss <= hi)], axis=1)))
+               for ss, dd in zip(shear_n, dc_mm, strict=True) if ((ss >= lo) & (ss <= hi)).any()]
+        if med:
+            ax.errorbar([0.5 * (lo + hi) - 0.05], [np.median(med)],
+                        yerr=[[np.median(med) - np.percentile(med, 10)], [np.percentile(med, 90) - np.median(med)]],
+                        fmt="o", color="C1", capsize=4, label="ours: trial medians in band (10-90 %)")
+        cs = study.get("cop_shift", {})
+        if cs:
+            ax.errorbar([0.5 * (lo + hi) + 0.05], [cs["median_mm"]],
+                        yerr=[[cs["median_mm"] - cs["p10_mm"]], [cs["p90_mm"] - cs["median_mm"]]],
+                        fmt="s", color="k", capsize=4, label="study")
+        ax.axvspan(lo, hi, color="0.9", zorder=0)
+        ax.legend(loc="upper left", fontsize=8)
+    ax.set(xlabel="|F_shear| (N)", ylabel="|Δc| (mm)", title="(b) inter-layer CoP shift against shear")
+
+    ax = axs[2]
+    bins = (heights or {}).get("bins", [])
+    for i, (axis, col) in enumerate((("x", "C0"), ("y", "C3"))):
+        mid = [0.5 * (b["fz_low_n"] + b["fz_high_n"]) + (i - 0.5) * 0.08 for b in bins if b.get(f"h_{axis}_mm") is not None]
+        h = [b[f"h_{axis}_mm"] for b in bins if b.get(f"h_{axis}_mm") is not None]
+        r2 = [max(b[f"r2_{axis}"], 0.0) for b in bins if b.get(f"h_{axis}_mm") is not None]
+        ax.scatter(mid, h, s=[20 + 180 * v for v in r2], color=col, label=f"ours h_{axis}")
+        ax.plot(mid, h, color=col, lw=0.8)
+        for key, mk in (("lowest_bin", "s"), ("highest_bin", "s")):
+            sb = study.get("heights", {}).get(key)
+            if sb:
+                ax.scatter([np.mean(sb["fz_n"]) + (i - 0.5) * 0.08], [sb[f"h_{axis}_mm"]], marker=mk,
+                           facecolors="none", edgecolors=col, s=80,
+                           label=f"study h_{axis}" if key == "lowest_bin" else None)
+    ax.axhline(0.0, color="0.6", lw=0.6)
+    if bins:
+        finite = [b[f"h_{a}_mm"] for b in bins for a in "xy" if b.get(f"h_{a}_mm") is not None]
+        if finite:
+            top = max(8.0, min(max(finite) * 1.1, 20.0))
+            ax.set_ylim(min(-1.0, max(min(finite) * 1.1, -10.0)), top)
+    ax.set(xlabel="F_z bin centre (N)", ylabel="h (mm)",
+           title="(c) effective height per normal-load bin\n(marker area ~ fit R²; clipped to -10..20 mm)")
+    ax.legend(loc="upper left", fontsize=8)
+    return fig
+
+
+def characterization_plot(path, *args, **kwargs) -> None:
+    """characterization_figure saved to path."""
+    _save(characterization_figure(*args, **kwargs), path)

@@ -226,7 +226,16 @@ class Analysis:
             fz = np.concatenate([c[i].force_n[:, 2] for i, _ in shear])
             fs = np.concatenate([c[i].force_n[:, :2] for i, _ in shear])
             self.results["heights"] = effective_heights(fz, np.concatenate(dcs), fs, cc)
-        else:
+        if self.a.figures and (presses or shear):
+            from analysis.figures import characterization_plot
+
+            characterization_plot(self.out / "characterization.png", presses,
+                                  [np.linalg.norm(c[i].force_n[:, :2], axis=1) for i, _ in shear],
+                                  [f["dc"][sl] for _, sl in shear], self.results.get("heights"),
+                                  cc.matched_load_n, tuple(cc.shear_band_n),
+                                  {**study.CHARACTERIZATION, "heights": study.HEIGHTS})
+            self.figures.append("characterization.png")
+        if not shear:
             self.skip("characterization.cop_shift", "no slide (shear) trials")
             self.skip("heights", "no slide (shear) trials")
         self.results["characterization"] = res

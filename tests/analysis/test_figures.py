@@ -37,3 +37,25 @@ def test_force_figure_has_every_model_a_colourbar_scores_and_the_study_range():
     assert {a.get_title().split(":")[0] for a in panels} == set(preds)
     assert panels[0].get_xlim()[0] < -2.0 and panels[0].get_xlim()[1] > 2.0  # the study's ±2 N is in view
     plt.close(fig)
+
+
+def test_characterization_figure_shows_ramps_cop_shift_and_heights_beside_the_study():
+    from analysis.characterization import PressTrial
+    from analysis.figures import characterization_figure
+
+    rng = np.random.default_rng(1)
+    load = np.linspace(0.0, 5.0, 200)
+    presses = [PressTrial(pos, load, 1e4 * (1 + 0.1 * pos) * np.sqrt(load)) for pos in range(4) for _ in range(2)]
+    shear = [np.linspace(0.0, 2.05, 300) for _ in range(5)]
+    dcs = [np.column_stack([0.9 * s + rng.normal(0, 0.1, s.size), rng.normal(0, 0.1, s.size)]) for s in shear]
+    heights = {"bins": [{"fz_low_n": lo, "fz_high_n": lo + 1.0, "h_x_mm": 1.0 + lo, "h_y_mm": 2.0 + lo,
+                         "r2_x": 0.5, "r2_y": 0.8} for lo in (1.0, 2.0, 3.0)]}
+    fig = characterization_figure(presses, shear, dcs, heights, 2.0, (1.9, 2.1),
+                                  {**study.CHARACTERIZATION, "heights": study.HEIGHTS})
+    ramps, shift, height = fig.axes
+    assert len(ramps.get_lines()) == len(presses) + 1  # one ramp per press and the matched-load line
+    assert "CV 0.145" in ramps.get_title()
+    labels = shift.get_legend_handles_labels()[1]
+    assert "study" in labels and any(lb.startswith("ours") for lb in labels)
+    assert {"ours h_x", "ours h_y", "study h_x", "study h_y"} <= set(height.get_legend_handles_labels()[1])
+    plt.close(fig)
