@@ -16,6 +16,12 @@ surface above its lowest point. The plate spreads the load: the contact and the 
 region grow with the load, and the lattice under the contact densifies only once the sheet's
 bending can no longer hand the load outwards. Beyond the pad the plate ends (a free edge).
 
+D is a field that follows the loaded state: the electrode films are held to the Velostat by
+friction only (`FrictionInterface`), so the sheet bends as a sandwich where friction can carry
+the sandwich's shear flow (the contact's centre, where the pressure is high and the flow small)
+and as loose films elsewhere. Each equilibrium is solved for a fixed field, the field updated
+from the solved pressures, and the two iterated until the field settles.
+
 Two geometries, both on a uniform grid from the contact outwards:
 - "hemisphere": axisymmetric about the contact (the square pad replaced by the disc of the same
   area), lap w = (1/r) (r w')';
