@@ -248,6 +248,14 @@ def interlayer_shift_and_height(sim: SimConfig) -> tuple[Check, Check, dict]:
                   heights[3.0], 1.0, 8.0, "mm"), heights)
 
 
+def height_rises_with_load(heights: dict) -> Check:
+    """The effective height is a coupling coefficient, not the spacer's height: as the load
+    grows, the contact widens and the lattice under it (not the stage-held indenter) takes a
+    larger share of the shear's couple, so F_z dc / F_t rises with F_z."""
+    return Check("effective height at 5 N / at 1 N", "the lattice's share of the shear's couple grows with the load",
+                 heights[5.0] / heights[1.0], 1.1, 10.0, "ratio")
+
+
 def response_spread(sim: SimConfig, n_positions: int = 30, seed: int = 0) -> tuple[Check, Check, dict]:
     """Taxel gains spread as configured; a contact's summed response spreads less, by how much
     of the spread is smooth over the sheet (it keeps the sheet-scale part, averaged over two
@@ -297,7 +305,7 @@ def run(sim: SimConfig | None = None) -> tuple[list[Check], dict]:
     c1, c2, reasons = slide_outcomes(sim)
     checks += [c1, c2]
     c3, c4, heights = interlayer_shift_and_height(sim)
-    checks += [c3, c4]
+    checks += [c3, c4, height_rises_with_load(heights)]
     c5, c6, spread = response_spread(sim)
     checks += [c5, c6]
     return checks, {"stop_reasons": reasons, "effective_height_mm_by_fz": {k: round(float(v), 3) for k, v in heights.items()},

@@ -53,6 +53,8 @@ def test_most_slides_reach_the_shear_stop_and_the_force_limit_trips_near_6n():
 def test_interlayer_shift_and_effective_height():
     shift, height, heights = v.interlayer_shift_and_height(SIM)
     assert shift.passed and height.passed, (shift, height, heights)
+    rises = v.height_rises_with_load(heights)
+    assert rises.passed, (rises, heights)
 
 
 def test_gain_spread_and_the_position_spread_it_leaves():
