@@ -7,7 +7,9 @@ The gain of each taxel is lognormal (fixed per seed) with two parts (`taxel_gain
 field over the sheet (Velostat thickness and carbon loading, lamination pressure: they vary
 over millimetres, so neighbouring taxels share them) and an independent part per taxel (the
 contact resistance between each electrode crossing and the Velostat). A contact loads many
-taxels at once, so only the smooth part survives in its summed response.
+taxels at once, so its summed response averages the per-crossing part; and the loaded taxels sit
+on the flat part of the readout divider, which compresses the smooth part too (`validate`
+measures what is left: little, next to where the contact sits on the grid).
 Two slow effects of the polymer come first, on the pressure the Velostat feels:
 - hysteresis as a rate-independent play operator of relative width w: loading reads
   p (1 - w), unloading holds the value until p (1 + w) falls below it;
