@@ -62,6 +62,30 @@ def test_slide_on_slippery_skin_runs_to_the_edge(tmp_path):
     assert np.abs(stage[:, :2]).max() == pytest.approx(edge, abs=1e-6)
 
 
+@pytest.mark.parametrize("z_ramp_mm", [None, 1.0])
+def test_slide_vertical_offset_is_spread_over_the_move_or_its_first_millimetre(tmp_path, z_ramp_mm):
+    # mu 0.3 keeps the slide from reaching 2 N: it runs to the edge, so the whole path is logged.
+    # None: the offset is the vertical part of one straight move (z linear in the travel);
+    # 1.0: reached after the first millimetre, then level.
+    cfg = _cal_cfg(tmp_path, **{"press.repeats": 0, "slide.z_offset_mm": 0.5, "slide.z_ramp_mm": z_ramp_mm})
+    results = run_campaign(cfg, _connected(platform_rig(mu=0.3)), META)
+    s = load_session(results[0].path, warn=False)
+    assert results[0].stop_reason == "skin_edge"
+    ev = s.streams["events"]
+    slide = ev["detail"][ev["message"].index("slide")]
+    start, offset = np.array(slide["start_mm"]), slide["z_offset_mm"]
+    assert abs(offset) > 0.05
+    t_slide = ev["t_ns"][ev["message"].index("slide")]
+    stage = s.streams["stage"]
+    during = (stage["t_ns"] > t_slide) & (stage["t_ns"] <= ev["t_ns"][ev["kind"].index("stop")])
+    pos = stage["position_mm"][during]
+    travel = np.linalg.norm(pos[:, :2] - start[:2], axis=1)
+    dz = pos[:, 2] - start[2]
+    assert dz[-1] == pytest.approx(offset, abs=0.01)
+    expected = offset * np.minimum(travel / (slide["travel_mm"] if z_ramp_mm is None else z_ramp_mm), 1.0)
+    np.testing.assert_allclose(dz, expected, atol=0.01)
+
+
 def test_force_guard_stops_within_one_sample(tmp_path):
     # A coarse 0.1 s loop at 10 mm/s on a stiff 40 N/mm spring: the loop alone would overshoot by
     # 40 N; the per-sample guard must stop the platform within one F/T sample (40 N/mm x 10 um).
