@@ -109,40 +109,6 @@ def _solver(sim: SimConfig, kind: str) -> PlateOnFoundation:
                              pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM, interface=interface)
 
 
-def ploughing_kpa(plate: PlateOnFoundation, contact_kpa: np.ndarray, sim: SimConfig) -> np.ndarray:
-    """Contact-pressure change per newton of tangential force (per N/mm for the rod) carried by
-    the indenter's flanks, (n_delta, n_x), in the first angular mode (cos phi about the shear).
-
-    The cap sinks into the stack, so its surface is inclined where it touches (sin theta = r/R).
-    Pushed sideways by u relative to the sheet it presses the leading flank and relieves the
-    trailing one: the normal gap through the cover closes by u sin theta cos phi. The cover is a
-    thin bonded incompressible layer, stiff in compression and soft in shear: squeezed in this
-    antisymmetric pattern (half-wavelength ~ a, the contact radius or half-width) it resists with
-    k_a = E_c (1 + 2 S^2) / t_c, S = a / 2 t_c (Gent & Lindley), while the tangential traction
-    path shears it at G_c / t_c = E_c / 3 t_c. The flanks' share of the tangential force is the
-    ratio of the two paths' stiffnesses (hemisphere: k_a a^2 / 4R^2 against G_c / t_c; rod:
-    k_a a^2 / 3R^2), and their pressure, k_a u (r / R) on the touching part, carries exactly that
-    share. The shear's moment about the deep plane is unchanged (the couple response has it)."""
-    radius = plate.radius
-    x = np.abs(plate.x)
-    e_c, t_c = sim.cover.modulus * KPA_MM2_TO_N, sim.cover.thickness
-    k_t = e_c / 3.0 / t_c  # shear of the incompressible cover, G = E / 3, per area (N/mm^3)
-    out = np.zeros_like(contact_kpa)
-    for k, row in enumerate(contact_kpa):
-        touching = row > 0.0
-        if not touching.any():
-            continue
-        a = float(x[touching].max())
-        k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, t_c, a)
-        flank = k_c * a * a / ((4.0 if plate.kind == "hemisphere" else 3.0) * radius * radius)
-        share = flank / (flank + k_t)
-        shape = np.where(touching, plate.x / radius, 0.0)  # k_a u sin(theta), up to the factor k_a u
-        # the force the shape carries along the shear, on the solver's grid (cos^2 phi averages to 1/2)
-        carried = float((shape * plate.x / radius * (0.5 * plate.area if plate.kind == "hemisphere" else plate.area)).sum())
-        out[k] = share / carried * shape / KPA_MM2_TO_N
-    return out
-
-
 def build_tables(sim: SimConfig, kind: str) -> ContactTables:
     """Solve the laminate on its lattice for a grid of indentation depths (see `laminate`)."""
     if kind not in ("hemisphere", "rod"):
@@ -190,9 +156,6 @@ def build_tables(sim: SimConfig, kind: str) -> ContactTables:
         weight = plate.area
     superficial = contact @ blur_s.T
     deep = found @ blur_d.T  # signed: where the sheet lifts, the bonded lattice pulls (the FSR reads 0)
-    centre = int(np.argmin(np.abs(x)))
-    height = sim.cover.thickness + sim.fsr.layer_thickness_mm + h - comp[:, centre]
-    contact1 = contact1 + ploughing_kpa(plate, contact, sim) / height[:, None]
     superficial1 = contact1 @ blur_s.T
     deep1 = found1 @ blur_d.T
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
@@ -203,5 +166,7 @@ def build_tables(sim: SimConfig, kind: str) -> ContactTables:
         fr = (contact * np.abs(x)[None, :]) @ weight / (contact @ weight)
     fr = np.nan_to_num(fr)
     halfwidth = np.array([np.abs(x[row > 0]).max() if (row > 0).any() else 0.0 for row in contact])
+    centre = int(np.argmin(np.abs(x)))
+    height = sim.cover.thickness + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
                          halfwidth, superficial1, deep1, height, comp[:, centre].copy())

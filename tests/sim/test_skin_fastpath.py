@@ -100,8 +100,7 @@ def test_frames_match_the_reference(case, crosstalk):
         g = np.concatenate([x[layer] for x in got]).astype(int)
         w = np.concatenate([x[layer] for x in want]).astype(int)
         assert g.shape == w.shape == (len(pick), 16, 16)
-        # nearest-bin lookups: up to ~2 % of the local value on a steep rim (see the maps test)
-        assert (np.abs(g - w) <= 3 + 0.02 * w).all()
+        assert (np.abs(g - w) <= 3 + 0.005 * w).all()  # a few counts (<= 0.5 %) where a steep rim meets a bin
         assert np.mean(np.abs(g - w) > 1) < 0.02 and np.mean(g != w) < 0.15  # float32 fields: rounding
     assert max(int(x[0].max()) for x in want) > 1000  # loaded frames are compared
 
