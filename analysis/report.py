@@ -206,7 +206,7 @@ class Analysis:
         f = self.calib_feats
         bounds = np.cumsum([0] + [len(t.t_s) for t in c])
         response = f["p_s"] * self.scale[0] + f["p_d"] * self.scale[1]  # counts above baseline, both layers
-        presses, shear, dcs = [], [], []
+        presses, shear = [], []
         for i, t in enumerate(c):
             sl = slice(bounds[i], bounds[i + 1])
             if t.labels.get("kind") == "press":
@@ -219,9 +219,9 @@ class Analysis:
             res["repeatability"] = repeatability(presses, cc)
         else:
             self.skip("characterization.uniformity", "no press trials")
+        s_n = [np.linalg.norm(c[i].force_n[:, :2], axis=1) for i, _ in shear]
+        dcs = [f["dc"][sl] for _, sl in shear]
         if shear:
-            s_n = [np.linalg.norm(c[i].force_n[:, :2], axis=1) for i, _ in shear]
-            dcs = [f["dc"][sl] for _, sl in shear]
             res["cop_shift"] = cop_shift_at_shear(s_n, dcs, cc)
             fz = np.concatenate([c[i].force_n[:, 2] for i, _ in shear])
             fs = np.concatenate([c[i].force_n[:, :2] for i, _ in shear])
@@ -229,9 +229,7 @@ class Analysis:
         if self.a.figures and (presses or shear):
             from analysis.figures import characterization_plot
 
-            characterization_plot(self.out / "characterization.png", presses,
-                                  [np.linalg.norm(c[i].force_n[:, :2], axis=1) for i, _ in shear],
-                                  [f["dc"][sl] for _, sl in shear], self.results.get("heights"),
+            characterization_plot(self.out / "characterization.png", presses, s_n, dcs, self.results.get("heights"),
                                   cc.matched_load_n, tuple(cc.shear_band_n),
                                   {**study.CHARACTERIZATION, "heights": study.HEIGHTS})
             self.figures.append("characterization.png")

@@ -297,7 +297,8 @@ class PlateOnFoundation:
         touching = pc > 0.0
         stiff = slope + self.k_cover * touching
         load = -np.gradient(pc, self.step) / fz  # sign: the deep pressure moves along the shear
-        lin1 = self._linear1 if sol.rigidity_n_mm is None else self._operators(sol.rigidity_n_mm)[1]
+        # a fixed sheet reuses its operator; a friction-held one has its own field per state
+        lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
         jac = lin1 + sp.diags(stiff)
         if self.kind == "hemisphere":
             load[0] = 0.0
