@@ -101,9 +101,6 @@ class LoopbackHardwareConfig(LabHardwareConfig):
                 "must be in (0, 0.01] s")
 
 
-HardwareConfig = SimHardwareConfig | LabHardwareConfig | LoopbackHardwareConfig
-
-
 def _store() -> None:
     cs = ConfigStore.instance()
     cs.store(group="hardware", name="sim_schema", node=SimHardwareConfig)

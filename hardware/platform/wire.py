@@ -28,9 +28,7 @@ PLANNER_BLOCKS = 16  # GRBL's look-ahead planner (config.h BLOCK_BUFFER_SIZE on 
 
 STATUS_QUERY = b"?"
 FEED_HOLD = b"!"
-CYCLE_START = b"~"
 SOFT_RESET = b"\x18"
-REALTIME_BYTES = frozenset(b"?!~\x18")
 
 GRBL_VERSION = "1.1h"
 

@@ -217,18 +217,10 @@ def decode_controller_version(payload: bytes) -> tuple[int, int, int, int]:
     return struct.unpack(">IIII", payload)
 
 
-def encode_setup_outputs_request(frequency_hz: float, names: list[str]) -> bytes:
-    return pack(RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS, struct.pack(">d", frequency_hz) + ",".join(names).encode())
-
-
 def decode_setup_outputs_request(payload: bytes) -> tuple[float, list[str]]:
     """(frequency in Hz, variable names) of an 'O' request (protocol version 2)."""
     (freq,) = struct.unpack_from(">d", payload)
     return freq, _names(payload[8:])
-
-
-def encode_setup_inputs_request(names: list[str]) -> bytes:
-    return pack(RTDE_CONTROL_PACKAGE_SETUP_INPUTS, ",".join(names).encode())
 
 
 def decode_setup_inputs_request(payload: bytes) -> list[str]:

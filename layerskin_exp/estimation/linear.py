@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-FEATURE_NAMES = ("dx_mm", "dy_mm", "p_s", "p_d", "dx_pbar", "dy_pbar")
-
 
 def linear_features(dc_mm: np.ndarray, p_s: np.ndarray, p_d: np.ndarray) -> np.ndarray:
     """φ = [Δx, Δy, p_s, p_d, Δx·p̄, Δy·p̄] with p̄ = (p_s + p_d)/2.

@@ -17,8 +17,6 @@ from scipy.sparse.csgraph import maximum_bipartite_matching
 
 from layerskin_exp.estimation.config import SlipConfig
 
-MAD_TO_SIGMA = 1.4826
-
 
 def _sorted_finite(x) -> np.ndarray:
     a = np.asarray(x, np.float64).ravel()

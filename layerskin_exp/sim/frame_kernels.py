@@ -46,13 +46,12 @@ N_STATE = 12
 assert (S_T, S_ROT) == (0, N_STATE - 1)
 
 # --- entries of the parameter vector
-(P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA, _P_FREE0, _P_FREE1,
- _P_FREE2, _P_FREE3, P_LK_ORIGIN, P_LK_SCALE, P_HALF_PAD, P_PERIOD, P_HYST, P_CREEP, P_CREEP_S,
+(P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA,
+ P_LK_ORIGIN, P_LK_SCALE, P_HALF_PAD, P_PERIOD, P_HYST, P_CREEP, P_CREEP_S,
  P_PSAT, P_EXPONENT, P_G_FLOOR, P_G_SAT, P_G_LEAK, P_G_DIV, P_R_ON, P_SUPPLY_V, P_FULL_SCALE,
- P_CROSSTALK, P_REUSE, P_JITTER_S, P_NOISE_COUNTS, P_LK_SCALE_DEEP, P_LK_ORIGIN_DEEP) = range(34)
-N_PARAM = 34
+ P_CROSSTALK, P_REUSE, P_JITTER_S, P_NOISE_COUNTS, P_LK_SCALE_DEEP, P_LK_ORIGIN_DEEP) = range(30)
+N_PARAM = 30
 
-_TINY = np.finfo(float).tiny
 # Hemisphere windows: outside, the profile is below this fraction of its peak. At 1e-5 what is
 # left out moves a frame's counts by ~1e-4 count on average (one taxel in ~10^4 rounds to a
 # neighbouring count against the 1e-8 window; 1e-4 would shift some by several counts).
