@@ -25,23 +25,19 @@ def _thread_cpu_s(thread) -> float:
 
 
 def run() -> dict:
-    from hydra import compose, initialize_config_dir
-
+    import layerskin_exp.sim.config  # noqa: F401 - stores the sim, skin and world schemas
     from hardware.sim.realtime import RealtimeWorld
     from hardware.skin_board import SkinBoardConfig, SkinBoardEmulator, SkinBoardReader
     from hardware.skin_board.wire import FRAME_LEN
-    from layerskin_exp.cli import CONF_DIR
-    from layerskin_exp.config import register_all, validate
+    from layerskin_exp.config import compose
 
     seconds = float(os.environ.get("LSX_SOAK_S", "600"))
-    register_all()
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = compose(config_name="force_calibration")
-    rt = RealtimeWorld.from_config(validate(cfg.sim), validate(cfg.skin), "platform")
+    world = compose("world")
+    rt = RealtimeWorld.from_config(world.sim, world.skin, "platform")
     rt.start()
     emulator = SkinBoardEmulator(rt)
     path = emulator.start()
-    reader = SkinBoardReader(SkinBoardConfig(port=path), validate(cfg.skin))
+    reader = SkinBoardReader(SkinBoardConfig(port=path), world.skin)
     reader.connect()
     gc.freeze()  # as protocols.app does for real-time rigs: short full collections
     received, seq_errors, last_seq, in_flight = 0, 0, None, 0

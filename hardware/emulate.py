@@ -26,22 +26,18 @@ def _setup_of(device: str) -> str:
 
 
 def _compose(setup: str, overrides: list[str]):
-    from hydra import compose, initialize_config_dir
+    import layerskin_exp.sim.config  # noqa: F401 - stores the sim, skin and world schemas
+    from layerskin_exp.cli import refuse
+    from layerskin_exp.config import ConfigError, compose
 
-    from layerskin_exp.cli import CONF_DIR, refuse
-    from layerskin_exp.config import ConfigError, register_all, validate
-
-    register_all()
     bad = [o for o in overrides if not o.lstrip("+~").startswith(("sim.", "skin."))]
     if bad:
         refuse(ConfigError(f"{bad[0]}: only sim.* and skin.* overrides shape an emulator's world"))
-    app = "force_calibration" if setup == "platform" else "grip_depth"
     try:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            cfg = compose(config_name=app, overrides=overrides)
-        return validate(cfg.sim), validate(cfg.skin)
-    except Exception as e:  # noqa: BLE001 - one readable line, exit 2
-        refuse(e if isinstance(e, ConfigError) else ConfigError(str(e).splitlines()[0]))
+        world = compose("world", overrides)
+    except ConfigError as e:
+        refuse(e)
+    return world.sim, world.skin
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -8,6 +8,10 @@
     demo        the reduced demo campaign       (python -m layerskin_exp.demo)
 
 Arguments after the command go to it unchanged (Hydra overrides, --help, -m, ...).
+
+This dispatcher is the one place the core names the applications, by their entry points' names
+(as [project.scripts] does), never importing one before it is asked for; the layering test
+(tests/test_layering.py) allows it and nothing else.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import sys
 COMMANDS = {
     "calibrate": "protocols.force_calibration:cli",
     "grip": "protocols.grip_depth:cli",
-    "report": "layerskin_exp.commands:report",
+    "report": "analysis.cli:report",
     "log": "layerskin_exp.commands:log",
     "live": "protocols.live:cli",
     "demo": "layerskin_exp.commands:demo",

@@ -3,33 +3,26 @@
 `preflight(config_name, argv)` composes and validates the config of every job a command line
 asks for (a multirun's whole sweep) before Hydra starts, so a bad override ends the command
 with one readable line and exit code 2: nothing connected, nothing written.
+
+The one piece of command-line glue kept in the core: the protocols' and the report's command
+lines share it, and it names no application (the caller has registered its schemas).
 """
 
 from __future__ import annotations
 
 import itertools
 import sys
-from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 
-from layerskin_exp.config import ConfigError, format_config_error, validate
+from layerskin_exp.config import CONF_DIR, ConfigError, check_retired, format_config_error, one_line, validate
+
+__all__ = ["CONF_DIR", "EXIT_CONFIG", "expand_sweep", "one_line", "preflight", "refuse"]
 
 
-def _conf_dir() -> Path:
-    """The Hydra configs: `conf/` beside the package in a checkout, `layerskin_exp/conf` in an
-    installed distribution (setup.py ships conf/ there)."""
-    here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "conf", here / "conf"):
-        if (candidate / "grip_depth.yaml").is_file():
-            return candidate
-    return here.parent / "conf"
-
-
-CONF_DIR = _conf_dir()
 EXIT_CONFIG = 2
 # Launchers that need an optional extra: Hydra's own error ("Could not load ...") names no fix.
 LAUNCHER_EXTRAS = {"slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
@@ -40,22 +33,6 @@ LAUNCHER_EXTRAS = {"slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
 def refuse(err: Exception) -> None:
     print(format_config_error(err), file=sys.stderr)
     sys.exit(EXIT_CONFIG)
-
-
-def one_line(err: Exception) -> str:
-    """One readable line: the error's first line and, for Hydra's override errors, the first
-    line of its cause (the explanation: "Key 'x' not in 'Schema'", "could not be converted")."""
-    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
-    text = lines[0] if lines else type(err).__name__
-    cause = err.__cause__
-    if isinstance(err, HydraException) and cause is not None:
-        cause_lines = [ln.strip() for ln in str(cause).splitlines() if ln.strip()]
-        if cause_lines and cause_lines[0] not in text:
-            text = f"{text.rstrip('.')}: {cause_lines[0]}"
-    options = getattr(err, "options", None)  # hydra's MissingConfigException: the group's choices
-    if options:
-        text = f"{text} (available: {', '.join(o for o in options if not o.endswith('_schema'))})"
-    return text
 
 
 def expand_sweep(overrides: list[str]) -> list[list[str]]:
@@ -82,6 +59,10 @@ def preflight(config_name: str, argv: list[str]) -> None:
     _refuse_schema_options(argv)
     overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
     multirun = "-m" in argv or "--multirun" in argv
+    try:
+        check_retired(overrides)
+    except ConfigError as e:
+        refuse(e)
     try:
         jobs = expand_sweep(overrides) if multirun else [overrides]
     except HydraException as e:

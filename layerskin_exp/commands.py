@@ -1,19 +1,8 @@
-"""Console-script entry points for commands whose modules are run with `python -m` (the
-protocols define their own `cli()`); see pyproject's [project.scripts]."""
+"""Console-script entry points of the core's own commands (the log tools, the demo); each
+application keeps its own (`protocols.<app>:cli`, `analysis.cli:report`). See pyproject's
+[project.scripts]."""
 
 from __future__ import annotations
-
-import sys
-
-
-def report() -> None:
-    """lsx-report: `python -m analysis.report` as a console script."""
-    from analysis import report as r
-    from layerskin_exp.cli import preflight
-
-    r._check_command_line(sys.argv[1:])
-    preflight("report", sys.argv[1:])
-    r.main()
 
 
 def log() -> int:

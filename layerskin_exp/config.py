@@ -1,31 +1,39 @@
 """Structured-config plumbing shared by every Hydra app.
 
 Each package keeps its schemas next to its code (`<package>/config.py`) and stores them in
-Hydra's ConfigStore when imported; `register_all()` imports them all. `validate(cfg)` turns a
-composed DictConfig into the typed dataclass tree, which runs every schema's range checks, and
-turns any failure into one `ConfigError` naming the key, the value and what to do — before any
-device is touched.
+Hydra's ConfigStore when imported: an application imports its own config module, which imports
+the schemas it builds on, so the core never names an application. `compose(config_name,
+overrides)` composes one of the configs under `conf/` (shipped inside the package when installed)
+and validates it. `validate(cfg)` turns a composed DictConfig into the typed dataclass tree, which
+runs every schema's range checks, and turns any failure into one `ConfigError` naming the key,
+the value and what to do — before any device is touched.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-# Every module that stores schemas in the ConfigStore; each owns its groups.
-SCHEMA_MODULES = (
-    "layerskin_exp.config",
-    "layerskin_exp.sim.config",
-    "hardware.config",
-    "protocols.config",
-    "analysis.config",
-)
+from layerskin_exp import rig
 
+
+def _conf_dir() -> Path:
+    """The Hydra configs: `conf/` beside the package in a checkout, `layerskin_exp/conf` in an
+    installed distribution (setup.py ships conf/ there)."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "conf", here / "conf"):
+        if (candidate / "grip_depth.yaml").is_file():
+            return candidate
+    return here.parent / "conf"
+
+
+CONF_DIR = _conf_dir()
 
 class ConfigError(ValueError):
     """A configuration value is wrong. The message names the key, the value and the fix."""
@@ -37,30 +45,69 @@ def require(ok: bool, key: str, value, what: str) -> None:
         raise ConfigError(f"{key}={value!r}: {what}")
 
 
+# Keys that once repeated a fact of the rig or moved: key -> what to do instead. Each schema
+# module retires its own keys (`retire`); `compose` and the command lines refuse them up front.
+RETIRED_KEYS: dict[str, str] = {}
+
+
+def retire(key: str, instead: str) -> None:
+    """Refuse the dotted config `key` from now on, with `instead` saying what to use."""
+    RETIRED_KEYS[key] = instead
+
+
+def check_retired(overrides: Sequence[str]) -> None:
+    """ConfigError for the first override that sets a retired key."""
+    for o in overrides:
+        key = o.split("=", 1)[0].lstrip("+~")
+        if key in RETIRED_KEYS:
+            raise ConfigError(f"{key}: no longer a setting; {RETIRED_KEYS[key]}")
+
+
 @dataclass
 class SkinConfig:
-    """Geometry and readout of the two-layer skin (the same for every backend)."""
+    """The two-layer skin as the backends read it: its frame timing, and the rig's geometry.
 
-    n_taxels: int = 16
-    pitch_mm: float = 1.5
-    electrode_mm: float = 1.2
-    adc_bits: int = 12
+    The geometry (array size, pitch, electrode width, ADC depth, layer names) is a fact of the
+    sensor, defined once in `layerskin_exp.rig`; it is read here, never set.
+    """
+
     frame_period_ms: float = 2.36  # one frame pair (both layers), mean
-    layers: tuple[str, str] = ("superficial", "deep")
 
     def __post_init__(self) -> None:
-        require(self.n_taxels > 0, "skin.n_taxels", self.n_taxels, "must be a positive taxel count")
-        require(self.pitch_mm > 0, "skin.pitch_mm", self.pitch_mm, "pitch must be > 0 mm")
-        require(0 < self.electrode_mm <= self.pitch_mm, "skin.electrode_mm", self.electrode_mm,
-                "electrode width must be > 0 and not exceed the pitch")
-        require(1 <= self.adc_bits <= 16, "skin.adc_bits", self.adc_bits, "must be 1..16")
         require(self.frame_period_ms > 0, "skin.frame_period_ms", self.frame_period_ms, "must be > 0")
+
+    @property
+    def n_taxels(self) -> int:
+        return rig.N_TAXELS
+
+    @property
+    def pitch_mm(self) -> float:
+        return rig.PITCH_MM
+
+    @property
+    def electrode_mm(self) -> float:
+        return rig.ELECTRODE_MM
+
+    @property
+    def adc_bits(self) -> int:
+        return rig.ADC_BITS
+
+    @property
+    def layers(self) -> tuple[str, str]:
+        return rig.LAYERS
 
     def taxel_centres_mm(self):
         """(n,) taxel centre coordinates along one axis, origin at the array centre."""
-        import numpy as np
+        return rig.taxel_centres_mm()
 
-        return (np.arange(self.n_taxels) - (self.n_taxels - 1) / 2) * self.pitch_mm
+
+for _key, _fact in (("n_taxels", f"the array is {rig.N_TAXELS} x {rig.N_TAXELS} taxels per layer"),
+                    ("pitch_mm", f"the taxel pitch is {rig.PITCH_MM} mm"),
+                    ("electrode_mm", f"the electrodes are {rig.ELECTRODE_MM} mm wide"),
+                    ("adc_bits", f"the readout is {rig.ADC_BITS}-bit"),
+                    ("layers", f"the layers are {list(rig.LAYERS)}")):
+    retire(f"skin.{_key}", f"{_fact} on every backend, a fact of the sensor defined once in layerskin_exp/rig.py "
+                           "(the readout board, the session log, the protocols and the simulator all read it)")
 
 
 def _store() -> None:
@@ -71,14 +118,48 @@ def _store() -> None:
 _store()
 
 
-def register_all() -> None:
-    """Import every schema module so the ConfigStore knows all groups."""
-    for mod in SCHEMA_MODULES:
-        try:
-            importlib.import_module(mod)
-        except ModuleNotFoundError as e:  # a package not written yet
-            if e.name != mod and not mod.startswith(str(e.name)):
-                raise
+def one_line(err: Exception) -> str:
+    """One readable line: the error's first line and, for Hydra's override errors, the first
+    line of its cause (the explanation: "Key 'x' not in 'Schema'", "could not be converted")."""
+    from hydra.errors import HydraException
+
+    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+    text = lines[0] if lines else type(err).__name__
+    cause = err.__cause__
+    if isinstance(err, HydraException) and cause is not None:
+        cause_lines = [ln.strip() for ln in str(cause).splitlines() if ln.strip()]
+        if cause_lines and cause_lines[0] not in text:
+            text = f"{text.rstrip('.')}: {cause_lines[0]}"
+    options = getattr(err, "options", None)  # hydra's MissingConfigException: the group's choices
+    if options:
+        text = f"{text} (available: {', '.join(o for o in options if not o.endswith('_schema'))})"
+    return text
+
+
+def compose(config_name: str, overrides: Sequence[str] = ()):
+    """The typed, validated config of `conf/<config_name>.yaml` with Hydra `overrides`.
+
+    Works from a checkout and from an installed wheel (CONF_DIR). The caller registers the
+    schemas the config names first, by importing their modules (`protocols.config` for the
+    protocols; the core's own `skin`, `sim` and `world` schemas register with
+    `layerskin_exp.sim.config`). Raises ConfigError (one line: key, value, what to do) for a
+    retired key, an unknown option or key, a type error or a range error.
+    """
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+
+    check_retired(overrides)
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
+    except HydraException as e:
+        raise ConfigError(one_line(e)) from None
+    finally:
+        GlobalHydra.instance().clear()
+    return validate(cfg)
 
 
 def unknown_keys(node: DictConfig, prefix: str = "") -> list[tuple[str, str]]:

@@ -11,8 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-SKIN_SHAPE = (16, 16)
-ADC_MAX = 4095  # 12-bit readout
+from layerskin_exp.rig import ADC_MAX, SKIN_SHAPE  # noqa: F401 - the records' shape and range, the rig's
 
 
 @dataclass(frozen=True, slots=True)

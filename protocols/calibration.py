@@ -20,7 +20,8 @@ from tqdm import tqdm
 
 from hardware.interfaces import DeviceError, Rig
 from layerskin_exp.config import ConfigError
-from protocols.config import SKIN_HALF_WIDTH_MM, ForceCalibrationConfig, PositionsConfig
+from layerskin_exp.rig import SENSING_HALF_WIDTH_MM
+from protocols.config import ForceCalibrationConfig, PositionsConfig
 from protocols.identity import design_id, trial_identity
 from protocols.loop import ControlLoop
 from protocols.runner import TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
@@ -55,7 +56,7 @@ def plan_positions(cfg: PositionsConfig, seed: int) -> np.ndarray:
     random: each position drawn from its own generator (seed, index), so the first k positions
     do not depend on count. grid: ceil(sqrt(count)) per side, row-major, first `count`.
     """
-    half_mm = SKIN_HALF_WIDTH_MM - cfg.margin_mm
+    half_mm = SENSING_HALF_WIDTH_MM - cfg.margin_mm
     if cfg.layout == "grid":
         n = int(np.ceil(np.sqrt(cfg.count)))
         axis = np.linspace(-half_mm, half_mm, n) if n > 1 else np.zeros(1)
@@ -230,7 +231,7 @@ def run_slide(ctl: PlatformControl, trial: CalibrationTrial) -> None:
         return
     start = ctl.position_mm()
     direction = np.array([np.cos(trial.direction_rad), np.sin(trial.direction_rad)])
-    travel_mm = distance_to_edge_mm(start[:2], direction, SKIN_HALF_WIDTH_MM - cfg.slide.edge_margin_mm)
+    travel_mm = distance_to_edge_mm(start[:2], direction, SENSING_HALF_WIDTH_MM - cfg.slide.edge_margin_mm)
     z_ramp = travel_mm if cfg.slide.z_ramp_mm is None else cfg.slide.z_ramp_mm
     ramp_mm = min(z_ramp, travel_mm)
     z_lo, z_hi = cfg.safety.platform_min_mm[2], cfg.approach.clearance_mm

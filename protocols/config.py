@@ -16,9 +16,11 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+# The groups the protocol configs compose: importing their schema modules stores them for Hydra.
+import hardware.config  # noqa: F401
+import layerskin_exp.sim.config  # noqa: F401
+from layerskin_exp import rig
 from layerskin_exp.config import require
-
-SKIN_HALF_WIDTH_MM = 12.0  # the 24 x 24 mm sensing area, centred on the skin frame origin
 
 # Hard ceilings no config can raise: what the skin, the platform, the UR5e and the Hand-E can do
 # safely on this rig. Checked when the config is validated, before any device connects.
@@ -124,8 +126,8 @@ class PositionsConfig:
     def __post_init__(self) -> None:
         require(self.layout in ("random", "grid"), "positions.layout", self.layout, "use 'random' or 'grid'")
         require(self.count > 0, "positions.count", self.count, "must be a positive number of positions")
-        require(0 <= self.margin_mm < SKIN_HALF_WIDTH_MM, "positions.margin_mm", self.margin_mm,
-                f"must be in [0, {SKIN_HALF_WIDTH_MM}) mm")
+        require(0 <= self.margin_mm < rig.SENSING_HALF_WIDTH_MM, "positions.margin_mm", self.margin_mm,
+                f"must be in [0, {rig.SENSING_HALF_WIDTH_MM}) mm")
 
 
 @dataclass
@@ -204,15 +206,15 @@ class ForceCalibrationConfig:
         require(0 <= self.slide.z_offset_mm <= 2.0, "slide.z_offset_mm", self.slide.z_offset_mm, "must be in [0, 2] mm")
         require(self.slide.z_ramp_mm is None or self.slide.z_ramp_mm > 0, "slide.z_ramp_mm", self.slide.z_ramp_mm,
                 "must be > 0 mm, or null (spread over the whole slide)")
-        require(0 <= self.slide.edge_margin_mm < SKIN_HALF_WIDTH_MM, "slide.edge_margin_mm",
-                self.slide.edge_margin_mm, f"must be in [0, {SKIN_HALF_WIDTH_MM}) mm")
+        require(0 <= self.slide.edge_margin_mm < rig.SENSING_HALF_WIDTH_MM, "slide.edge_margin_mm",
+                self.slide.edge_margin_mm, f"must be in [0, {rig.SENSING_HALF_WIDTH_MM}) mm")
         require(self.press.hold_s >= 0, "press.hold_s", self.press.hold_s, "must be >= 0 s")
         require(self.approach.contact_force_n > 0, "approach.contact_force_n", self.approach.contact_force_n,
                 "must be > 0 N")
         for key, value in (("press.speed_mm_s", self.press.speed_mm_s), ("slide.speed_mm_s", self.slide.speed_mm_s),
                            ("approach.travel_speed_mm_s", self.approach.travel_speed_mm_s)):
             _check_speed(key, value, s.max_platform_speed_mm_s, "safety.max_platform_speed_mm_s")
-        edge = SKIN_HALF_WIDTH_MM - self.slide.edge_margin_mm
+        edge = rig.SENSING_HALF_WIDTH_MM - self.slide.edge_margin_mm
         require(all(lo <= -edge and hi >= edge for lo, hi in zip(s.platform_min_mm[:2], s.platform_max_mm[:2],
                                                                   strict=True)),
                 "slide.edge_margin_mm", self.slide.edge_margin_mm,

@@ -7,13 +7,10 @@ import sys
 import hydra
 from omegaconf import DictConfig
 
-from layerskin_exp.config import register_all
-
-register_all()
-
-from layerskin_exp.cli import CONF_DIR  # noqa: E402
-from protocols.app import preflight, run_app  # noqa: E402
-from protocols.calibration import run_campaign  # noqa: E402
+import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
+from layerskin_exp.config import CONF_DIR
+from protocols.app import preflight, run_app
+from protocols.calibration import run_campaign
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="force_calibration")

@@ -1,11 +1,13 @@
-"""The shared config plumbing: range checks name the key, type errors name the key."""
+"""The shared config plumbing: range checks name the key, type errors name the key, keys that
+repeated a fact of the rig are refused naming where the fact lives."""
 
 from dataclasses import dataclass, field
 
 import pytest
 from omegaconf import OmegaConf
 
-from layerskin_exp.config import ConfigError, SkinConfig, require, validate
+from layerskin_exp import rig
+from layerskin_exp.config import ConfigError, SkinConfig, compose, require, validate
 
 
 @dataclass
@@ -26,8 +28,7 @@ def test_valid_config_builds_typed_objects():
 
 @pytest.mark.parametrize(
     "key,value,needle",
-    [("skin.pitch_mm", -1.5, "skin.pitch_mm=-1.5"), ("skin.electrode_mm", 2.0, "skin.electrode_mm=2.0"),
-     ("depth_mm", -3.0, "depth_mm=-3.0")],
+    [("skin.frame_period_ms", -2.0, "skin.frame_period_ms=-2.0"), ("depth_mm", -3.0, "depth_mm=-3.0")],
 )
 def test_out_of_range_value_names_the_key(key, value, needle):
     cfg = OmegaConf.structured(_App)
@@ -39,5 +40,26 @@ def test_out_of_range_value_names_the_key(key, value, needle):
 def test_wrong_type_is_refused_naming_the_key():
     cfg = OmegaConf.structured(_App)
     with pytest.raises(Exception) as ei:
-        cfg.skin.pitch_mm = "wide"
-    assert "skin.pitch_mm" in str(ei.value)
+        cfg.skin.frame_period_ms = "fast"
+    assert "skin.frame_period_ms" in str(ei.value)
+
+
+def test_the_skin_geometry_is_the_rigs():
+    skin = SkinConfig()
+    assert (skin.n_taxels, skin.pitch_mm, skin.electrode_mm, skin.adc_bits) == (
+        rig.N_TAXELS, rig.PITCH_MM, rig.ELECTRODE_MM, rig.ADC_BITS)
+    assert rig.SKIN_SHAPE == (rig.N_TAXELS, rig.N_TAXELS) and rig.ADC_MAX == 2**rig.ADC_BITS - 1
+    assert rig.SENSING_HALF_WIDTH_MM == pytest.approx(-skin.taxel_centres_mm()[0] + rig.PITCH_MM / 2)
+
+
+@pytest.mark.parametrize("override,where", [
+    ("skin.n_taxels=8", "rig.py"), ("skin.adc_bits=10", "rig.py"), ("skin.pitch_mm=1.4", "rig.py"),
+    ("sim.contact.rod_diameter_mm=20", "ROD_DIAMETER_MM"), ("sim.rig.gripper.rod_diameter_mm=20", "ROD_DIAMETER_MM"),
+    ("sim.contact.hemisphere_radius_mm=3", "INDENTER_RADIUS_MM"), ("sim.rig.camera.marker_ids=[3,4]", "MARKER_"),
+])
+def test_a_value_that_would_contradict_the_rig_is_refused(override, where):
+    import layerskin_exp.sim.config  # noqa: F401 - the world's schemas
+
+    with pytest.raises(ConfigError, match=rf"^{override.split('=')[0]}: no longer a setting.*{where}"):
+        compose("world", [override])
+    assert compose("world", ["sim.seed=2"]).sim.seed == 2  # the same call composes a good override

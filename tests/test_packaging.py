@@ -91,3 +91,18 @@ def test_module_entry_and_install_hint(installed):
     assert r.returncode == 2 and "not an option" in r.stderr
     r = _run([str(venv / "bin" / "lsx-log"), "layout"], cwd=root, env=env)
     assert r.returncode == 0 and '"maxValue":4095' in r.stdout
+    r = _run([str(venv / "bin" / "lsx-report"), "analysis=nope"], cwd=root, env=env)
+    assert r.returncode == 2 and "analysis=nope" in r.stderr and "paper" in r.stderr  # the report's own glue
+
+
+def test_commands_without_a_protocol_compose_from_the_wheel(installed):
+    """The preview, the emulators and the model's validation compose conf/world.yaml from inside
+    the installed package (the validation once read conf/ beside the sources: FileNotFoundError)."""
+    _, venv, env, root = installed
+    code = ("from layerskin_exp.sim import preview, validate\n"
+            "from hardware import emulate\n"
+            "print(validate.load_sim(['sim.seed=7']).seed, preview.configs(['seed=8'])[0].seed,\n"
+            "      emulate._compose('gripper', ['sim.seed=9'])[0].seed)\n")
+    r = _run([str(venv / "bin" / "python"), "-c", code], cwd=root, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == ["7", "8", "9"]

@@ -14,6 +14,7 @@ from hardware.sim.gripper import SimGripper
 from hardware.sim.platform import SimPlatform
 from hardware.sim.skin import SimSkinReader
 from layerskin_exp.config import SkinConfig
+from layerskin_exp.rig import R_TCP_SKIN
 from layerskin_exp.sim.clocks import device_rng
 from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.platform_scene import PlatformScene
@@ -87,6 +88,4 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
 
 def scene_rotation_doc() -> list[list[float]]:
     """Skin axes in the TCP frame (columns x_s, y_s, z_s), as nested lists for metadata."""
-    from layerskin_exp.sim.grip_scene import R_TCP_SKIN
-
     return R_TCP_SKIN.tolist()

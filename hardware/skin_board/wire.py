@@ -25,11 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from layerskin_exp.rig import ADC_BITS, ADC_MAX, N_TAXELS
+
 SYNC = b"\xa5\x5aSK"
 VERSION = 1
-N_TAXELS = 16
 N_VALUES = 2 * N_TAXELS * N_TAXELS  # both layers
-ADC_MAX = 4095
 HEADER = struct.Struct("<4sBBHI")  # sync, version, flags, seq, device_t_us
 HEADER_LEN = HEADER.size  # 12
 PAYLOAD_LEN = N_VALUES * 3 // 2  # 768
@@ -63,7 +63,7 @@ def pack_counts(superficial: np.ndarray, deep: np.ndarray) -> bytes:
         raise ValueError(f"superficial and deep must be ({N_TAXELS}, {N_TAXELS}) each; got "
                          f"{np.shape(superficial)} and {np.shape(deep)}")
     if vals.min() < 0 or vals.max() > ADC_MAX:
-        raise ValueError(f"counts must be 0..{ADC_MAX} (12-bit ADC); got {vals.min()}..{vals.max()}")
+        raise ValueError(f"counts must be 0..{ADC_MAX} ({ADC_BITS}-bit ADC); got {vals.min()}..{vals.max()}")
     v = vals.astype(np.uint32)
     word = v[0::2] | (v[1::2] << 12)
     return np.stack([word & 0xFF, (word >> 8) & 0xFF, word >> 16], axis=1).astype(np.uint8).tobytes()

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from layerskin_exp.rig import R_TCP_SKIN  # how the skin is mounted on the jaw
 from layerskin_exp.types import FrameTransform
 
 BASE, TOOL, SKIN, CAMERA = "base", "tool", "skin", "camera"
@@ -30,8 +31,6 @@ def marker_frame(marker_id: int) -> str:
 def skin_in_tool(opening_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """(translation (3,) m, quaternion xyzw (4,)) of the skin frame in the tool (TCP) frame on the
     gripper rig: on the jaw, half the opening from the TCP along -y_tool, axes as mounted."""
-    from layerskin_exp.sim.grip_scene import R_TCP_SKIN  # the one definition of the mount
-
     t = np.array([0.0, -0.5e-3 * float(opening_mm), 0.0])
     return t, Rotation.from_matrix(R_TCP_SKIN).as_quat()
 

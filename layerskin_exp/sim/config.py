@@ -10,10 +10,12 @@ is `-m sim.spacer.modulus=20,35,60`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
 
-from layerskin_exp.config import require
+from layerskin_exp.config import require, retire
 from layerskin_exp.sim.rig_config import RigConfig
 
 
@@ -176,16 +178,13 @@ class SheetConfig:
 
 @dataclass
 class ContactConfig:
-    """Indenter geometry and the numerical resolution of the contact model."""
+    """The numerical resolution of the contact model (the indenter and the rod are the rig's:
+    `layerskin_exp.rig.INDENTER_RADIUS_MM`, `ROD_DIAMETER_MM`)."""
 
-    hemisphere_radius_mm: float = 2.5  # the platform's 3D-printed indenter
-    rod_diameter_mm: float = 12.0  # the manipulation rig's fixed rod
     quad_points: int = 3  # Gauss points per axis over each taxel electrode
     table_points: int = 96  # indentation samples in the precomputed contact tables
 
     def __post_init__(self) -> None:
-        _positive(self.hemisphere_radius_mm, "sim.contact.hemisphere_radius_mm")
-        _positive(self.rod_diameter_mm, "sim.contact.rod_diameter_mm")
         require(self.quad_points in (1, 2, 3, 4), "sim.contact.quad_points", self.quad_points, "must be 1..4")
         require(self.table_points >= 16, "sim.contact.table_points", self.table_points, "must be >= 16")
 
@@ -269,8 +268,26 @@ class SimConfig:
                 "must be a non-negative integer")
 
 
+@dataclass
+class WorldConfig:
+    """`conf/world.yaml`: the simulated world without a protocol (preview, emulators, validation)."""
+
+    skin: Any = MISSING  # SkinConfig
+    sim: Any = MISSING  # SimConfig
+
+
+for _key, _fact in (("sim.contact.hemisphere_radius_mm", "the indenter's radius is layerskin_exp.rig.INDENTER_RADIUS_MM"),
+                    ("sim.contact.rod_diameter_mm", "the rod's diameter is layerskin_exp.rig.ROD_DIAMETER_MM"),
+                    ("sim.rig.gripper.rod_diameter_mm", "the rod's diameter is layerskin_exp.rig.ROD_DIAMETER_MM")):
+    retire(_key, f"{_fact}, one fact for the contact model, the grip scene and the protocols")
+for _key in ("marker_ids", "marker_size_mm", "marker_x_mm", "marker_y_mm", "dictionary"):
+    retire(f"sim.rig.camera.{_key}", "the markers printed on the skin are the rig's: layerskin_exp.rig.MARKER_*")
+
+
 def _store() -> None:
-    ConfigStore.instance().store(group="sim", name="sim_schema", node=SimConfig)
+    cs = ConfigStore.instance()
+    cs.store(group="sim", name="sim_schema", node=SimConfig)
+    cs.store(name="world_schema", node=WorldConfig)
 
 
 _store()

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import i0e
 
+from layerskin_exp import rig
 from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.laminate import (
     FrictionInterface,
@@ -68,18 +69,6 @@ class ContactTables:
     def d_delta(self) -> float:
         return float(self.delta_mm[1] - self.delta_mm[0])
 
-    @property
-    def d_dist(self) -> float:
-        return float(self.dist_mm[1] - self.dist_mm[0])
-
-
-def _profile_height(kind: str, radius_mm: float, d: np.ndarray) -> np.ndarray:
-    """Height of the indenter surface above its lowest point at distance d (inf outside)."""
-    d = np.abs(d)
-    inside = d < radius_mm
-    h = np.full(d.shape, np.inf)
-    h[inside] = radius_mm - np.sqrt(radius_mm**2 - d[inside] ** 2)
-    return h
 
 
 def _radial_gauss_matrix(r_out: np.ndarray, r_in: np.ndarray, dr_in: float, sigma: float) -> np.ndarray:
@@ -97,7 +86,7 @@ def _line_gauss_matrix(d_out: np.ndarray, d_in: np.ndarray, dd_in: float, sigma:
 def _solver(sim: SimConfig, kind: str) -> PlateOnFoundation:
     """The laminate-on-lattice model of one design (see `laminate`)."""
     law = SpacerLaw(sim.spacer)
-    radius = sim.contact.hemisphere_radius_mm if kind == "hemisphere" else sim.contact.rod_diameter_mm / 2
+    radius = rig.INDENTER_RADIUS_MM if kind == "hemisphere" else rig.ROD_DIAMETER_MM / 2
     g_p = sim.spacer.shear_modulus_kpa * KPA_MM2_TO_N * sim.spacer.thickness / 3.0  # Vlasov: G h / 3
     k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, sim.cover.thickness, sim.spacer.confinement_length)
     sheet = sim.sheet

@@ -11,7 +11,7 @@ Frames (all right-handed):
 
 Arm translation along base X0 (= TCP x at the home pose) moves the rod along skin x; a rotation
 of the tool about its y axis (the skin normal) turns the rod about the skin normal (yaw). The
-other finger is `contact_opening_mm - rod_diameter_mm` away from the rod at contact and closes
+other finger is `contact_opening_mm - rig.ROD_DIAMETER_MM` away from the rod at contact and closes
 only half the commanded closure, so within the stroke used it never touches the rod.
 """
 
@@ -22,12 +22,11 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from layerskin_exp import rig
+from layerskin_exp.rig import R_TCP_SKIN
 from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.kinematics import LimitedMotion
 from layerskin_exp.sim.rig_config import ArmConfig, GripperConfig
-
-# Skin axes expressed in the TCP frame (columns): x_s = x_t, y_s = -z_t, z_s = y_t.
-R_TCP_SKIN = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
 def rotvec_to_matrix(rv: list[float]) -> np.ndarray:
@@ -64,7 +63,7 @@ class GripScene:
         self.force_pct = 0.0
         self.force_limit_n = grip.force_min_n
         self.stalled = False
-        self.radius_mm = grip.rod_diameter_mm / 2.0
+        self.radius_mm = rig.ROD_DIAMETER_MM / 2.0
         # The rod, fixed in base (m): axis point and unit direction.
         self.R_home = self.R_ref.copy()
         self.place_rod(0.0, 0.0)

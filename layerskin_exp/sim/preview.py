@@ -3,8 +3,8 @@
     python -m layerskin_exp.sim.preview [out=PATH] [seed=N] [sim.KEY=VALUE ...] [skin.KEY=VALUE ...]
     python -m layerskin_exp.sim.preview out=soft.png sim.spacer.modulus=20
 
-sim.* and skin.* are the same overrides the protocols take (conf/sim/, conf/skin/), checked the
-same way; seed=N is sim.seed=N. Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of
+sim.* and skin.* are the same overrides the protocols take (conf/sim/, conf/skin/, composed by
+conf/world.yaml), checked the same way; seed=N is sim.seed=N. Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of
 pressure marked (baseline-subtracted counts as weights) and the applied force in the titles.
 """
 
@@ -13,12 +13,6 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-
-
-def _cop(counts: np.ndarray, base: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    p = np.clip(counts.astype(float) - base, 0.0, None)
-    tot = p.sum() + 1e-9
-    return np.array([p.sum(axis=0) @ xs / tot, p.sum(axis=1) @ xs / tot])
 
 
 def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) -> str:
@@ -30,13 +24,13 @@ def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) ->
     import matplotlib.pyplot as plt
 
     from layerskin_exp.config import SkinConfig
+    from layerskin_exp.features import centre_of_pressure
     from layerskin_exp.sim.config import SimConfig
     from layerskin_exp.sim.skin import SkinModel
 
     sim = sim if sim is not None else SimConfig(seed=seed)
     skin = skin if skin is not None else SkinConfig()
     m = SkinModel(sim, skin, "hemisphere", np.random.default_rng(sim.seed))
-    xs = skin.taxel_centres_mm()
     idle = m.frames([m.step(0.0, np.array([0.0, 0.0, 1.0]))], np.array([0.0]))
     cases = []
     t = 0.0
@@ -55,7 +49,7 @@ def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) ->
         for col, (layer, counts, base) in enumerate((("superficial", sup[0], idle[0][0]), ("deep", deep[0], idle[1][0]))):
             ax = axes[row, col]
             im = ax.imshow(counts, origin="lower", extent=(-half, half, -half, half), cmap="magma", vmin=0, vmax=4095)
-            c = _cop(counts, base.astype(float), xs)
+            c = centre_of_pressure(np.clip(counts.astype(float) - base, 0.0, None), skin)
             ax.plot(*c, "c+", ms=14, mew=2, label=f"CoP ({c[0]:.2f}, {c[1]:.2f}) mm")
             ax.legend(loc="lower right", fontsize=8)
             f = st.force_n
@@ -70,26 +64,16 @@ def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) ->
 
 
 def configs(overrides: list[str]):
-    """(SimConfig, SkinConfig) from conf/ with sim.* / skin.* overrides, validated as the protocols
-    validate them (a bad key or value exits with code 2 and one line)."""
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.errors import HydraException
+    """(SimConfig, SkinConfig) from conf/world.yaml with sim.* / skin.* overrides, validated as the
+    protocols validate them (a bad key or value exits with code 2 and one line)."""
+    import layerskin_exp.sim.config  # noqa: F401 - stores the sim, skin and world schemas
+    from layerskin_exp.config import ConfigError, compose, format_config_error
 
-    from layerskin_exp.cli import CONF_DIR, one_line, refuse
-    from layerskin_exp.config import ConfigError, register_all, validate
-
-    register_all()
-    GlobalHydra.instance().clear()
     try:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            typed = validate(compose(config_name="force_calibration", overrides=overrides))
+        typed = compose("world", overrides)
     except ConfigError as e:
-        refuse(e)
-    except HydraException as e:
-        refuse(ConfigError(one_line(e)))
-    finally:
-        GlobalHydra.instance().clear()
+        print(format_config_error(e), file=sys.stderr)
+        sys.exit(2)
     return typed.sim, typed.skin
 
 

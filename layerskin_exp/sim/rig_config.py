@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from layerskin_exp.config import require
+from layerskin_exp.vision.camera_model import CameraModelConfig
 
 
 @dataclass
@@ -154,7 +155,7 @@ class ArmConfig:
 
 @dataclass
 class GripperConfig:
-    """Robotiq Hand-E with the skin on one finger, and the fixed rod it presses.
+    """Robotiq Hand-E with the skin on one finger, and the fixed rod it presses (rig.ROD_DIAMETER_MM).
 
     The jaws are symmetric: closing the opening by d moves each finger d/2. The skin finger's
     cover meets the rod at `contact_opening_mm`; past that, the commanded finger travel presses
@@ -170,7 +171,6 @@ class GripperConfig:
     rate_hz: float = 100.0  # state polling
     position_resolution_mm: float = 50.0 / 255.0  # 8-bit register
     initial_opening_mm: float = 50.0
-    rod_diameter_mm: float = 12.0
     contact_opening_mm: float = 36.0  # opening at which the skin cover touches the rod
     other_finger_clearance_mm: float = 30.0  # other finger's gap to the rod at contact (it never touches)
     # Lumped series compliance of the printed finger adapter carrying the skin and the rod's stand.
@@ -191,7 +191,6 @@ class GripperConfig:
         require(1 <= self.rate_hz <= 1000, f"{k}.rate_hz", self.rate_hz, "must be 1..1000 Hz")
         require(0 <= self.initial_opening_mm <= self.stroke_mm, f"{k}.initial_opening_mm",
                 self.initial_opening_mm, "must lie in the stroke")
-        require(self.rod_diameter_mm > 0, f"{k}.rod_diameter_mm", self.rod_diameter_mm, "must be > 0")
         require(0 < self.contact_opening_mm < self.stroke_mm, f"{k}.contact_opening_mm",
                 self.contact_opening_mm, "must lie inside the stroke")
         require(self.other_finger_clearance_mm >= 0, f"{k}.other_finger_clearance_mm",
@@ -202,24 +201,13 @@ class GripperConfig:
 
 
 @dataclass
-class CameraConfig:
-    """Fixed RealSense D435 colour stream looking at the two ArUco markers on the superficial layer."""
+class CameraConfig(CameraModelConfig):
+    """Fixed RealSense D435 colour stream looking at the two ArUco markers on the superficial layer
+    (image size, intrinsics and distance: CameraModelConfig; the markers: the rig's)."""
+
+    KEY = "sim.rig.camera"
 
     fps: float = 30.0
-    # D435 colour stream at 1280x720 (69 deg horizontal field of view).
-    width_px: int = 1280
-    height_px: int = 720
-    fx_px: float = 920.0
-    fy_px: float = 920.0
-    cx_px: float = 640.0
-    cy_px: float = 360.0
-    distance_mm: float = 120.0  # camera centre to the skin plane, along the optical axis
-    marker_size_mm: float = 5.0
-    marker_ids: tuple[int, int] = (0, 1)
-    dictionary: str = "DICT_4X4_50"
-    # Marker centres in the skin frame (mm), on the superficial layer outside the 24 mm sensing area.
-    marker_x_mm: tuple[float, float] = (-8.0, 8.0)
-    marker_y_mm: tuple[float, float] = (16.0, 16.0)
     supersample: int = 4  # render at 4x and average down: edges placed to ~0.005 px (2x: ~0.015 px, ~0.4 deg of tilt)
     blur_sigma_px: float = 0.6
     noise_std_gray: float = 2.0
@@ -230,22 +218,14 @@ class CameraConfig:
         drift_ppm_std=30.0, timestamp_jitter_us=100.0, delay_min_ms=0.0, delay_mean_extra_ms=0.0))
 
     def __post_init__(self) -> None:
-        k = "sim.rig.camera"
+        k = self.KEY
         require(0 < self.fps <= 120, f"{k}.fps", self.fps, "must be 0..120")
-        require(self.width_px >= 64 and self.height_px >= 64, f"{k}.width_px", (self.width_px, self.height_px),
-                "image must be at least 64x64")
-        require(self.fx_px > 0 and self.fy_px > 0, f"{k}.fx_px", (self.fx_px, self.fy_px), "must be > 0")
-        require(self.distance_mm > 10, f"{k}.distance_mm", self.distance_mm, "must be > 10 mm")
-        require(self.marker_size_mm > 0, f"{k}.marker_size_mm", self.marker_size_mm, "must be > 0")
-        require(len(self.marker_ids) == len(self.marker_x_mm) == len(self.marker_y_mm) >= 1,
-                f"{k}.marker_ids", self.marker_ids, "one id per marker position (marker_x_mm, marker_y_mm)")
+        self.check_model()
         require(1 <= self.supersample <= 8, f"{k}.supersample", self.supersample, "must be 1..8")
         require(self.blur_sigma_px >= 0, f"{k}.blur_sigma_px", self.blur_sigma_px, "must be >= 0")
         require(self.noise_std_gray >= 0, f"{k}.noise_std_gray", self.noise_std_gray, "must be >= 0")
         require(0 <= self.latency_ms < 1000, f"{k}.latency_ms", self.latency_ms, "must be 0..1000 ms")
         require(self.latency_jitter_ms >= 0, f"{k}.latency_jitter_ms", self.latency_jitter_ms, "must be >= 0")
-        require(self.dictionary.startswith("DICT_"), f"{k}.dictionary", self.dictionary,
-                "an OpenCV predefined ArUco dictionary name, e.g. DICT_4X4_50")
         self.clock.check(f"{k}.clock")
 
 

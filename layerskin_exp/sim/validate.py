@@ -339,16 +339,9 @@ def table(checks: list[Check]) -> str:
 
 def load_sim(overrides: list[str]) -> SimConfig:
     """conf/sim/default.yaml with `sim.key=value` overrides, validated by SimConfig."""
-    from pathlib import Path
+    from layerskin_exp.config import compose
 
-    from omegaconf import OmegaConf
-
-    path = Path(__file__).resolve().parents[2] / "conf" / "sim" / "default.yaml"
-    raw = OmegaConf.load(path)
-    raw.pop("defaults", None)
-    cfg = OmegaConf.merge(OmegaConf.structured(SimConfig), raw,
-                          OmegaConf.from_dotlist([o.removeprefix("sim.") for o in overrides]))
-    return OmegaConf.to_object(cfg)
+    return compose("world", [o if o.startswith("sim.") else f"sim.{o}" for o in overrides]).sim
 
 
 def main(argv=None) -> int:

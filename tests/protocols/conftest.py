@@ -10,7 +10,8 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
-from layerskin_exp.config import register_all, validate
+import protocols.config  # noqa: F401 - the apps' schemas, as the apps store them
+from layerskin_exp.config import validate
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -21,7 +22,6 @@ TINY_GRIP = ["trajectory.waypoints=[0.0,0.5,0.0]", "hold_s=0.1", "close.settle_s
 
 def compose_app(config_name: str, overrides: list[str]):
     """(DictConfig, typed config) of an app, composed as the CLI would."""
-    register_all()
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
         cfg = compose(config_name=config_name, overrides=overrides)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from layerskin_exp.config import ConfigError, SkinConfig, register_all, validate
+from layerskin_exp.config import ConfigError, SkinConfig, validate
 from layerskin_exp.sim.config import CoverConfig, FSRConfig, ReadoutConfig, SimConfig, SpacerConfig
 from layerskin_exp.sim.fsr import FSRLayer
 from layerskin_exp.sim.readout import MatrixReadout
@@ -112,7 +112,6 @@ def test_config_range_errors_name_the_key(factory, key):
 
 
 def test_hydra_sweep_key_and_refusal():
-    register_all()
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
         cfg = compose(config_name=None, overrides=["+sim=default", "sim.spacer.modulus=20", "sim.cover.friction=0.8"])
         sim = validate(cfg, "sim")
