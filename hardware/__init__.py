@@ -6,7 +6,8 @@
 
 from __future__ import annotations
 
-from hardware.interfaces import DeviceError, Rig
+from hardware.interfaces import DeviceError
+from hardware.rig import Rig
 
 
 def build_rig(cfg, setup: str) -> Rig:

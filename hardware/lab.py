@@ -10,7 +10,8 @@ from __future__ import annotations
 import math
 import time
 
-from hardware.interfaces import Clock, DeviceError, Rig
+from hardware.interfaces import Clock, DeviceError
+from hardware.rig import Rig
 from layerskin_exp.config import SkinConfig
 
 SETUPS = ("platform", "gripper")
@@ -30,7 +31,7 @@ class MonotonicClock(Clock):
 
 def wire_guards(rig: Rig) -> None:
     """Route every acquired sample of the rig's drivers through its guards."""
-    rig.skin.on_frames = lambda frames: rig.watches("skin") and any(rig.check_guards(f, "skin") for f in frames)
+    rig.skin.on_frames = rig.check_frames
     if rig.ft is not None:
         rig.ft.on_sample = rig.check_guards
 

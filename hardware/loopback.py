@@ -16,8 +16,9 @@ import socket
 import threading
 from dataclasses import dataclass, field
 
-from hardware.interfaces import DeviceError, Rig
+from hardware.interfaces import DeviceError
 from hardware.lab import MonotonicClock, attach_devices
+from hardware.rig import Rig
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from hardware.interfaces import DeviceError, Rig
+from hardware.interfaces import DeviceError
+from hardware.rig import Rig
 from layerskin_exp.config import ConfigError
 from layerskin_exp.rig import SENSING_HALF_WIDTH_MM
 from protocols.config import ForceCalibrationConfig, PositionsConfig

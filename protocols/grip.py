@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hardware.interfaces import Rig
+from hardware.rig import Rig
 from layerskin_exp.config import ConfigError
 from layerskin_exp.types import SkinEstimate
 from protocols.config import GripDepthConfig, TrajectoryConfig

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware.interfaces import DeviceError, Rig
+from hardware.interfaces import DeviceError
+from hardware.rig import Rig
 from layerskin_exp.log import SessionFileError, SessionWriter, load_session
 from layerskin_exp.log.frames import FrameTree
 from layerskin_exp.log.view import SkinView

@@ -12,13 +12,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hardware.interfaces import Rig
+from hardware.rig import Rig
 from layerskin_exp.types import Wrench
 from protocols.config import SafetyConfig
 
 FORCE_LIMIT = "force_limit"
 SKIN_LOAD_LIMIT = "skin_load_limit"
-SAFETY_TRIPS = (FORCE_LIMIT, SKIN_LOAD_LIMIT)
 SLOW_ZONE = "slow_zone"
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from hardware.interfaces import DeviceError, Rig
+from hardware.interfaces import DeviceError
+from hardware.rig import Rig
 from hardware.sim.arm import SimArm
 from hardware.sim.camera import SimMarkerCamera
 from hardware.sim.clock import SimClock
@@ -67,7 +68,7 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     rig = SimRig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup})
     # Skin guards act at the end of each world advance (at most one control tick late); F/T
     # guards act on the very sample, rewinding the world to it (see SimForceTorque).
-    skin.on_frames = lambda frames: rig.watches("skin") and any(rig.check_guards(f, "skin") for f in frames)
+    skin.on_frames = rig.check_frames
     rig.trial_hooks.append(world.begin_trial)
     if setup == "platform":
         rig.ft = SimForceTorque(world, rc.ft, device_rng(sim_cfg.seed, "ft"), on_sample=rig.check_guards,

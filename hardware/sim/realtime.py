@@ -21,7 +21,7 @@ from __future__ import annotations
 import threading
 import time
 
-from hardware.interfaces import Rig
+from hardware.rig import Rig
 
 WARM_UP_S = 0.01
 

@@ -16,9 +16,9 @@ from hardware.interfaces import (
     ForceTorqueSensor,
     Gripper,
     Platform,
-    Rig,
     SkinReader,
 )
+from hardware.rig import Rig
 from layerskin_exp.types import GripperState, Pose, StagePosition, TwoLayerFrame, Wrench
 
 
