@@ -4,8 +4,8 @@
 asks for (a multirun's whole sweep) before Hydra starts, so a bad override ends the command
 with one readable line and exit code 2: nothing connected, nothing written.
 
-The one piece of command-line glue kept in the core: the protocols' and the report's command
-lines share it, and it names no application (the caller has registered its schemas).
+Kept in the core because the protocols' and the report's command lines share it; it names no
+application (the caller has stored its schemas before calling it).
 """
 
 from __future__ import annotations
