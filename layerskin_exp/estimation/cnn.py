@@ -22,6 +22,7 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
+from layerskin_exp import rig
 from layerskin_exp.estimation.config import CnnConfig
 from layerskin_exp.estimation.splits import split_trials, trial_starts, window_indices
 
@@ -57,7 +58,7 @@ def input_channels(maps: np.ndarray, layers: str) -> np.ndarray:
 class CnnGru(nn.Module):
     """Frame encoder + three GRU heads. forward(x (B, T, C, 16, 16)) -> (B, 3)."""
 
-    def __init__(self, in_channels: int, dropout: float = 0.1, hidden: int = 64, n_taxels: int = 16) -> None:
+    def __init__(self, in_channels: int, dropout: float = 0.1, hidden: int = 64, n_taxels: int = rig.N_TAXELS) -> None:
         super().__init__()
         flat = 64 * ((n_taxels + 1) // 2) ** 2  # 4096 for 16×16
         self.encoder = nn.Sequential(

@@ -24,6 +24,7 @@ import torch
 from torch import nn
 
 from layerskin_exp.estimation.artifact import Estimator
+from layerskin_exp.rig import SKIN_SHAPE
 
 
 class EncoderGraph(nn.Module):
@@ -72,7 +73,7 @@ def _export(module: nn.Module, example: torch.Tensor, f, names: tuple[str, str],
 def onnx_bytes(enc: EncoderGraph, heads: HeadsGraph, seq_len: int, opset: int = 17) -> tuple[bytes, bytes]:
     """The two graphs as serialized ONNX models, in memory."""
     out = []
-    for module, example, names in ((enc, torch.zeros(1, 2, 16, 16), ("maps", "encoding")),
+    for module, example, names in ((enc, torch.zeros(1, 2, *SKIN_SHAPE), ("maps", "encoding")),
                                    (heads, torch.zeros(1, seq_len, 64), ("window", "force_n"))):
         buf = io.BytesIO()
         _export(module, example, buf, names, opset)

@@ -23,6 +23,7 @@ def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from layerskin_exp import rig
     from layerskin_exp.config import SkinConfig
     from layerskin_exp.features import centre_of_pressure
     from layerskin_exp.sim.config import SimConfig
@@ -43,12 +44,12 @@ def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) ->
         st = m.step(t, np.array([-3.0 + 0.002 * (k + 1), 1.5, -2.2]))
     cases.append(("slide +x 3 mm", st, m.frames([st], np.array([t]))))
 
-    half = skin.n_taxels * skin.pitch_mm / 2
+    half = rig.SENSING_HALF_WIDTH_MM
     fig, axes = plt.subplots(2, 2, figsize=(9, 8.5), constrained_layout=True)
     for row, (name, st, (sup, deep)) in enumerate(cases):
         for col, (layer, counts, base) in enumerate((("superficial", sup[0], idle[0][0]), ("deep", deep[0], idle[1][0]))):
             ax = axes[row, col]
-            im = ax.imshow(counts, origin="lower", extent=(-half, half, -half, half), cmap="magma", vmin=0, vmax=4095)
+            im = ax.imshow(counts, origin="lower", extent=(-half, half, -half, half), cmap="magma", vmin=0, vmax=rig.ADC_MAX)
             c = centre_of_pressure(np.clip(counts.astype(float) - base, 0.0, None), skin)
             ax.plot(*c, "c+", ms=14, mew=2, label=f"CoP ({c[0]:.2f}, {c[1]:.2f}) mm")
             ax.legend(loc="lower right", fontsize=8)

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from layerskin_exp import rig
 from layerskin_exp.sim import frame_kernels as fk
 from layerskin_exp.sim.config import ReadoutConfig
 
 
 class MatrixReadout:
-    def __init__(self, cfg: ReadoutConfig, adc_bits: int, n: int = 16):
+    def __init__(self, cfg: ReadoutConfig, adc_bits: int, n: int = rig.N_TAXELS):
         self.cfg = cfg
         self.n = n
         self.full_scale = float(2**adc_bits - 1)
