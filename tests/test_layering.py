@@ -176,6 +176,11 @@ LOADS = {
         "preflight('force_calibration', ['positions.count=2'])\n"
         "preflight('grip_depth', ['-m', 'grip_depth=6,9'])\n"
     ),
+    "analysis": (
+        "from analysis import cli, report\n"
+        "from layerskin_exp.cli import preflight\n"
+        "preflight('report', ['analysis=demo'])\n"
+    ),
 }
 
 
