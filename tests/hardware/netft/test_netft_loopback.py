@@ -126,7 +126,7 @@ def test_a_box_that_stops_sending_faults_after_the_stall_timeout(emulator):
     with sensor_for(emu) as ft:
         collect(ft, 20)
         assert ft.fault(time.monotonic_ns()) is None
-        emu.stalled = True
+        emu.stall()
         time.sleep(0.01)
         ft.read_available()
         last = ft._last_rx_ns
