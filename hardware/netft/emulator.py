@@ -24,7 +24,6 @@ from __future__ import annotations
 import http.server
 import logging
 import socket
-import threading
 from collections import deque
 
 import numpy as np

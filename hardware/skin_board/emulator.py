@@ -45,7 +45,8 @@ class SkinBoardEmulator(Emulator):
     rt: a started RealtimeWorld whose rig has a skin twin. host, port: unused (a pty has no
     network address; accepted so every emulator is built the same way). period_s: how often the
     twin is drained. seq_offset: added to the twin's seq before it wraps to 16 bits (to reach
-    the wrap quickly). sent_maxlen: how many intact frames `sent` remembers.
+    the wrap quickly). sent_maxlen: how many intact frames `sent` remembers (4096: ~10 s of
+    frames, what a test compares against; a bound, so a long run does not grow).
     """
 
     DEVICE = "skin_board"
@@ -55,7 +56,7 @@ class SkinBoardEmulator(Emulator):
     def __init__(self, rt, host: str | None = None, port: int | None = None, *, seed: int = 0,
                  p_bit_flip: float = 0.0, p_drop_byte: float = 0.0, p_insert_garbage: float = 0.0,
                  p_drop_frame: float = 0.0, garbage_max: int = 64, stalls: tuple = (),
-                 period_s: float = 0.0015, seq_offset: int = 0, sent_maxlen: int = 100_000,
+                 period_s: float = 0.0015, seq_offset: int = 0, sent_maxlen: int = 4096,
                  stall_after_s: float | None = None, disconnect_after_s: float | None = None) -> None:
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
         for name, p in (("p_bit_flip", p_bit_flip), ("p_drop_byte", p_drop_byte),
@@ -119,7 +120,9 @@ class SkinBoardEmulator(Emulator):
                     attached = False
                 self.counts["no_host_frames"] += len(frames)
                 continue
-            attached = True
+            if not attached:
+                self.counts["host_opens"] += 1
+                attached = True
             self.counts["host_bytes"] += len(pty.read())  # the board takes no commands: discarded
             if self.stalled:  # the board stops scanning; bytes already queued still go out
                 self.counts["stalled_frames"] += len(frames)

@@ -100,10 +100,9 @@ def test_kill_9_during_a_loopback_trial_keeps_all_but_the_last_100_ms(tmp_path, 
 
 
 def test_standalone_emulator_prints_where_it_listens_and_serves(tmp_path):
+    import socket
     import subprocess
     import sys
-
-    import socket
 
     from hardware.emulation import free_loopback_host
     from hardware.netft import NetFTConfig, NetFTSensor
