@@ -65,7 +65,7 @@ def run() -> dict:
         wall = time.monotonic() - t0
         cpu_drv = _thread_cpu_s(reader._thread) - cpu0_drv
         cpu_bench = (_thread_cpu_s(rt._thread) - cpu0_world) + (_thread_cpu_s(emulator._thread) - cpu0_emu)
-        emulator.stall(1e9)  # the board stops scanning; what it already queued goes out and is read
+        emulator.stall()  # the board stops scanning; what it already queued goes out and is read
         time.sleep(0.2)
         drain()
         emulator.stop()

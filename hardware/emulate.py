@@ -7,6 +7,11 @@ ur5e/hande/camera) advanced at wall-clock pace; `sim.*` and `skin.*` overrides s
 `hardware=sim`. Once it is ready it prints one line saying where it listens (host:port, or the
 pty path to open as a serial port), then serves until Ctrl-C or SIGTERM. It binds loopback
 unless --host says otherwise.
+
+Network devices listen on their usual ports, so a client that hard-codes them finds the
+emulator: Net F/T RDT on UDP 49152 and its calibration page (netftapi2.xml) on HTTP 80 (8080
+where binding port 80 is not allowed: the line printed says which), the Hand-E URCap socket on
+TCP 63352, the UR5e controller on its fixed ports. --port moves the main one.
 """
 
 from __future__ import annotations
@@ -40,13 +45,27 @@ def _compose(setup: str, overrides: list[str]):
     return world.sim, world.skin
 
 
+def _start(emulator, cls) -> str:
+    """Start the emulator; where a usual port below 1024 is not allowed, its documented fallback."""
+    try:
+        where = emulator.start()
+    except PermissionError:
+        fallback = getattr(sys.modules[cls.__module__], "HTTP_FALLBACK_PORT", None)
+        if fallback is None or getattr(emulator, "http_port", None) != 80:
+            raise
+        emulator.http_port = fallback
+        where = emulator.start()
+    http = getattr(emulator, "http_address", None)
+    return where if http is None else f"{where} (calibration page http://{http}/netftapi2.xml)"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hardware.emulate", description=__doc__.split("\n\n")[0])
     parser.add_argument("device", choices=sorted(EMULATORS))
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     parser.add_argument("--port", type=int, default=None,
-                        help="port for TCP/UDP emulators (default: the device's usual port; ur5e uses the "
-                             "controller's fixed ports)")
+                        help="port for TCP/UDP emulators (default: the device's usual port: netft 49152 with "
+                             "its calibration page on HTTP 80, hande 63352; ur5e uses the controller's fixed ports)")
     parser.add_argument("overrides", nargs="*", help="sim.* / skin.* overrides for the simulated rig")
     args = parser.parse_args(argv)
 
@@ -55,15 +74,16 @@ def main(argv: list[str] | None = None) -> int:
     setup = _setup_of(args.device)
     sim_cfg, skin_cfg = _compose(setup, args.overrides)
     rt = RealtimeWorld.from_config(sim_cfg, skin_cfg, setup)
-    kwargs = {"host": args.host}
+    cls = emulator_class(args.device)
+    kwargs = {"host": args.host, **getattr(cls, "USUAL_PORTS", {})}
     if args.port is not None:
         kwargs["port"] = args.port
-    emulator = emulator_class(args.device)(rt, **kwargs)
+    emulator = cls(rt, **kwargs)
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     rt.start()
     try:
-        where = emulator.start()
+        where = _start(emulator, cls)
         gc.freeze()  # keep full collections (which stop every thread) short while serving
         print(f"{args.device} emulator listening on {where} (simulated {setup} rig, seed {sim_cfg.seed}); "
               "Ctrl-C to stop", flush=True)

@@ -13,7 +13,6 @@ import dataclasses
 import importlib
 import logging
 import socket
-import threading
 from dataclasses import dataclass, field
 
 from hardware.interfaces import DeviceError
@@ -34,16 +33,6 @@ EMULATORS = {
 SETUP_DEVICES = {"platform": ("skin_board", "platform", "netft"),
                  "gripper": ("skin_board", "ur5e", "hande", "camera")}
 UR_PORTS = (29999, 30001, 30002, 30003, 30004)  # fixed on a UR controller; ur_rtde dials them
-# How each emulator stops delivering while staying connected (a hung device), for the bench-level
-# fault `stall_after_s`: seconds after the bench is powered on.
-STALL = {
-    "skin_board": lambda e: e.stall(1e9),
-    "platform": lambda e: e.freeze(),
-    "netft": lambda e: setattr(e, "stalled", True),
-    "ur5e": lambda e: e.pause_output(True),
-    "hande": lambda e: e.freeze(),
-    "camera": lambda e: setattr(e, "stalled", True),
-}
 # Emulator arguments a loopback bench always uses: the Net F/T box serves its calibration page, so
 # the driver reads counts-per-unit over HTTP as it does from a real box.
 BENCH_DEFAULTS = {"netft": {"http_port": 0}}
@@ -79,7 +68,8 @@ class LoopbackBench:
     """The emulators of one setup, on one realtime simulated world.
 
     faults: device -> keyword arguments for its emulator (fault injection, see each emulator),
-    plus `stall_after_s` for any device: it stops delivering that long after power-on.
+    among them `stall_after_s` / `disconnect_after_s` for any device (hardware.emulation): it
+    stops delivering / loses its link that long after power-on.
     """
 
     def __init__(self, sim_cfg, skin_cfg, setup: str, host: str = "127.0.0.1", ur_host: str = "auto",
@@ -99,7 +89,6 @@ class LoopbackBench:
         self.rt = RealtimeWorld.from_config(sim_cfg, skin_cfg, setup, period_s)
         self.emulators: dict[str, object] = {}
         self.addresses: dict[str, str] = {}
-        self._timers: list[threading.Timer] = []
 
     def start(self) -> dict[str, str]:
         """Start the world and every emulator; returns device -> where it serves."""
@@ -109,15 +98,9 @@ class LoopbackBench:
                 cls = emulator_class(device)
                 host = (free_ur_host() if self.ur_host == "auto" else self.ur_host) if device == "ur5e" else self.host
                 kwargs = {**BENCH_DEFAULTS.get(device, {}), **self.faults.get(device, {})}
-                stall_after_s = kwargs.pop("stall_after_s", None)
                 emu = cls(self.rt, host=host, **kwargs)
                 self.addresses[device] = emu.start()
                 self.emulators[device] = emu
-                if stall_after_s is not None:
-                    timer = threading.Timer(float(stall_after_s), STALL[device], args=(emu,))
-                    timer.daemon = True
-                    timer.start()
-                    self._timers.append(timer)
                 log.info("loopback: %s emulator at %s", device, self.addresses[device])
         except BaseException:
             self.stop()
@@ -125,8 +108,6 @@ class LoopbackBench:
         return dict(self.addresses)
 
     def stop(self) -> None:
-        for timer in self._timers:
-            timer.cancel()
         for device, emu in reversed(list(self.emulators.items())):
             try:
                 emu.stop()

@@ -11,8 +11,10 @@ the reference the driver's must match.
 Not a network device: start() returns "fake-capture:<id>" and `capture_factory` is what the
 driver takes. Covers: frames, their timestamps, frame size and rate properties. Not covered:
 USB/V4L2 buffering and dropped frames, exposure and format controls (set() is accepted, ignored).
-Fault injection: `stalled` (no new frames; read() keeps waiting), `end_capture()` (read() fails
-from then on, as an unplugged camera's).
+Faults (hardware.emulation's vocabulary): stall() (no new frames; read() keeps waiting;
+resume()), drop(n) (the next n frames never come), corrupt(n) (the next n frames are "noise":
+uniform random pixels, in which no marker is found), disconnect() (read() fails from then on, as
+an unplugged camera's).
 """
 
 from __future__ import annotations
@@ -23,6 +25,9 @@ import time
 from collections import deque
 
 import cv2
+import numpy as np
+
+from hardware.emulation import Emulator
 
 EMULATOR_SETUP = "gripper"
 POLL_S = 0.005  # how often the emulator looks for a new twin frame
@@ -44,7 +49,7 @@ class FakeCapture:
     def read(self):
         emu = self._emu
         while self._open:
-            if emu.ended:
+            if emu.disconnected:
                 return False, None
             with emu.cond:
                 if emu.frames and emu.frames[0][2] <= time.monotonic_ns():
@@ -66,55 +71,39 @@ class FakeCapture:
         self._open = False
 
 
-class CameraEmulator:
+class CameraEmulator(Emulator):
     """rt: a started RealtimeWorld of the "gripper" setup. host/port are unused (no network)."""
 
-    def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, stalled: bool = False, max_queue: int = 8) -> None:
-        self.rt = rt
-        self.stalled = bool(stalled)
-        self.ended = False
+    DEVICE = "camera"
+    TWINS = ("camera",)
+    CORRUPTIONS = ("noise",)
+
+    def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, max_queue: int = 8, seed: int = 0,
+                 stall_after_s: float | None = None, disconnect_after_s: float | None = None) -> None:
+        super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
+        self.rng = np.random.default_rng(seed)
         self.name = f"fake-capture:{next(_ids)}"
         self.frames: deque = deque(maxlen=max_queue)  # (grey (H, W) uint8, device_t_ns, release monotonic ns)
         self.cond = threading.Condition()
         self.twin_detections: dict[int, list] = {}
-        self.running = False
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
         self._last_dev_ns: int | None = None
 
     def capture_factory(self) -> FakeCapture:
         return FakeCapture(self)
 
-    def end_capture(self) -> None:
-        """From now on read() fails, as with an unplugged camera."""
-        self.ended = True
+    def _on_disconnect(self) -> None:
         with self.cond:
             self.cond.notify_all()
 
-    def start(self) -> str:
+    def _open(self) -> str:
         with self.rt.lock:
             self.rt.rig.camera.cfg.keep_images = True  # the twin keeps its latest frame for us
-        self._stop.clear()
-        self.running = True
-        self._thread = threading.Thread(target=self._run, name="camera-emu", daemon=True)
-        self._thread.start()
+        self._spawn(self._run, "frames")
         return self.name
 
-    def stop(self) -> None:
-        self._stop.set()
-        self.running = False
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+    def _wake(self) -> None:
         with self.cond:
             self.cond.notify_all()
-
-    def __enter__(self) -> CameraEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
     def _run(self) -> None:
         twin = self.rt.rig.camera
@@ -132,6 +121,11 @@ class CameraEmulator:
             self._last_dev_ns = dev_ns
             if self.stalled:
                 continue
+            fault = self._next_fault()
+            if fault is not None and fault[0] == "drop":
+                continue
+            if fault is not None:
+                img = self.rng.integers(0, 256, img.shape, dtype=np.uint8)
             with self.cond:
                 self.frames.append((img, dev_ns, self.rt.to_monotonic_ns(host_ns)))
                 self.cond.notify_all()

@@ -9,14 +9,20 @@ or 0x05 (still activating) as the gripper does; POS is the twin's latest reporte
 position request taken by the last GTO; OBJ 0 while moving (or GTO 0), 2/1 when the jaws stopped
 short of the request closing/opening (an object: the rod), 3 at the request.
 
-Not modelled: the activation's full open/close stroke, auto-release (ATR/ADR are stored only),
-motor current (COU reads 0), temperature/voltage faults unless injected, several clients at once
-(one connection is served at a time; the next waits in the listen backlog). What the URCap
-answers to an unknown variable is not publicly documented; this answers `?\\n`.
+Several clients at once, as the URCap's socket server serves them: a UR program's own rq_*
+functions (which open the socket on the controller) and a remote client talk to one gripper at
+the same time. Each connection gets its own answers; every request acts on the one set of
+registers, in the order the requests arrive. No idle connection holds up another.
 
-Fault injection: freeze() (keeps the connection, answers nothing), drop_connection() (closes the
-client's socket), inject_fault(code) (FLT reads code until ACT 0 -> 1), reply_delay_s (slow
-replies), start_active (skip the need to activate).
+Not modelled: the activation's full open/close stroke, auto-release (ATR/ADR are stored only),
+motor current (COU reads 0), temperature/voltage faults unless set. What the URCap answers to an
+unknown variable is not publicly documented; this answers `?\\n`.
+
+Faults (hardware.emulation's vocabulary): stall() (connections kept, nothing answered; resume()),
+drop(n) (the next n replies are not sent), corrupt(n) (the next n replies arrive "garbled"),
+disconnect() (every client connection is closed, as when the URCap restarts; clients may connect
+again). set_fault(code): the gripper reports FLT `code` until reset (ACT 0 -> 1). reply_delay_s
+(slow replies), start_active (skip the need to activate). The URCap's usual port is USUAL_PORTS.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import socket
 import threading
 import time
 
+from hardware.emulation import Emulator
 from hardware.hande import wire
 from hardware.interfaces import DeviceError
 
@@ -34,12 +41,21 @@ log = logging.getLogger(__name__)
 EMULATOR_SETUP = "gripper"
 
 
-class HandEEmulator:
+POLL_S = 0.002  # how often the gripper twin's records are taken
+LISTEN_BACKLOG = 16
+
+
+class HandEEmulator(Emulator):
     """URCap socket on host:port (0 = any free port) backed by `rt.rig.gripper`."""
 
+    DEVICE = "hande"
+    TWINS = ("gripper",)
+    USUAL_PORTS = {"port": wire.PORT}  # the URCap's gripper socket
+
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, activation_time_s: float = 0.05,
-                 start_active: bool = False, reply_delay_s: float = 0.0) -> None:
-        self.rt = rt
+                 start_active: bool = False, reply_delay_s: float = 0.0, stall_after_s: float | None = None,
+                 disconnect_after_s: float | None = None) -> None:
+        super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
         self.host, self.port = host, int(port)
         self.activation_time_s = float(activation_time_s)
         self.reply_delay_s = float(reply_delay_s)
@@ -55,65 +71,51 @@ class HandEEmulator:
             self.regs.update(ACT=1, STA=wire.STA_ACTIVE)
         self.requests = 0
         self.bad_requests = 0
+        self.connections = 0  # accepted so far
         self._listener: socket.socket | None = None
-        self._client: socket.socket | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-        self._frozen = threading.Event()
-        self._drop = threading.Event()
+        self._clients: set[socket.socket] = set()
+        self._regs_lock = threading.Lock()  # one gripper: requests act on it one at a time
 
     # ---- life cycle ----------------------------------------------------------------------------
-    def start(self) -> str:
-        if self._thread is not None:
-            return f"{self.host}:{self.port}"
+    def _open(self) -> str:
         ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._listener = ls
         ls.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         ls.bind((self.host, self.port))
-        ls.listen(1)
+        ls.listen(LISTEN_BACKLOG)
         ls.settimeout(0.02)
-        self._listener = ls
         self.port = ls.getsockname()[1]
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name="hande-emulator", daemon=True)
-        self._thread.start()
+        self._spawn(self._accept, "accept")
+        self._spawn(self._track, "twin")
         return f"{self.host}:{self.port}"
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-            self._thread = None
+    def _close(self) -> None:
+        self._close_clients()
         if self._listener is not None:
             self._listener.close()
             self._listener = None
 
-    def __enter__(self) -> HandEEmulator:
-        self.start()
-        return self
+    def _close_clients(self) -> None:
+        for conn in list(self._clients):
+            try:
+                conn.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
 
-    def __exit__(self, *exc) -> None:
-        self.stop()
+    # ---- faults --------------------------------------------------------------------------------
+    def _on_disconnect(self) -> None:
+        self._close_clients()
+        self._disconnected.clear()  # the socket server stays: clients may connect again
 
-    # ---- fault injection -----------------------------------------------------------------------
-    def freeze(self) -> None:
-        """Keep the connection but answer nothing."""
-        self._frozen.set()
-
-    def unfreeze(self) -> None:
-        self._frozen.clear()
-
-    def drop_connection(self) -> None:
-        """Close the current client connection (the URCap or the controller went away)."""
-        self._drop.set()
-
-    def inject_fault(self, code: int) -> None:
+    def set_fault(self, code: int) -> None:
         """FLT reads `code` (e.g. 0x0E overcurrent) until the gripper is reset (ACT 0 -> 1)."""
-        self.regs["FLT"] = int(code)
-        if code >= 0x08:
-            self._halt()
+        with self._regs_lock:
+            self.regs["FLT"] = int(code)
+            if code >= 0x08:
+                self._halt()
 
     # ---- serving -------------------------------------------------------------------------------
-    def _serve(self) -> None:
+    def _accept(self) -> None:
         while not self._stop.is_set():
             try:
                 conn, _ = self._listener.accept()
@@ -123,20 +125,32 @@ class HandEEmulator:
                 return
             conn.settimeout(0.02)
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._drop.clear()
-            self._client = conn
-            try:
-                self._serve_client(conn)
-            finally:
-                self._client = None
-                conn.close()
+            self.connections += 1
+            self._clients.add(conn)
+            self._threads = [t for t in self._threads if t.is_alive()]  # forget finished clients
+            self._spawn(self._serve_client, f"client{self.connections}", conn)
+
+    def _track(self) -> None:
+        """Keep the jaws' latest reported state (the twin's records, drained as they come)."""
+        while not self._stop.wait(POLL_S):
+            with self.rt.lock:
+                recs = self.rt.rig.gripper.read_available()
+            if recs:
+                with self._regs_lock:
+                    self._opening_mm = recs[-1].position_mm
+                    self._object = recs[-1].object_detected
 
     def _serve_client(self, conn: socket.socket) -> None:
+        try:
+            self._converse(conn)
+        finally:
+            self._clients.discard(conn)
+            conn.close()
+
+    def _converse(self, conn: socket.socket) -> None:
         buf = b""
         while not self._stop.is_set():
-            if self._drop.is_set():
-                return
-            if self._frozen.is_set():
+            if self.stalled:
                 time.sleep(0.005)
                 continue
             i = buf.find(b"\n")
@@ -154,9 +168,15 @@ class HandEEmulator:
             line, buf = buf[:i].strip(b"\r"), buf[i + 1:]
             if not line.strip():
                 continue
-            reply = self._answer(line)
+            with self._regs_lock:
+                reply = self._answer(line)
             if self.reply_delay_s:
                 time.sleep(self.reply_delay_s)
+            fault = self._next_fault()
+            if fault is not None and fault[0] == "drop":
+                continue
+            if fault is not None:  # garbled: the reply's first byte changed
+                reply = bytes([reply[0] ^ 0x20]) + reply[1:]
             try:
                 conn.sendall(reply)
             except OSError:
@@ -184,16 +204,12 @@ class HandEEmulator:
 
     # ---- the gripper ---------------------------------------------------------------------------
     def _tick(self) -> None:
-        """Advance the activation and refresh the jaw state from the twin's latest record."""
+        """Advance the activation and refresh whether the jaws move (their position comes from _track)."""
         r = self.regs
         if r["STA"] == wire.STA_ACTIVATING and time.monotonic() - self._act_t0 >= self.activation_time_s:
             r["STA"] = wire.STA_ACTIVE
         with self.rt.lock:
-            recs = self.rt.rig.gripper.read_available()
             self._moving = self.rt.rig.gripper.is_moving()
-        if recs:
-            self._opening_mm = recs[-1].position_mm
-            self._object = recs[-1].object_detected
 
     def _read(self, var: str) -> int:
         r = self.regs

@@ -8,8 +8,15 @@ ft_sample_rate_hz, counts from a calibration, and optionally netftapi2.xml over 
 Not covered: the box's other settings (filters, output rate: the twin's rate is used),
 thresholds and the latch, TCP and EtherNet/IP interfaces.
 
-Fault injection (attributes, changeable while running): drop_every (drop every n-th record),
-stalled (stop sending while still accepting requests), status (status word put in every record).
+Faults (hardware.emulation's vocabulary): stall() (stop sending while still taking requests),
+drop(n) (the next n records are lost), corrupt(n) (the next n datagrams arrive "truncated"),
+disconnect() (the box leaves the network: nothing sent or answered, the calibration page gone);
+drop_every (drop every n-th record) and status (the status word put in every record) are
+attributes that may change while running.
+
+Ports: `port` (RDT, UDP) and `http_port` (the calibration page) take 0 for any free port, as the
+loopback bench does; the box's own are USUAL_PORTS (RDT 49152, HTTP 80), which the standalone
+launcher uses (HTTP falls back to HTTP_FALLBACK_PORT where port 80 is not allowed).
 """
 
 from __future__ import annotations
@@ -17,11 +24,11 @@ from __future__ import annotations
 import http.server
 import logging
 import socket
-import threading
 from collections import deque
 
 import numpy as np
 
+from hardware.emulation import Emulator
 from hardware.netft import wire
 
 log = logging.getLogger(__name__)
@@ -32,28 +39,36 @@ BIAS_SAMPLES = 32  # the software bias takes the mean of the latest readings, as
 DEFAULT_CALIBRATION = wire.Calibration(1_000_000.0, 1_000_000.0, "N", "N-m")
 
 
-class NetFTEmulator:
+USUAL_PORTS = {"port": wire.RDT_PORT, "http_port": 80}  # the box's RDT and web server ports
+HTTP_FALLBACK_PORT = 8080  # where binding port 80 is not allowed (not root): say so when used
+
+
+class NetFTEmulator(Emulator):
     """rt: a started RealtimeWorld of the "platform" setup (its rig has the F/T twin).
 
     http_port: None serves no calibration page; 0 picks a free port (see http_address).
     records_per_packet: records per datagram in buffered mode (0x0003).
     """
 
+    DEVICE = "netft"
+    TWINS = ("ft",)
+    CORRUPTIONS = ("truncated",)
+    USUAL_PORTS = USUAL_PORTS
+
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, http_port: int | None = None,
                  calibration: wire.Calibration = DEFAULT_CALIBRATION, ft_sample_rate_hz: float = 7000.0,
-                 records_per_packet: int = 10, drop_every: int = 0, stalled: bool = False, status: int = 0) -> None:
-        self.rt = rt
+                 records_per_packet: int = 10, drop_every: int = 0, status: int = 0,
+                 stall_after_s: float | None = None, disconnect_after_s: float | None = None) -> None:
+        super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
         self.host, self.port, self.http_port = host, port, http_port
         self.calibration = calibration
         self.ft_sample_rate_hz = float(ft_sample_rate_hz)
         self.records_per_packet = int(records_per_packet)
-        self.drop_every, self.stalled, self.status = int(drop_every), bool(stalled), int(status)
+        self.drop_every, self.status = int(drop_every), int(status)
         self.http_address: str | None = None
         self.requests: list[tuple[int, int]] = []  # (command, count) received, for tests
         self._sock: socket.socket | None = None
         self._http: http.server.HTTPServer | None = None
-        self._threads: list[threading.Thread] = []
-        self._stop = threading.Event()
         # Stream state (emulator thread only).
         self._client = None
         self._mode: int | None = None  # CMD_START_REALTIME / CMD_START_BUFFERED while streaming
@@ -65,42 +80,35 @@ class NetFTEmulator:
         self._recent_raw: deque[np.ndarray] = deque(maxlen=BIAS_SAMPLES)  # unbiased counts, newest last
 
     # ---- life cycle ------------------------------------------------------------------------
-    def start(self) -> str:
+    def _open(self) -> str:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock = sock
         sock.bind((self.host, self.port))
         sock.settimeout(POLL_S)
-        self._sock = sock
         self.port = sock.getsockname()[1]
-        self._stop.clear()
         if self.http_port is not None:
             self._http = http.server.ThreadingHTTPServer((self.host, self.http_port), self._handler())
             self.http_port = self._http.server_address[1]
             self.http_address = f"{self.host}:{self.http_port}"
-            self._threads.append(threading.Thread(target=self._http.serve_forever, kwargs={"poll_interval": 0.05},
-                                                  name="netft-emu-http", daemon=True))
-        self._threads.append(threading.Thread(target=self._run, name="netft-emu", daemon=True))
-        for t in self._threads:
-            t.start()
+            self._spawn(self._http.serve_forever, "http", 0.05)
+        self._spawn(self._run, "rdt")
         return f"{self.host}:{self.port}"
 
-    def stop(self) -> None:
-        self._stop.set()
+    def _wake(self) -> None:
+        self._close_http()
+
+    def _close_http(self) -> None:
         if self._http is not None:
-            self._http.shutdown()
-            self._http.server_close()
-        for t in self._threads:
-            t.join(timeout=2.0)
-        self._threads = []
+            http_server, self._http = self._http, None
+            if any(t.name.endswith("-http") and t.is_alive() for t in self._threads):
+                http_server.shutdown()
+            http_server.server_close()
+
+    def _close(self) -> None:
+        self._close_http()
         if self._sock is not None:
             self._sock.close()
             self._sock = None
-
-    def __enter__(self) -> NetFTEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
     def _handler(self):
         body = wire.calibration_xml(self.calibration, "Net F/T (emulated Mini40)").encode()
@@ -125,6 +133,10 @@ class NetFTEmulator:
     def _run(self) -> None:
         sock = self._sock
         while not self._stop.is_set():
+            if self.disconnected:  # off the network: no requests, no records, no page
+                self._close_http()
+                sock.close()
+                return
             try:
                 data, addr = sock.recvfrom(64)
                 self._request(data, addr)
@@ -172,7 +184,10 @@ class NetFTEmulator:
         counts = np.clip(raw - self._bias, -(1 << 31), (1 << 31) - 1).tolist()
         record = wire.encode_record(self._rdt, ft_seq, self.status, counts)
         dropped = self.drop_every > 0 and self._made % self.drop_every == 0
-        if not dropped and not self.stalled:
+        fault = None if dropped or self.stalled else self._next_fault()
+        if fault is not None and fault[0] == "corrupt":
+            record = record[:-3]  # a short datagram: the client cannot decode it
+        if not dropped and not self.stalled and (fault is None or fault[0] != "drop"):
             if self._mode == wire.CMD_START_BUFFERED:
                 self._pending.append(record)
                 self._flush(force=False)

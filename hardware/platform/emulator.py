@@ -2,10 +2,15 @@
 
 What it models (from gnea/grbl 1.1h's source and interface docs):
 - the welcome banner at start and after every soft reset;
-- a 128-byte serial receive buffer: line bytes beyond it are dropped (a host bug; counted in
-  `rx_overflow_bytes` and logged); real-time bytes `?` `!` `~` Ctrl-X are picked off before it;
+- a 128-byte serial receive buffer that the protocol loop empties into its line buffer while it is
+  not waiting on the planner or a dwell; bytes arriving when it is full (a host that does not count
+  characters) are dropped (counted in `rx_overflow_bytes` and logged); real-time bytes `?` `!` `~`
+  Ctrl-X are picked off before it;
+- an 80-character line buffer: a longer line answers `error:11` and the parser goes on with the next;
 - a line parser for G0/G1/G4/G20/G21/G90/G91 (+ G17/G54/G94 accepted), F/X/Y/Z/P/N words, and
-  `$$`, `$X`, `$H`, `$G`, `$I`, `$`, `$N=value`; each line answers `ok` or `error:N`;
+  `$$`, `$#` (coordinate offsets, all zero: no G10/G92 here), `$C` (check mode: lines are parsed,
+  nothing moves; leaving it resets), `$X`, `$H`, `$G`, `$I`, `$`, `$N=value`; each line answers
+  `ok` or `error:N`;
 - a planner queue (16 blocks): queued moves go to the twin one after the other; a line that finds
   the planner full waits (its `ok` with it) as in GRBL;
 - feeds above the axes' max rates ($110-112) are clamped as GRBL's planner does (the nominal rate is
@@ -24,27 +29,26 @@ Coordinates: MPos equals the twin's position (the skin frame). A real GRBL homed
 reports MPos in [-$13x, 0]; here that box is shifted to end at the stage's workspace_max, i.e.
 travel box = [workspace_max - $13x, workspace_max], so the default travel is the stage's workspace.
 
-Not modelled: `$J=` jogging and jog cancel, `$C` check mode, arcs, probing, real homing motion
+Not modelled: `$J=` jogging and jog cancel, G10/G28/G30/G92 offsets, arcs, probing, real homing motion
 (`$H` only clears the alarm: the simulated stage knows its position), overrides, EEPROM timing, the
 500 ms pause GRBL takes after printing an ALARM, baud-rate pacing.
 
-Fault injection: freeze() (stops reading and answering: a hung controller), hang_up() (closes the
-pty master: the host sees the port vanish), inject(raw) (bytes to the host, e.g. noise),
+Faults (hardware.emulation's vocabulary): stall() (stops reading and answering: a hung
+controller; resume() ends it), disconnect() (closes the pty master: the host sees the port vanish),
+drop(n) (the next n messages to the host are lost), corrupt(n, how) (the next n messages arrive as
+"noise": line noise before the message, or "garbled": a byte of the message changed);
 start_in_alarm=True (power-up alarm, as with homing enabled).
 """
 
 from __future__ import annotations
 
 import logging
-import os
-import select
-import threading
 import time
-import tty
 from collections import deque
 
 import numpy as np
 
+from hardware.emulation import Emulator, Pty
 from hardware.interfaces import DeviceError
 from hardware.platform import wire
 
@@ -57,16 +61,25 @@ _MODAL_GROUPS = {0.0: "motion", 1.0: "motion", 4.0: "nonmodal", 17.0: "plane", 2
                  54.0: "wcs", 90.0: "distance", 91.0: "distance", 94.0: "feedmode"}
 
 
-class GrblEmulator:
+_LINE_KEEP = 4 * wire.LINE_BUFFER_SIZE  # raw bytes of a line kept for parsing (beyond: error:11 anyway)
+_NOISE = b"\x00\xff\x13#~garbage\r\n"
+
+
+class GrblEmulator(Emulator):
     """GRBL 1.1h on a pty, backed by `rt.rig.platform`; `start()` returns the slave path to open.
 
     host/port: accepted for the common emulator signature; a serial device has neither.
     """
 
+    DEVICE = "platform"
+    TWINS = ()  # reads the stage's position directly, as GRBL counts its own steps
+    CORRUPTIONS = ("noise", "garbled")
+
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, start_in_alarm: bool = False,
                  planner_blocks: int = wire.PLANNER_BLOCKS, rx_buffer_bytes: int = wire.RX_BUFFER_BYTES,
-                 tick_s: float = 0.001) -> None:
-        self.rt = rt
+                 tick_s: float = 0.001, stall_after_s: float | None = None,
+                 disconnect_after_s: float | None = None) -> None:
+        super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
         self.start_in_alarm = start_in_alarm
         self.planner_blocks = int(planner_blocks)
         self.rx_buffer_bytes = int(rx_buffer_bytes)
@@ -89,68 +102,24 @@ class GrblEmulator:
         self.lines_received = 0
         self.status_reports = 0
         self.resets = 0
-        # pty and thread
-        self._master = self._slave = -1
         self.path: str | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-        self._frozen = threading.Event()
-        self._hangup = threading.Event()
-        self._inject: deque[bytes] = deque()
+        self.pty: Pty | None = None
         self._reset_state(power_up=True)
 
     # ---- life cycle ----------------------------------------------------------------------------
-    def start(self) -> str:
-        if self._thread is not None:
-            return self.path
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        tty.setraw(self._master)
-        os.set_blocking(self._master, False)
-        self.path = os.ttyname(self._slave)
-        self._stop.clear()
+    def _open(self) -> str:
+        # The slave stays open here: GRBL's replies wait in the port for the host to read them.
+        self.pty = Pty(hold_slave=True)
+        self.path = self.pty.path
         self._emit(wire.format_banner())
         if self._state == "Alarm":
             self._emit(wire.format_feedback("MSG", "'$H'|'$X' to unlock"))
-        self._thread = threading.Thread(target=self._run, name="grbl-emulator", daemon=True)
-        self._thread.start()
+        self._spawn(self._run, "serial")
         return self.path
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-            self._thread = None
-        for fd in (self._master, self._slave):
-            if fd >= 0:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self._master = self._slave = -1
-
-    def __enter__(self) -> GrblEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
-
-    # ---- fault injection -----------------------------------------------------------------------
-    def freeze(self) -> None:
-        """Stop reading and answering (a hung controller); the pty stays open."""
-        self._frozen.set()
-
-    def unfreeze(self) -> None:
-        self._frozen.clear()
-
-    def hang_up(self) -> None:
-        """Close the pty master: the host's port reports an I/O error or end of data."""
-        self._hangup.set()
-
-    def inject(self, raw: bytes) -> None:
-        """Send raw bytes to the host (noise, corrupt lines)."""
-        self._inject.append(bytes(raw))
+    def _close(self) -> None:
+        if self.pty is not None:
+            self.pty.close()
 
     @property
     def state(self) -> str:
@@ -162,7 +131,9 @@ class GrblEmulator:
             self._state = "Alarm" if self.start_in_alarm else "Idle"
         self._critical = False  # soft/hard limit alarm: only '?' and Ctrl-X until reset
         self._hold_complete = False
-        self._rx = bytearray()
+        self._rx = bytearray()  # the serial receive buffer
+        self._line = bytearray()  # the line being assembled from it
+        self._line_over = False  # that line ran past _LINE_KEEP bytes
         self._planner: deque[tuple[np.ndarray, float]] = deque()
         self._current: tuple[np.ndarray, float] | None = None
         self._pending_line: bytes | None = None  # a line waiting on the planner or a dwell
@@ -189,40 +160,34 @@ class GrblEmulator:
 
     # ---- main loop -----------------------------------------------------------------------------
     def _run(self) -> None:
+        pty = self.pty
         while not self._stop.is_set():
-            if self._hangup.is_set():
-                try:
-                    os.close(self._master)
-                except OSError:
-                    pass
-                self._master = -1
+            if self.disconnected:
+                pty.close()
                 return
-            if self._frozen.is_set():
+            if self.stalled:
                 time.sleep(self.tick_s)
                 continue
-            try:
-                r, _, _ = select.select([self._master], [], [], self.tick_s)
-                data = os.read(self._master, 4096) if r else b""
-            except (BlockingIOError, InterruptedError):
-                data = b""
-            except OSError:
-                time.sleep(self.tick_s)  # no slave open (EIO); keep serving
-                data = b""
-            while self._inject:
-                self._emit(self._inject.popleft())
-            for b in data:
+            for b in pty.read(self.tick_s):
                 self._receive_byte(b)
             self._step()
 
     def _emit(self, data: bytes) -> None:
+        fault = self._next_fault() if data else None
+        if fault is not None:
+            if fault[0] == "drop":
+                return
+            if fault[1] == "noise":
+                data = _NOISE + data
+            else:  # garbled: one byte of the message changed
+                data = bytearray(data)
+                data[len(data) // 2] ^= 0x5A
+                data = bytes(data)
         view = memoryview(data)
         while view:
-            try:
-                n = os.write(self._master, view)
-            except BlockingIOError:
+            n = self.pty.write(view)
+            if n == 0:
                 self.tx_dropped_bytes += len(view)
-                return
-            except OSError:
                 return
             view = view[n:]
 
@@ -244,6 +209,8 @@ class GrblEmulator:
                             "the host is not counting characters", self.rx_buffer_bytes, self.rx_overflow_bytes)
         else:
             self._rx.append(b)
+            if self._pending_line is None and not self._critical:
+                self._parse_lines()  # the protocol loop empties the buffer while it is free
 
     # ---- real-time commands ----------------------------------------------------------------------
     def _soft_reset(self) -> None:
@@ -334,18 +301,40 @@ class GrblEmulator:
                 self._state = "Idle"
         elif self._state == "Hold" and not self._hold_complete and not self._twin_moving():
             self._hold_complete = True
-        if self._critical:
-            return
+        if not self._critical:
+            self._parse_lines()
+
+    def _next_line(self) -> tuple[bytes | None, bool]:
+        """The next complete line from the receive buffer (None: no line end yet) and whether
+        it ran past what is kept of a line."""
+        rx, i = self._rx, 0
+        while i < len(rx):
+            c = rx[i]
+            i += 1
+            if c in (0x0A, 0x0D):
+                del rx[:i]
+                line, over = bytes(self._line), self._line_over
+                self._line, self._line_over = bytearray(), False
+                self.lines_received += 1
+                return line, over
+            if len(self._line) < _LINE_KEEP:
+                self._line.append(c)
+            else:
+                self._line_over = True
+        del rx[:i]
+        return None, False
+
+    def _parse_lines(self) -> None:
         while True:
             if self._pending_line is not None:
                 line = self._pending_line
             else:
-                i = next((k for k, c in enumerate(self._rx) if c in (0x0A, 0x0D)), -1)
-                if i < 0:
+                line, over = self._next_line()
+                if line is None:
                     return
-                line = bytes(self._rx[:i])
-                del self._rx[: i + 1]
-                self.lines_received += 1
+                if over:
+                    self._emit(wire.format_error(11))
+                    continue
             reply = self._execute(line)
             if reply is None:  # waiting on the planner or a dwell
                 self._pending_line = line
@@ -376,6 +365,22 @@ class GrblEmulator:
         ok = wire.format_ok()
         if block == "$":
             return wire.format_feedback("HLP", "$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x") + ok
+        if block == "$#":
+            if self._state not in ("Idle", "Alarm"):
+                return wire.format_error(8)
+            zero = "0.000,0.000,0.000"
+            out = b"".join(wire.format_feedback(f"G{n}", zero) for n in (54, 55, 56, 57, 58, 59, 28, 30, 92))
+            return out + wire.format_feedback("TLO", "0.000") + wire.format_feedback("PRB", zero + ":0") + ok
+        if block == "$C":
+            if self._state == "Check":  # leaving check mode resets GRBL's parser state
+                self.resets += 1
+                self._reset_state()
+                self._state = "Idle"
+                return wire.format_feedback("MSG", "Disabled") + ok + wire.format_banner()
+            if self._state != "Idle":
+                return wire.format_error(8)
+            self._state = "Check"
+            return wire.format_feedback("MSG", "Enabled") + ok
         if block == "$$":
             out = b""
             for n, v in sorted(self.settings.items()):
@@ -470,6 +475,8 @@ class GrblEmulator:
         # the block is valid: commit its modal state
         self._unit_mm, self._absolute, self._motion, self._feed_mm_min = unit, absolute, motion, feed
         if dwell:
+            if self._state == "Check":
+                return wire.format_ok()
             if self._state != "Idle" or self._planner:
                 return None  # G4 waits for the planner to empty
             now = time.monotonic()
@@ -483,7 +490,9 @@ class GrblEmulator:
             if self.settings[20] and np.any((target > self._ws_max + 1e-9) | (target < self._ws_max - self._travel() - 1e-9)):
                 self._critical_alarm(2)
                 return b""
-            if self._plan(target, motion):
+            if self._state == "Check":  # parsed, not moved
+                self._gc_pos = target
+            elif self._plan(target, motion):
                 self._gc_pos = target
         return wire.format_ok()
 

@@ -10,6 +10,10 @@ World host time and the host's monotonic clock share an origin here: world host 
 the offset taken at start), so records drained from a twin can be handed out when their
 receive time comes.
 
+Each emulator claims the twins whose streams it drains (`claim`); after every advance the pacer
+discards what the host has received from every other twin, so the streams of devices no
+emulator serves (a standalone emulator serves one) do not queue without bound.
+
     rt = RealtimeWorld.from_config(cfg.sim, cfg.skin, "platform")
     with rt:                                   # connects the twins, starts the pacer
         with rt.lock:
@@ -24,6 +28,7 @@ import time
 from hardware.rig import Rig
 
 WARM_UP_S = 0.01
+STREAM_TWINS = ("skin", "ft", "platform", "arm", "gripper", "camera")  # rig attributes with a stream
 
 
 class RealtimeWorld:
@@ -48,6 +53,8 @@ class RealtimeWorld:
         self._origin_ns = 0  # monotonic time at world time 0
         self.lag_s = 0.0  # worst lag of the world behind wall time seen by the pacer
         self.error: BaseException | None = None  # what ended the pacer, if it failed
+        self._claims: dict[int, tuple[str, ...]] = {}  # id(emulator) -> twins it drains
+        self._unclaimed: tuple = self._twins_without({})
 
     @classmethod
     def from_config(cls, sim_cfg, skin_cfg, setup: str, period_s: float = 0.002) -> RealtimeWorld:
@@ -93,6 +100,28 @@ class RealtimeWorld:
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
+    # ---- who drains which stream --------------------------------------------------------------
+    def _twins_without(self, claims: dict) -> tuple:
+        claimed = {name for names in claims.values() for name in names}
+        return tuple(getattr(self.rig, n) for n in STREAM_TWINS
+                     if n not in claimed and getattr(self.rig, n, None) is not None)
+
+    def claim(self, emulator, twins) -> None:
+        """`emulator` drains the streams of `twins` (rig attribute names) from now on."""
+        with self.lock:
+            self._claims[id(emulator)] = tuple(twins)
+            self._unclaimed = self._twins_without(self._claims)
+
+    def release(self, emulator) -> None:
+        with self.lock:
+            self._claims.pop(id(emulator), None)
+            self._unclaimed = self._twins_without(self._claims)
+
+    def _discard_unclaimed(self) -> None:
+        for twin in self._unclaimed:
+            if twin.is_connected:
+                twin.read_available()
+
     # ---- time --------------------------------------------------------------------------------
     def world_time_s(self) -> float:
         """Where the world should be now (wall time since start)."""
@@ -115,6 +144,7 @@ class RealtimeWorld:
                     dt = target_s - self.world.t_s
                     if dt > 0:
                         self.world.advance(dt)
+                        self._discard_unclaimed()
                 self.lag_s = max(self.lag_s, self.world_time_s() - target_s)
         except BaseException as exc:  # noqa: BLE001 - reported to the emulators through `error`
             self.error = exc

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hardware.emulation import Emulator
 from hardware.interfaces import DeviceError
 from hardware.ur5e import wire
 
@@ -38,28 +39,33 @@ START_TIMEOUT_S = 20.0
 _ROOT = Path(__file__).resolve().parents[2]
 
 
-class UR5eEmulator:
+class UR5eEmulator(Emulator):
     """A UR5e controller on `host`, backed by `rt` (a started "gripper" RealtimeWorld).
 
     port: 0 or 30004 (the client knows no other RTDE port). Keyword options go to the controller
     (controller_version, polyscope_version, serial_number, remote_control).
-    Fault injection: protective_stop(), emergency_stop(), unlock_protective_stop(),
-    drop_connections(), pause_output(True/False) (links stay open, no data flows).
+    Faults (hardware.emulation's vocabulary): stall() / resume() (links stay open, no data flows),
+    disconnect(refuse_s) (every client connection closes; see drop_connections); the arm's own:
+    protective_stop(), emergency_stop(), unlock_protective_stop().
     """
 
-    def __init__(self, rt, host: str = "127.0.0.2", port: int = 0, **controller_options) -> None:
+    DEVICE = "ur5e"
+    TWINS = ()  # the bridge reads the arm's pose directly
+    FAULTS = ("stall", "disconnect")
+
+    def __init__(self, rt, host: str = "127.0.0.2", port: int = 0, *, stall_after_s: float | None = None,
+                 disconnect_after_s: float | None = None, **controller_options) -> None:
         if port not in (0, wire.PORT_RTDE):
             raise ValueError(f"port={port}: the ur_rtde client only reaches RTDE on {wire.PORT_RTDE}; "
                              "give each emulator its own loopback host instead")
         if controller_options:
             raise ValueError(f"unknown options {sorted(controller_options)}")
-        self.rt, self.host = rt, host
+        super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
+        self.host = host
         self.info: dict = {}  # the controller's latest read-out (commands seen, runtime state, ...)
         self._proc: subprocess.Popen | None = None
         self._conn: Connection | None = None
         self._send_lock = threading.Lock()
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
         self._applied_id = 0
         self._error: str | None = None
         self._ready = threading.Event()
@@ -67,10 +73,8 @@ class UR5eEmulator:
         self._start_error: str | None = None
 
     # ---- life cycle ----------------------------------------------------------------------------
-    def start(self) -> str:
+    def _open(self) -> str:
         """Start the controller process and the bridge; returns "host:30004" once it listens."""
-        if self._proc is not None:
-            return self._where
         parent, child = socket.socketpair()
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(_ROOT), os.environ.get("PYTHONPATH", "")]))
         self._proc = subprocess.Popen(
@@ -78,20 +82,16 @@ class UR5eEmulator:
              repr(float(self.rt.world_time_s()))], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
         child.close()
         self._conn = Connection(parent.detach())
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._bridge, name="ur5e-emu-bridge", daemon=True)
-        self._thread.start()
+        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
         if not self._ready.wait(START_TIMEOUT_S) or self._start_error is not None:
             why = self._start_error or f"no answer within {START_TIMEOUT_S} s"
-            self.stop()
+            self._stop.set()
+            for t in self._threads:
+                t.join(timeout=2.0)
             raise DeviceError(f"ur5e emulator: the controller process did not start on {self.host} ({why})")
         return self._where
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+    def _close(self) -> None:
         if self._conn is not None:
             try:
                 self._send(("quit",))
@@ -108,13 +108,6 @@ class UR5eEmulator:
             self._conn.close()
             self._conn = None
 
-    def __enter__(self) -> UR5eEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
-
     # ---- fault injection -------------------------------------------------------------------------
     def protective_stop(self) -> None:
         """The arm stops, safety mode PROTECTIVE_STOP, the control program pauses."""
@@ -127,6 +120,15 @@ class UR5eEmulator:
         """Safety back to normal (what the pendant's unlock does); the program stays paused."""
         self._send(("fault", "unlock_protective_stop"))
 
+    def _on_stall(self, stalled: bool) -> None:
+        self._send(("set", "output_paused", bool(stalled)))
+
+    def disconnect(self, refuse_s: float = 0.0) -> None:
+        """Close every client connection (see drop_connections)."""
+        self._require("disconnect")
+        self.fault_counts["disconnect"] += 1
+        self.drop_connections(refuse_s)
+
     def drop_connections(self, refuse_s: float = 0.0) -> None:
         """Close every client connection (a cable pulled); for refuse_s the ports also refuse new
         connections. The program keeps running. With refuse_s = 0 the ur_rtde 1.6.5 control
@@ -134,8 +136,8 @@ class UR5eEmulator:
         self._send(("fault", "drop_connections", float(refuse_s)))
 
     def pause_output(self, paused: bool) -> None:
-        """Stop (or resume) sending RTDE data while the connections stay open."""
-        self._send(("set", "output_paused", bool(paused)))
+        """stall() / resume() under the name tests/hardware/ur5e uses."""
+        self.stall() if paused else self.resume()
 
     def wait_info(self, predicate, timeout_s: float = 5.0) -> dict:
         """Wait until predicate(info) holds (info: the controller's read-out); returns it."""

@@ -100,20 +100,23 @@ def test_kill_9_during_a_loopback_trial_keeps_all_but_the_last_100_ms(tmp_path, 
 
 
 def test_standalone_emulator_prints_where_it_listens_and_serves(tmp_path):
+    import socket
     import subprocess
     import sys
 
+    from hardware.emulation import free_loopback_host
     from hardware.netft import NetFTConfig, NetFTSensor
     from tests.protocols.conftest import REPO
 
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.Popen([sys.executable, "-m", "hardware.emulate", "netft", "--host", "127.0.0.1", "--port", "0"],
+    host = free_loopback_host({80: socket.SOCK_STREAM})  # the calibration page takes the box's port 80
+    proc = subprocess.Popen([sys.executable, "-m", "hardware.emulate", "netft", "--host", host, "--port", "0"],
                             cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
-        assert line.startswith("netft emulator listening on 127.0.0.1:"), line + proc.stderr.read()
+        assert line.startswith(f"netft emulator listening on {host}:"), line + proc.stderr.read()
         port = int(line.split()[4].rsplit(":", 1)[1])
-        sensor = NetFTSensor(NetFTConfig(host="127.0.0.1", port=port, fetch_calibration=False))
+        sensor = NetFTSensor(NetFTConfig(host=host, port=port, fetch_calibration=False))
         sensor.connect()
         try:
             deadline = time.monotonic() + 5

@@ -93,14 +93,14 @@ def test_without_backend_timestamps_capture_time_is_receive_time_minus_latency(e
 def test_a_capture_that_stops_is_a_fault(emu):
     with OpenCVMarkerCamera(CameraConfig(), emu.capture_factory) as cam:
         collect_frames(cam, 2)
-        emu.stalled = True
+        emu.stall()
         time.sleep(0.1)
         cam.read_available()
         last = cam._last_rx_ns
         # At the rig clock's times: fine within the stall timeout (0.2 s at 30 fps), faulted after.
         assert cam.fault(last + 150_000_000) is None
         assert cam.fault(last + 250_000_000) == "camera stalled: no frame for 250 ms"
-        emu.end_capture()
+        emu.disconnect()
         wait_for(lambda: cam.fault(time.monotonic_ns()) is not None and "capture ended" in cam.fault(0))
 
 
@@ -111,7 +111,7 @@ def test_a_source_that_does_not_open_or_never_delivers_fails_connect(emu):
 
     with pytest.raises(DeviceError, match="camera: cannot open v4l2 source '0'"):
         OpenCVMarkerCamera(CameraConfig(), lambda: Closed(emu)).connect()
-    emu.stalled = True
+    emu.stall()
     cam = OpenCVMarkerCamera(CameraConfig(connect_timeout_s=0.3), emu.capture_factory)
     with pytest.raises(DeviceError, match="no frame from v4l2 source '0' within 0.3 s"):
         cam.connect()

@@ -120,21 +120,47 @@ def test_bad_moves_are_refused_before_anything_is_sent(bench):
 
 def test_device_fault_stall_and_link_loss(bench):
     drv, emu, rt = bench()
-    emu.inject_fault(0x0E)
+    emu.set_fault(0x0E)
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is not None, 1.0)
     assert "0x0E" in drv.fault(time.monotonic_ns()) and "overcurrent" in drv.fault(time.monotonic_ns())
     with pytest.raises(DeviceError, match="0x0E"):
         drv.move(30.0, 100.0, 0.0)
     emu.regs["FLT"] = 0
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 1.0)
-    emu.freeze()
+    emu.stall()
     assert wait_for(lambda: "stalled" in (drv.fault(time.monotonic_ns()) or ""), 1.0)
-    emu.unfreeze()
+    emu.resume()
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 1.0)
-    emu.drop_connection()
+    emu.disconnect()
     assert wait_for(lambda: "link lost" in (drv.fault(time.monotonic_ns()) or ""), 2.0)
     with pytest.raises(DeviceError, match="link lost"):
         drv.move(30.0, 100.0, 0.0)
+
+
+def test_several_clients_at_once_and_an_idle_one_blocks_nobody(realtime_world):
+    """The URCap serves a UR program's rq_* socket and a remote client together, on one gripper."""
+    rt = realtime_world("gripper")
+    with HandEEmulator(rt, start_active=True) as emu:
+        idle = [socket.create_connection(("127.0.0.1", emu.port), timeout=2.0) for _ in range(3)]  # connected, silent
+        try:
+            a = socket.create_connection(("127.0.0.1", emu.port), timeout=2.0)
+            b = socket.create_connection(("127.0.0.1", emu.port), timeout=2.0)
+            with a, b:
+                assert exchange(a, b"SET POS 100\n") == wire.ACK
+                assert exchange(b, b"GET POS\n").startswith(b"POS ")  # answered while a stays open
+                assert exchange(b, b"SET SPE 200\n") == wire.ACK
+                assert exchange(a, b"GET SPE\n") == b"SPE 200\n"  # one gripper: b's write seen by a
+                drv = HandEGripper(HandEConfig(host="127.0.0.1", port=emu.port, connect_timeout_s=2.0))
+                drv.connect()  # a driver alongside them
+                try:
+                    assert healthy(drv)
+                    assert exchange(a, b"GET STA\n") == b"STA 3\n"
+                finally:
+                    drv.disconnect()
+            assert emu.connections == 6
+        finally:
+            for s in idle:
+                s.close()
 
 
 def test_connect_and_activation_errors(bench):

@@ -112,6 +112,31 @@ def test_dropped_records_are_counted_as_lost(emulator):
     assert ft.health.lost == seq[-1] - seq[0] + 1 - len(w)  # every gap between the first and last sample
 
 
+def test_scheduled_drops_and_corrupt_datagrams_are_counted(emulator):
+    emu = emulator()
+    with sensor_for(emu) as ft:
+        collect(ft, 20)
+        emu.drop(5)
+        wait_for(lambda: emu.scheduled == 0)
+        collect(ft, 20)
+        assert ft.health.lost == 5 and ft.health.corrupt == 0
+        emu.corrupt(3)
+        wait_for(lambda: emu.scheduled == 0)
+        collect(ft, 20)
+        assert ft.health.corrupt == 3 and ft.health.lost == 5 + 3  # a short datagram's record never arrives
+    assert emu.fault_counts == {"drop": 5, "corrupt": 3}
+
+
+def test_a_disconnected_box_answers_nothing(emulator):
+    emu = emulator()
+    with sensor_for(emu) as ft:
+        collect(ft, 20)
+        emu.disconnect()
+        wait_for(lambda: "ft stalled" in (ft.fault(time.monotonic_ns()) or ""), 2.0)
+    with pytest.raises(DeviceError):
+        sensor_for(emu, connect_timeout_s=0.3).connect()  # neither RDT nor the calibration page answers
+
+
 def test_a_status_word_from_the_box_is_a_fault(emulator):
     emu = emulator(status=0x80020000)
     with sensor_for(emu) as ft:
@@ -126,7 +151,7 @@ def test_a_box_that_stops_sending_faults_after_the_stall_timeout(emulator):
     with sensor_for(emu) as ft:
         collect(ft, 20)
         assert ft.fault(time.monotonic_ns()) is None
-        emu.stalled = True
+        emu.stall()
         time.sleep(0.01)
         ft.read_available()
         last = ft._last_rx_ns

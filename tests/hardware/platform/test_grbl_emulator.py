@@ -4,6 +4,7 @@ import os
 import select
 import time
 
+import numpy as np
 import pytest
 
 from hardware.platform.emulator import GrblEmulator
@@ -79,13 +80,78 @@ def test_status_report_and_realtime_bytes_bypass_the_buffer(grbl):
     assert port.read_until(b"\r\n") == b"ok\r\n"
 
 
-def test_receive_buffer_overflow_is_counted(grbl):
+def test_a_line_longer_than_the_buffers_answers_error_11_and_the_parser_goes_on(grbl):
     emu, port = grbl
-    port.send(b"(" + b"x" * 199)  # 200 bytes without a line end: 72 beyond the 128-byte buffer
+    port.send(b"G1X1F600" + b"0" * 200 + b"\n")  # 209 bytes: past the 128-byte receive and 80-char line buffers
+    assert port.read_until(b"\r\n") == b"error:11\r\n"
+    port.send(b"G21\n")
+    assert port.read_until(b"\r\n") == b"ok\r\n"
+    assert emu.rx_overflow_bytes == 0  # GRBL was free: it emptied its receive buffer as the bytes came
+
+
+def test_coordinate_offsets_report(grbl):
+    emu, port = grbl
+    port.send(b"$#\n")
+    z = b"0.000,0.000,0.000"
+    expected = b"".join(b"[G%d:%s]\r\n" % (n, z) for n in (54, 55, 56, 57, 58, 59, 28, 30, 92))
+    assert port.read_until(b"ok\r\n") == expected + b"[TLO:0.000]\r\n[PRB:" + z + b":0]\r\nok\r\n"
+
+
+def test_check_mode_parses_without_moving_and_leaving_it_resets(grbl):
+    emu, port = grbl
+    port.send(b"$C\n")
+    assert port.read_until(b"ok\r\n") == b"[MSG:Enabled]\r\nok\r\n"
+    port.send(b"G21G90G1X1Y1Z6F600\n")
+    assert port.read_until(b"\r\n") == b"ok\r\n"
+    port.send(b"G1X1\n")  # parse errors still answer
+    port.send(b"G5\n")
+    assert port.read_until(b"error:20\r\n") == b"ok\r\nerror:20\r\n"
+    port.send(b"?")
+    assert port.read_until(b">\r\n").startswith(b"<Check|MPos:0.000,0.000,5.000|")  # nothing moved
+    port.send(b"$C\n")
+    assert port.read_until(b"help]\r\n") == b"[MSG:Disabled]\r\nok\r\n\r\nGrbl 1.1h ['$' for help]\r\n"
+    port.send(b"?")
+    assert port.read_until(b">\r\n").startswith(b"<Idle|MPos:0.000,0.000,5.000|")
+
+
+def test_a_third_party_streaming_library_connects_and_streams(grbl):
+    """grbl-streamer (PyPI) reads `$#` at boot and halts on any error; it streams with
+    character counting against GRBL's 128-byte buffer."""
+    grbl_streamer = pytest.importorskip("grbl_streamer")
+    emu, port = grbl
+    port.close()  # the library is the only reader of the port
+    port.close = lambda: None
+    events = []
+    g = grbl_streamer.GrblStreamer(lambda event, *data: events.append((event, data)))
+    g.cnect(emu.path, 115200)
+    try:
+        assert _wait(lambda: any(e == "on_boot" for e, _ in events))
+        g.get_hash_state()
+        assert _wait(lambda: ("[PRB:0.000,0.000,0.000:0]",) in [d for e, d in events if e == "on_read"]), \
+            (emu.error, emu.lines_received, events)  # the last line of the `$#` answer
+        assert g.settings_hash["G54"] == g.settings_hash["G92"] == g.settings_hash["PRB"] == (0.0, 0.0, 0.0)
+        g.write("G21 G90\nG1 X0.5 Y0 Z5 F1200\nG1 X0.5 Y0.5 Z5.5\n")
+        n = len(events)
+        g.job_run()
+        assert _wait(lambda: any(e == "on_job_completed" for e, _ in events[n:]), 10.0)  # every line ok'd
+
+        def at_target():
+            with emu.rt.lock:
+                return np.allclose(emu.rt.rig.platform.position_mm(), [0.5, 0.5, 5.5], atol=0.002)
+
+        assert _wait(at_target, 10.0)
+        assert not [e for e in events if e[0] in ("on_error", "on_alarm")], events
+    finally:
+        g.disconnect()
+
+
+def _wait(pred, timeout_s: float = 3.0) -> bool:
     t0 = time.monotonic()
-    while emu.rx_overflow_bytes < 72 and time.monotonic() - t0 < 2:
+    while not pred():
+        if time.monotonic() - t0 > timeout_s:
+            return False
         time.sleep(0.005)
-    assert emu.rx_overflow_bytes == 72
+    return True
 
 
 def test_feed_hold_then_reset_keeps_position_and_reset_in_motion_alarms(grbl):

@@ -151,24 +151,24 @@ def test_character_counting_never_overflows_the_receive_buffer(bench):
     assert emu.rx_overflow_bytes == 0
     assert np.allclose(drv.read_available()[-1].position_mm, targets[-1], atol=0.002)
     # the same lines written without counting overflow GRBL's buffer
-    emu.freeze()
+    emu.stall()
     raw = b"".join(wire.encode_move(t, 1200.0) for t in targets)
     fd = os.open(emu.path, os.O_WRONLY | os.O_NOCTTY)
     os.write(fd, raw)
     os.close(fd)
-    emu.unfreeze()
+    emu.resume()
     assert wait_for(lambda: emu.rx_overflow_bytes > 0)
 
 
 def test_stall_and_link_loss_become_faults(bench):
     drv, emu, rt = bench()
     assert healthy(drv)
-    emu.freeze()
+    emu.stall()
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is not None, 1.0)
     assert "stalled" in drv.fault(time.monotonic_ns())
-    emu.unfreeze()
+    emu.resume()
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 1.0)
-    emu.hang_up()
+    emu.disconnect()
     assert wait_for(lambda: "link lost" in (drv.fault(time.monotonic_ns()) or ""), 1.0)
     with pytest.raises(DeviceError, match="link lost"):
         drv.move_to(HOME, 10.0)
@@ -176,7 +176,8 @@ def test_stall_and_link_loss_become_faults(bench):
 
 def test_noise_is_counted_and_the_stream_goes_on(bench):
     drv, emu, rt = bench()
-    emu.inject(b"\x00\xffgarbage\r\n<Idle|MPos:1.0,bad,2.0|FS:0,0>\r\n")
+    emu.corrupt(1, "noise")  # line noise before the next message
+    emu.corrupt(1, "garbled")  # a byte of the one after changed
     assert wait_for(lambda: drv.health.corrupt >= 2)
     drv.read_available()
     assert wait_for(lambda: len(drv.read_available()) > 0)

@@ -10,8 +10,9 @@ import pytest
 
 from hardware.interfaces import DeviceError
 from hardware.skin_board import SkinBoardConfig, SkinBoardEmulator, SkinBoardReader
-from hardware.skin_board.wire import SEQ_MOD, encode_frame
+from hardware.skin_board.wire import FRAME_LEN, SEQ_MOD, encode_frame
 from layerskin_exp.config import ConfigError
+from tests.hardware.waiting import wait_for
 
 
 class Collector:
@@ -98,9 +99,9 @@ def test_sequence_wrap_end_to_end(board):
 def test_injected_faults_are_counted(board):
     emu, drv, c = board()
     assert c.until(lambda: len(c.frames) >= 20)
-    schedule = ["bit_flip", None] * 4 + ["drop_byte", None] * 3 + ["insert_garbage", None] * 2 + \
-        ["drop_frame", None, "drop_frame", "drop_frame", None]
-    emu.inject(*schedule)
+    schedule = [("corrupt", "bit_flip"), None] * 4 + [("corrupt", "drop_byte"), None] * 3 + \
+        [("corrupt", "insert_garbage"), None] * 2 + ["drop", None, "drop", "drop", None]
+    emu.schedule(*schedule)
     assert c.until(lambda: emu.scheduled == 0)
     last = emu.sent[-1].seq
     assert c.until(lambda: c.frames and c.frames[-1].seq >= last + 5)
@@ -123,7 +124,7 @@ def test_random_faults_never_deliver_a_wrong_frame(board):
 def test_stall_is_reported_then_clears(board):
     emu, drv, c = board()
     assert c.until(lambda: len(c.frames) >= 20)
-    emu.stall(300)
+    emu.stall(0.3)
     assert c.until(lambda: (drv.fault(time.monotonic_ns()) or "").startswith("skin stalled: no frame for"))
     assert c.until(lambda: drv.fault(time.monotonic_ns()) is None and emu.counts["stalled_frames"] > 0)
     n = len(c.frames)
@@ -131,10 +132,10 @@ def test_stall_is_reported_then_clears(board):
     assert drv.health.lost >= emu.counts["stalled_frames"] > 0  # frames of the stall never came
 
 
-def test_unplug_is_reported_as_link_lost(board):
+def test_disconnect_is_reported_as_link_lost(board):
     emu, drv, c = board()
     assert c.until(lambda: len(c.frames) >= 20)
-    emu.unplug()
+    emu.disconnect()
     assert c.until(lambda: "link lost" in (drv.fault(time.monotonic_ns()) or ""))
     assert drv.fault(time.monotonic_ns()).startswith("skin: link lost (")
     t0 = time.monotonic()
@@ -149,9 +150,9 @@ def test_reconnect_continues_the_sequence(board):
     assert c.until(lambda: len(c.frames) >= 20)
     drv.disconnect()
     last = c.frames[-1].seq
-    n_sent = len(emu.sent)
+    n_made = emu.counts["no_host_frames"]
     deadline = time.monotonic() + 5.0
-    while len(emu.sent) < n_sent + 20 and time.monotonic() < deadline:  # the board streams on meanwhile
+    while emu.counts["no_host_frames"] < n_made + 20 and time.monotonic() < deadline:  # the board scans on meanwhile
         time.sleep(0.01)
     drv.connect()
     n = len(c.frames)
@@ -161,6 +162,55 @@ def test_reconnect_continues_the_sequence(board):
     assert after[0] > last + 10 and after == list(range(after[0], after[0] + len(after)))
     assert drv.health.lost == after[0] - last - 1  # missed while disconnected
     assert_matches_twin(c.frames, emu)
+
+
+def _read_for(fd, seconds):
+    """Everything the port delivers within `seconds` (a non-blocking fd)."""
+    out = bytearray()
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            out += os.read(fd, 1 << 16)
+        except BlockingIOError:
+            time.sleep(0.002)
+    return bytes(out)
+
+
+def test_opening_the_port_delivers_what_the_board_sends_now(realtime_world):
+    """A CDC device streams to a host that has the port open; nothing made while the port was
+    closed, and nothing a host left unread, comes out at the next open."""
+    rt = realtime_world("platform")
+    made_per_s = 424 * FRAME_LEN  # the board's byte rate
+    with SkinBoardEmulator(rt) as emu:
+        for attempt in range(2):  # first open; then reopen after leaving bytes unread
+            time.sleep(1.0)  # nobody reads the port meanwhile
+            fd = os.open(emu.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+            try:
+                got = _read_for(fd, 0.1)
+                time.sleep(0.3 if attempt == 0 else 0.0)  # frames pile up unread before the close
+            finally:
+                os.close(fd)
+            assert 0 < len(got) <= made_per_s * 0.3, (attempt, len(got))  # 0.1 s read + slack, not seconds of backlog
+        assert emu.counts["no_host_frames"] > 424  # the frames of the closed seconds were never sent
+
+
+def test_host_writes_are_read_not_blocked(realtime_world):
+    rt = realtime_world("platform")
+    payload = b"\x55" * (1 << 20)  # far more than a pty buffers
+    with SkinBoardEmulator(rt) as emu:
+        fd = os.open(emu.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            view, deadline = memoryview(payload), time.monotonic() + 20.0
+            while view and time.monotonic() < deadline:
+                try:
+                    view = view[os.write(fd, view[:4096]):]
+                except BlockingIOError:
+                    time.sleep(0.001)
+                _read_for(fd, 0)  # the host keeps reading the stream too
+            assert not view, f"{len(view)} bytes could not be written: the board does not read the port"
+            assert wait_for(lambda: emu.counts["host_bytes"] == len(payload))
+        finally:
+            os.close(fd)
 
 
 def test_ring_keeps_the_newest_frames(board):

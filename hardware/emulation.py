@@ -1,0 +1,349 @@
+"""What the six device emulators share: life cycle, serving, and one fault vocabulary.
+
+Life cycle: `start()` opens what the emulator serves (`_open`, returning where a driver reaches
+it: a pty path, host:port, a capture name), then starts the threads `_open` registered with
+`_spawn`; `stop()` stops them, joins them and closes everything (`_close`); both are idempotent
+and the emulator is a context manager. A thread that fails leaves its exception in `error`.
+
+Each emulator names the simulated twins whose streams it drains (`TWINS`); the RealtimeWorld
+discards the received records of every other twin, so an emulator run on its own does not
+queue the streams of the devices it does not serve.
+
+Faults, the same four words for every device (a device names the ones it can show in `FAULTS`):
+  stall(duration_s=None)  stop delivering while the link stays up (None: until resume())
+  drop(n=1)               the next n outgoing messages (frames, records, replies, images) are lost
+  corrupt(n=1, how=None)  the next n outgoing messages arrive damaged (`how`: the device's ways,
+                          CORRUPTIONS; None: its first)
+  disconnect()            the link goes: a pty closes (the port vanishes), TCP connections close,
+                          a UDP box stops answering, a camera's capture ends
+`schedule(*entries)` is the general form of drop/corrupt: one entry per outgoing message, "drop",
+"corrupt", ("corrupt", how) or None (intact). Two keyword arguments every emulator takes put a
+fault on a timer from start(): `stall_after_s`, `disconnect_after_s`.
+
+Serving helpers: `Pty` (a raw pseudo-terminal that knows whether a host has it open), and
+`free_loopback_host` (an address 127.0.0.N on which a device's usual ports are free).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import socket
+import termios
+import threading
+import time
+import tty
+from collections import Counter, deque
+
+FAULTS = ("stall", "drop", "corrupt", "disconnect")
+
+
+def _check_delay(name: str, value) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    if not (math.isfinite(value) and value >= 0):
+        raise ValueError(f"{name}={value!r}: must be a finite number of seconds >= 0")
+    return value
+
+
+class Emulator:
+    """Base of the device emulators. rt: the started RealtimeWorld the emulator is backed by."""
+
+    DEVICE = "device"  # name in messages
+    TWINS: tuple[str, ...] = ()  # twins (rig attributes) whose streams this emulator drains
+    FAULTS: tuple[str, ...] = FAULTS  # the faults this device can show
+    CORRUPTIONS: tuple[str, ...] = ("garbled",)  # ways a message is corrupted, the default first
+
+    def __init__(self, rt, *, stall_after_s: float | None = None, disconnect_after_s: float | None = None) -> None:
+        self.rt = rt
+        self.stall_after_s = _check_delay("stall_after_s", stall_after_s)
+        self.disconnect_after_s = _check_delay("disconnect_after_s", disconnect_after_s)
+        self.where: str | None = None
+        self.error: BaseException | None = None
+        self.fault_counts: Counter = Counter()  # faults applied, by kind
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._timers: list[threading.Timer] = []
+        self._started = False
+        self._fault_lock = threading.Lock()
+        self._planned: deque = deque()  # (kind, how) or None, one per outgoing message
+        self._stall_until = 0.0  # monotonic s; inf: until resume()
+        self._disconnected = threading.Event()
+
+    # ---- life cycle ------------------------------------------------------------------------
+    def start(self) -> str:
+        """Open and start serving; returns where a driver reaches the device."""
+        if self._started:
+            return self.where
+        self._stop.clear()
+        self._disconnected.clear()
+        try:
+            self.where = self._open()
+        except BaseException:
+            self._threads = []
+            self._close()
+            raise
+        self._started = True
+        claim = getattr(self.rt, "claim", None)
+        if claim is not None:
+            claim(self, self.TWINS)
+        for t in self._threads:
+            if t.ident is None:  # (_open may have needed one running already)
+                t.start()
+        for delay, fault in ((self.stall_after_s, self.stall), (self.disconnect_after_s, self.disconnect)):
+            if delay is not None:
+                timer = threading.Timer(delay, fault)
+                timer.daemon = True
+                timer.start()
+                self._timers.append(timer)
+        return self.where
+
+    def stop(self) -> None:
+        if not self._started:
+            return
+        self._stop.set()
+        for timer in self._timers:
+            timer.cancel()
+        self._timers = []
+        self._wake()
+        for t in self._threads:
+            t.join(timeout=5.0)
+        self._threads = []
+        self._close()
+        release = getattr(self.rt, "release", None)
+        if release is not None:
+            release(self)
+        self._started = False
+
+    @property
+    def running(self) -> bool:
+        return self._started and not self._stop.is_set()
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def _spawn(self, target, name: str, *args) -> threading.Thread:
+        """A daemon thread started with the emulator (or at once when it is already running);
+        an exception it raises is kept in `error`."""
+
+        def body() -> None:
+            try:
+                target(*args)
+            except BaseException as exc:  # noqa: BLE001 - reported to the test or the CLI through `error`
+                if not self._stop.is_set():
+                    self.error = exc
+
+        t = threading.Thread(target=body, name=f"{self.DEVICE}-emu-{name}", daemon=True)
+        self._threads.append(t)
+        if self._started:
+            t.start()
+        return t
+
+    # What a subclass provides.
+    def _open(self) -> str:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        """Release what _open took (called once the threads have stopped, or after _open failed)."""
+
+    def _wake(self) -> None:
+        """Unblock the threads so they see the stop (optional)."""
+
+    # ---- faults ------------------------------------------------------------------------------
+    def _require(self, kind: str) -> None:
+        if kind not in self.FAULTS:
+            raise ValueError(f"{self.DEVICE} emulator: fault {kind!r} is not modelled; "
+                             f"this device shows {self.FAULTS}")
+
+    def stall(self, duration_s: float | None = None) -> None:
+        """Deliver nothing for duration_s from now (None: until resume()); the link stays up."""
+        self._require("stall")
+        until = math.inf if duration_s is None else time.monotonic() + float(duration_s)
+        self._stall_until = max(self._stall_until, until)
+        self.fault_counts["stall"] += 1
+        self._on_stall(True)
+
+    def resume(self) -> None:
+        """End a stall."""
+        self._stall_until = 0.0
+        self._on_stall(False)
+
+    @property
+    def stalled(self) -> bool:
+        return time.monotonic() < self._stall_until
+
+    def drop(self, n: int = 1) -> None:
+        """The next n outgoing messages are lost."""
+        self.schedule(*["drop"] * int(n))
+
+    def corrupt(self, n: int = 1, how: str | None = None) -> None:
+        """The next n outgoing messages arrive damaged (how: one of CORRUPTIONS)."""
+        self.schedule(*[("corrupt", how)] * int(n))
+
+    def schedule(self, *entries) -> None:
+        """One entry per next outgoing message: "drop", "corrupt", ("corrupt", how) or None."""
+        plan = []
+        for e in entries:
+            if e is None:
+                plan.append(None)
+                continue
+            kind, how = (e, None) if isinstance(e, str) else e
+            if kind not in ("drop", "corrupt"):
+                raise ValueError(f"{self.DEVICE} emulator: schedule entry {e!r}: use 'drop', 'corrupt', "
+                                 "('corrupt', how) or None")
+            self._require(kind)
+            if kind == "corrupt":
+                how = how or self.CORRUPTIONS[0]
+                if how not in self.CORRUPTIONS:
+                    raise ValueError(f"{self.DEVICE} emulator: corruption {how!r}: choose one of {self.CORRUPTIONS}")
+            plan.append((kind, how))
+        with self._fault_lock:
+            self._planned.extend(plan)
+
+    @property
+    def scheduled(self) -> int:
+        """Entries of the drop/corrupt schedule not yet applied."""
+        with self._fault_lock:
+            return len(self._planned)
+
+    def _next_fault(self) -> tuple[str, str | None] | None:
+        """What happens to the next outgoing message: None (intact), ("drop", None) or
+        ("corrupt", how); the schedule first, then the emulator's own random draw."""
+        with self._fault_lock:
+            if self._planned:
+                fault = self._planned.popleft()
+                if fault is not None:
+                    self.fault_counts[fault[0]] += 1
+                return fault
+        fault = self._draw_fault()
+        if fault is not None:
+            self.fault_counts[fault[0]] += 1
+        return fault
+
+    def _draw_fault(self) -> tuple[str, str | None] | None:
+        """A random fault for the next message (emulators with fault probabilities override)."""
+        return None
+
+    def disconnect(self) -> None:
+        """The link goes (see the module docstring for what that is on each kind of link)."""
+        self._require("disconnect")
+        self.fault_counts["disconnect"] += 1
+        self._disconnected.set()
+        self._on_disconnect()
+
+    @property
+    def disconnected(self) -> bool:
+        return self._disconnected.is_set()
+
+    def _on_stall(self, stalled: bool) -> None:
+        """Hook for emulators whose stall is carried out elsewhere (another process)."""
+
+    def _on_disconnect(self) -> None:
+        """Hook: carry out the disconnect (or leave it to the serving thread, which polls
+        `disconnected`)."""
+
+
+class Pty:
+    """A raw pseudo-terminal: the emulator holds the master, a driver opens `path`.
+
+    hold_slave: keep a slave descriptor open (the master then never sees a hang-up, and bytes
+    written while no host has the port open wait in the pty for the next one). Without it,
+    `host_attached()` says whether a host has the port open, and `forget_unread()` discards what
+    a host left unread, as a USB CDC device's host side does when the port closes.
+    """
+
+    def __init__(self, hold_slave: bool = False) -> None:
+        self.master, slave = os.openpty()
+        tty.setraw(slave)  # no echo, no line discipline: bytes pass unchanged
+        tty.setraw(self.master)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(slave)
+        self.slave: int | None = slave
+        if not hold_slave:
+            os.close(slave)
+            self.slave = None
+        self._poll = select.poll()
+        self._poll.register(self.master, select.POLLIN | select.POLLHUP)
+
+    @property
+    def closed(self) -> bool:
+        return self.master < 0
+
+    def host_attached(self) -> bool:
+        if self.master < 0:
+            return False
+        return not any(ev & select.POLLHUP for _, ev in self._poll.poll(0))
+
+    def forget_unread(self) -> None:
+        """Discard bytes written to the host that no host read (the port is closed now)."""
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError:
+            return
+        try:
+            termios.tcflush(fd, termios.TCIFLUSH)
+        finally:
+            os.close(fd)
+
+    def read(self, timeout_s: float = 0.0) -> bytes:
+        """What the host wrote (b"" when nothing came within timeout_s or no host is attached)."""
+        if self.master < 0:
+            return b""
+        if timeout_s > 0:
+            r, _, _ = select.select([self.master], [], [], timeout_s)
+            if not r:
+                return b""
+        try:
+            return os.read(self.master, 4096)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        except OSError:  # EIO: no host has the port open
+            if timeout_s > 0:
+                time.sleep(timeout_s)
+            return b""
+
+    def write(self, data) -> int:
+        """Write what the pty takes now; returns the bytes written (the rest did not fit)."""
+        if self.master < 0:
+            return 0
+        try:
+            return os.write(self.master, data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError:
+            return 0
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            if fd is not None and fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self.master, self.slave = -1, None
+
+
+def free_loopback_host(ports: dict[int, int], first: int = 2, last: int = 254) -> str:
+    """A loopback address 127.0.0.N on which every (port, socket type) of `ports` can be bound,
+    so that emulators on a device's usual ports do not collide with each other."""
+    for n in range(first, last + 1):
+        host = f"127.0.0.{n}"
+        socks = []
+        try:
+            for port, kind in ports.items():
+                s = socket.socket(socket.AF_INET, kind)
+                socks.append(s)
+                s.bind((host, port))
+            return host
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise OSError(f"no loopback address 127.0.0.N ({first}..{last}) with the ports {sorted(ports)} free")
