@@ -46,15 +46,17 @@ from scipy.spatial.transform import Rotation
 
 from hardware.interfaces import Arm, DeviceError
 from hardware.ur5e.config import UR5eConfig
+from hardware.ur5e.wire import (
+    RUNTIME_NAMES,
+    RUNTIME_PLAYING,
+    SAFETY_BIT_PROTECTIVE_STOPPED,
+    SAFETY_EMERGENCY_STOPPED,
+)
 from layerskin_exp.types import Pose
 
 log = logging.getLogger(__name__)
 
 CONTROLLER_PERIOD_S = 0.002
-RUNTIME_PLAYING = 2
-RUNTIME_NAMES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
-SAFETY_PROTECTIVE_STOPPED = 1 << 2
-SAFETY_EMERGENCY_STOPPED = (1 << 5) | (1 << 6) | (1 << 7)
 ASYNC_RUNNING_BIT = 1 << 15
 
 
@@ -287,7 +289,7 @@ class UR5eArm(Arm):
             return f"arm: link lost ({self._link_error}); reconnecting to {self.cfg.host}"
         if self._safety_bits & SAFETY_EMERGENCY_STOPPED:
             return "arm: emergency stop (release the e-stop, then restart the program)"
-        if self._safety_bits & SAFETY_PROTECTIVE_STOPPED:
+        if self._safety_bits & SAFETY_BIT_PROTECTIVE_STOPPED:
             return "arm: protective stop; inspect the cause, unlock it on the pendant, then restart_program()"
         if self._runtime_state != RUNTIME_PLAYING:
             name = RUNTIME_NAMES.get(self._runtime_state, str(self._runtime_state))
@@ -302,7 +304,7 @@ class UR5eArm(Arm):
         kind = self._move_kind
         if kind is None:
             return False
-        if self._safety_bits & (SAFETY_PROTECTIVE_STOPPED | SAFETY_EMERGENCY_STOPPED) \
+        if self._safety_bits & (SAFETY_BIT_PROTECTIVE_STOPPED | SAFETY_EMERGENCY_STOPPED) \
                 or self._runtime_state != RUNTIME_PLAYING:
             self._move_kind = None  # the safety system stopped the arm; the script's registers froze
             return False
