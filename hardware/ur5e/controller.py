@@ -377,7 +377,8 @@ class URController:
                 try:
                     packages = reader.feed(data)
                 except ValueError as exc:  # a size below the header: the stream cannot be framed any more
-                    log.warning("ur5e emulator: RTDE connection closed: %s", exc)
+                    bad += 1
+                    (log.warning if bad == 1 else log.info)("ur5e emulator: RTDE connection closed: %s", exc)
                     session.send(wire.encode_text_message(f"malformed package: {exc}", level=0))
                     return
                 for kind, payload in packages:
@@ -393,7 +394,7 @@ class URController:
                         session.send(reply)
         finally:
             if bad > 1:
-                log.warning("ur5e emulator: %d malformed RTDE packages on one connection", bad)
+                log.info("ur5e emulator: %d malformed RTDE packages on one connection", bad)
 
     def _rtde_request(self, session: _RtdeSession, kind: int, payload: bytes) -> bytes | None:
         if kind == wire.RTDE_REQUEST_PROTOCOL_VERSION:
