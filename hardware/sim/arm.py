@@ -79,5 +79,20 @@ class SimArm(SimStreamMixin, Arm):
         rv = Rotation.from_matrix(self.scene.tcp_rotation()).as_rotvec()
         return np.concatenate((np.asarray(self.scene.pos.position, float), rv))
 
+    def tcp_speed6(self) -> np.ndarray:
+        """TCP twist [vx, vy, vz, wx, wy, wz] (m/s, rad/s, base frame), as RTDE's actual_TCP_speed.
+        The turn is a rotation vector r relative to the reference orientation R_ref; its angular
+        velocity in base is R_ref J(r) dr/dt with J the rotation vector's (left) Jacobian."""
+        self._require_connected()
+        r, r_dot = np.asarray(self.scene.rot.position, float), np.asarray(self.scene.rot.velocity, float)
+        th = float(np.linalg.norm(r))
+        k = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        if th < 1e-8:
+            jac = np.eye(3) + 0.5 * k
+        else:
+            jac = np.eye(3) + (1.0 - np.cos(th)) / th**2 * k + (th - np.sin(th)) / th**3 * (k @ k)
+        w = self.scene.R_ref @ (jac @ r_dot)
+        return np.concatenate((np.asarray(self.scene.pos.velocity, float), w))
+
     def read_available(self) -> list[Pose]:
         return self._drain()

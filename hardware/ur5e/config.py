@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from layerskin_exp.config import require
@@ -27,6 +28,14 @@ class UR5eConfig:
     max_accel_m_s2: float = 1.5
     max_angular_speed_rad_s: float = 0.5
     start_timeout_s: float = 0.5  # an asynchronous move must show up in the status register within this
+    # The Robotiq Hand-E on its I/O coupling, set by the driver on every control-script start
+    # (set_tcp / set_payload) so poses, moves and the payload compensation refer to the gripper.
+    # Source: robotiq_hande_description (URDF after Robotiq's drawings): coupling 11.0 mm,
+    # gripper body 99.0 mm, fingertips 46.5 mm beyond the body; masses 0.119 kg (coupling with
+    # bolts), 0.86387 kg (body, centred at half its height), 2 x 0.03804 kg (fingers at the body's top).
+    tcp_offset_m_rad: tuple[float, float, float, float, float, float] = (0.0, 0.0, 0.1565, 0.0, 0.0, 0.0)
+    payload_kg: float = 1.059
+    payload_cog_m: tuple[float, float, float] = (0.0, 0.0, 0.058)
 
     def __post_init__(self) -> None:
         k = "hardware.ur5e"
@@ -45,3 +54,12 @@ class UR5eConfig:
         require(0 < self.max_angular_speed_rad_s <= 3.14, f"{k}.max_angular_speed_rad_s",
                 self.max_angular_speed_rad_s, "must be in (0, 3.14] rad/s")
         require(self.start_timeout_s > 0, f"{k}.start_timeout_s", self.start_timeout_s, "must be > 0 s")
+        t = tuple(self.tcp_offset_m_rad)
+        require(len(t) == 6 and all(math.isfinite(x) for x in t) and math.hypot(*t[:3]) <= 0.5
+                and math.hypot(*t[3:]) <= math.pi, f"{k}.tcp_offset_m_rad", self.tcp_offset_m_rad,
+                "six finite values [x, y, z (m), rx, ry, rz (rad)], within 0.5 m of the flange, turn <= pi")
+        require(math.isfinite(self.payload_kg) and 0 <= self.payload_kg <= 5.0, f"{k}.payload_kg", self.payload_kg,
+                "must be in [0, 5] kg (the UR5e's rated payload)")
+        c = tuple(self.payload_cog_m)
+        require(len(c) == 3 and all(math.isfinite(x) and abs(x) <= 0.5 for x in c), f"{k}.payload_cog_m",
+                self.payload_cog_m, "three finite values, each within 0.5 m of the flange")

@@ -15,10 +15,12 @@ client sends (captured in the tests):
                         and signal_done_with_cmd() unless cmd == 255 (stop script)
 
 Commands acted on: moveL (3, synchronous or asynchronous), stopL (33) / stopJ (34), speedL (10),
-speedStop (15), servoStop (16), isSteady (47), stop script (255). Commands that only set state
-the emulator does not model (setPayload 17, setTcp 29, setWatchdog 35, ...) are acknowledged
-like the script would without effect; any other command is acknowledged and recorded in
-`unsupported` so a test can see the driver asked for something not emulated.
+speedStop (15), servoStop (16), isSteady (47), setPayload (17), setTcp (29), getTCPOffset (40),
+stop script (255). The TCP offset and payload belong to the running program (a new upload starts
+from the installation's, here none); the controller reports the payload on RTDE. Commands that
+only set state the emulator does not model (setWatchdog 35, force-mode damping 20 / gain 21) are
+acknowledged like the script would without effect; any other command is acknowledged and
+recorded in `unsupported` so a test can see the driver asked for something not emulated.
 """
 
 from __future__ import annotations
@@ -43,25 +45,30 @@ CMD_SET_TCP = 29
 CMD_STOPL = 33
 CMD_STOPJ = 34
 CMD_SET_WATCHDOG = 35
+CMD_GET_TCP_OFFSET = 40
 CMD_IS_STEADY = 47
 CMD_STOP_SCRIPT = 255
 # Processed every cycle and answered with "ready", never "done" (the script's list).
 REALTIME_CMDS = frozenset({24, 11, 9, 10, 6, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71})
-ACKNOWLEDGED_ONLY = frozenset({CMD_SET_PAYLOAD, CMD_SET_TCP, CMD_SET_WATCHDOG, 20, 21})
+ACKNOWLEDGED_ONLY = frozenset({CMD_SET_WATCHDOG, 20, 21})
 
 SIGNAL_READY = 1
 SIGNAL_DONE = 2
 
-# How far ahead a speedl twist is turned into a move of the twin (the twin only takes targets).
-SPEED_HORIZON_S = 30.0
+# speedl runs until told otherwise, but the twin only takes targets: a twist becomes a move toward
+# where it leads SPEED_HORIZON_S ahead (at most MAX_HORIZON_ANGLE_RAD of turn), renewed every
+# quarter of that, so the arm never reaches it. Where the move would leave the workspace, the
+# emulator's bridge ends it on the boundary (the controller's safety planes).
+SPEED_HORIZON_S = 2.0
 MAX_HORIZON_ANGLE_RAD = 1.0
+CYCLE_S = 0.002
 
 
 class ArmAccess(Protocol):
     """The simulated arm as the script reaches it (the emulator takes the world lock)."""
 
     def move_linear(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
-                    angular_speed_rad_s: float | None) -> None: ...
+                    angular_speed_rad_s: float | None, stop_at_workspace: bool = False) -> None: ...
     def stop(self) -> None: ...
     def is_moving(self) -> bool: ...
     def tcp_pose6(self) -> np.ndarray: ...
@@ -75,6 +82,16 @@ class Registers:
         self.input_double = [0.0] * 48
         self.output_int = [0] * 48
         self.output_double = [0.0] * 48
+
+
+class ToolSettings:
+    """What set_tcp / set_payload set: TCP offset from the flange [x, y, z, rx, ry, rz] (m, rad),
+    payload mass (kg) and centre of gravity from the flange (m)."""
+
+    def __init__(self) -> None:
+        self.tcp_offset = [0.0] * 6
+        self.payload_kg = 0.0
+        self.payload_cog_m = [0.0, 0.0, 0.0]
 
 
 class ControlScript:
@@ -97,6 +114,10 @@ class ControlScript:
         self._speed_twist = np.zeros(6)
         self._speed_accel = 0.5
         self._pending: Callable[[], bool] | None = None  # blocking command: done when it returns True
+        self._speed_renew_in = 0  # cycles until a running speedl's target is renewed
+        self._last_twist: np.ndarray | None = None
+        self.tool = ToolSettings()
+        self.speed_fraction = 1.0  # the speed slider, set by the controller (applies to moves commanded after)
         self._reset_async_progress()
         self._signal(SIGNAL_READY)
 
@@ -136,6 +157,10 @@ class ControlScript:
         if self._move_active and not self.arm.is_moving():
             self._move_active = False  # move_thread / stop_thread finished
             self._write_async_progress(-1)
+        if self._speeding and self._last_twist is not None:
+            self._speed_renew_in -= 1
+            if self._speed_renew_in <= 0:
+                self._command_twist(self._speed_twist, self._speed_accel)
         if self._pending is not None:
             if not self._pending():
                 return  # a blocking command is still executing: no signal this cycle
@@ -162,6 +187,7 @@ class ControlScript:
         """The program was stopped or paused from outside (protective stop, dashboard stop)."""
         self._move_active = False
         self._speeding = False
+        self._last_twist = None
         self._pending = None
 
     # ---- commands -----------------------------------------------------------------------------
@@ -173,7 +199,8 @@ class ControlScript:
         if cmd == CMD_MOVEL:
             pose, v, a, is_async = self._pose_in(0), r.input_double[6], r.input_double[7], r.input_int[1]
             self._stop_async_move()
-            self.arm.move_linear(pose, v, a, None)
+            f = self._slider()
+            self.arm.move_linear(pose, v * f, a * f * f, None)
             if is_async == 1:
                 self._move_active = True
                 self._write_async_progress(0)
@@ -202,6 +229,15 @@ class ControlScript:
             self._pending = lambda: not self.arm.is_moving()
         elif cmd == CMD_IS_STEADY:
             r.output_int[1] = 0 if self.arm.is_moving() else 1
+        elif cmd == CMD_SET_TCP:
+            self.tool.tcp_offset = [float(x) for x in r.input_double[0:6]]
+        elif cmd == CMD_SET_PAYLOAD:
+            self.tool.payload_kg = float(r.input_double[0])
+            cog = [float(x) for x in r.input_double[1:4]]
+            if any(cog):  # all zero: the script keeps the current centre of gravity
+                self.tool.payload_cog_m = cog
+        elif cmd == CMD_GET_TCP_OFFSET:
+            r.output_double[0:6] = list(self.tool.tcp_offset)
         elif cmd == CMD_STOP_SCRIPT:
             log.info("ur5e emulator: Received stop script!")
             return False
@@ -212,26 +248,37 @@ class ControlScript:
             log.warning("ur5e emulator: control script command %d is not emulated (acknowledged only)", cmd)
         return True
 
+    def _slider(self) -> float:
+        # Time scaling by the speed slider: speeds scale by f, accelerations by f^2; kept above
+        # what the twin accepts (a slider at 0 holds the arm on the real controller).
+        return min(max(float(self.speed_fraction), 1e-3), 1.0)
+
     def _command_twist(self, twist: np.ndarray, accel: float) -> None:
         """speedl(twist, a): TCP velocity [vx, vy, vz, wx, wy, wz] (m/s, rad/s, base frame).
 
         The twin takes targets, so a twist becomes a linear move toward where the twist leads
-        (far ahead, at the twist's speeds); a zero twist decelerates at `accel` to rest, i.e. a move
-        to the point where that deceleration stops the current motion.
+        SPEED_HORIZON_S ahead, renewed before it gets there (see SPEED_HORIZON_S); a zero twist
+        decelerates at `accel` to rest, i.e. a move to the point where that deceleration stops the
+        current motion.
         """
         here = np.asarray(self.arm.tcp_pose6(), float)
-        v, w = twist[:3], twist[3:]
+        f = self._slider()
+        v, w = twist[:3] * f, twist[3:] * f
+        accel = accel * f * f
         speed, ang = float(np.linalg.norm(v)), float(np.linalg.norm(w))
         if speed == 0.0 and ang == 0.0:
             self._decelerate(here, accel)
             return
         horizon_s = SPEED_HORIZON_S if ang == 0.0 else min(SPEED_HORIZON_S, MAX_HORIZON_ANGLE_RAD / ang)
-        self._last_twist = twist.copy()
+        self._speed_renew_in = max(1, int(horizon_s / 4.0 / CYCLE_S))
+        self._last_twist = np.concatenate((v, w))
         target = _advance(here, v, w, horizon_s)
-        self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None)
+        self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None,
+                             stop_at_workspace=True)
 
     def _decelerate(self, here: np.ndarray, accel: float) -> None:
-        last = getattr(self, "_last_twist", None)
+        last = self._last_twist
+        self._last_twist = None
         if last is None or accel <= 0:
             self.arm.stop()
             return
@@ -240,8 +287,8 @@ class ControlScript:
         # Time to stop at `accel` from the larger of the two (speedl's aRot defaults to a).
         t_stop = max(speed, ang) / accel
         target = _advance(here, v, w, t_stop / 2.0)  # distance of a linear ramp to zero
-        self._last_twist = None
-        self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None)
+        self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None,
+                             stop_at_workspace=True)
 
 
 def _advance(pose6: np.ndarray, v: np.ndarray, w: np.ndarray, dt_s: float) -> np.ndarray:

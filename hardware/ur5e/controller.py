@@ -17,14 +17,33 @@ the world's time when the emulator started). Socket readers run one thread per c
 from __future__ import annotations
 
 import logging
+import math
 import socket
+import struct
 import threading
 import time
+from collections import deque
 
 import numpy as np
 
 from hardware.ur5e import wire
-from hardware.ur5e.control_script import ControlScript, Registers
+from hardware.ur5e.control_script import ControlScript, Registers, ToolSettings
+from hardware.ur5e.wire import (
+    ROBOT_MODE_IDLE,
+    ROBOT_MODE_NAMES,
+    ROBOT_MODE_POWER_OFF,
+    ROBOT_MODE_RUNNING,
+    ROBOT_STATUS_POWER_ON,
+    ROBOT_STATUS_PROGRAM_RUNNING,
+    RUNTIME_NAMES,
+    RUNTIME_PAUSED,
+    RUNTIME_PLAYING,
+    RUNTIME_STOPPED,
+    SAFETY_MODE_NAMES,
+    SAFETY_MODE_NORMAL,
+    SAFETY_MODE_PROTECTIVE_STOP,
+    SAFETY_MODE_ROBOT_EMERGENCY_STOP,
+)
 
 log = logging.getLogger(__name__)
 
@@ -32,25 +51,11 @@ EMULATOR_SETUP = "gripper"
 
 PERIOD_S = 0.002  # the controller cycle (500 Hz)
 
-# Robot / safety / runtime constants (RTDE guide, ur_rtde's enums).
-ROBOT_MODE_RUNNING = 7
-SAFETY_MODE_NORMAL = 1
-SAFETY_MODE_PROTECTIVE_STOP = 3
-SAFETY_MODE_ROBOT_EMERGENCY_STOP = 7
-SAFETY_BIT_NORMAL = 1 << 0
-SAFETY_BIT_PROTECTIVE_STOPPED = 1 << 2
-SAFETY_BIT_ROBOT_EMERGENCY_STOPPED = 1 << 6
-SAFETY_BIT_EMERGENCY_STOPPED = 1 << 7
-SAFETY_BIT_STOPPED_DUE_TO_SAFETY = 1 << 10
-ROBOT_STATUS_POWER_ON = 1 << 0
-ROBOT_STATUS_PROGRAM_RUNNING = 1 << 1
-RUNTIME_STOPPED = 1
-RUNTIME_PLAYING = 2
-RUNTIME_PAUSED = 4
-
-SAFETY_MODE_NAMES = {1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP",
-                     6: "SYSTEM_EMERGENCY_STOP", 7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT"}
-RUNTIME_NAMES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
+# One program upload at most this long (ur_rtde's control script is 42 kB); longer text, or a
+# line this long outside a program, is dropped so a stray upload cannot fill the memory.
+MAX_PROGRAM_BYTES = 1 << 20
+ROBOT_MODEL = "UR5"  # what the dashboard's "get robot model" answers for a UR5e
+PROGRAMS_DIR = "/programs"  # where PolyScope keeps .urp programs ("load" paths are relative to it)
 
 
 class BridgedArm:
@@ -62,6 +67,7 @@ class BridgedArm:
         self.conn = conn
         self._send_lock = threading.Lock()
         self.pose = np.zeros(6)
+        self.speed = np.zeros(6)  # TCP twist [v (m/s), w (rad/s)], base frame
         self.t_s = 0.0
         self.moving = False
         self.sent_id = 0
@@ -73,9 +79,11 @@ class BridgedArm:
             self.sent_id += 1
             self.conn.send((msg[0], self.sent_id, *msg[1:]))
 
-    def move_linear(self, pose6, speed_m_s, accel_m_s2, angular_speed_rad_s):
+    def move_linear(self, pose6, speed_m_s, accel_m_s2, angular_speed_rad_s, stop_at_workspace=False):
+        """stop_at_workspace: end the move where it would leave the twin's workspace (speedl)
+        instead of refusing it (movel to a target outside)."""
         self._send(("move", np.asarray(pose6, float).tolist(), float(speed_m_s), float(accel_m_s2),
-                    None if angular_speed_rad_s is None else float(angular_speed_rad_s)))
+                    None if angular_speed_rad_s is None else float(angular_speed_rad_s), bool(stop_at_workspace)))
 
     def stop(self):
         self._send(("stop",))
@@ -86,8 +94,11 @@ class BridgedArm:
     def tcp_pose6(self):
         return self.pose.copy()
 
-    def on_state(self, t_s: float, pose6, moving: bool, applied_id: int, error: str | None) -> None:
+    def on_state(self, t_s: float, pose6, moving: bool, applied_id: int, error: str | None, speed6) -> None:
+        """speed6: the twin's TCP twist (its motion state, not a difference of sampled poses: the
+        bridge and the world advance on clocks of their own)."""
         self.t_s, self.pose, self.moving, self.applied_id = t_s, np.asarray(pose6, float), moving, applied_id
+        self.speed = np.asarray(speed6, float)
         if error is not None:
             self.error = error
 
@@ -128,10 +139,18 @@ class URController:
         self.arm = arm
         self.script: ControlScript | None = None
         self.scripts_received: list[str] = []  # programs uploaded, in order
-        self.dashboard_requests: list[str] = []
+        self.dashboard_requests: deque[str] = deque(maxlen=200)  # the latest, for tests
         self.runtime_state = RUNTIME_STOPPED
         self.safety_mode = SAFETY_MODE_NORMAL
-        self.robot_mode = ROBOT_MODE_RUNNING
+        self.robot_mode = ROBOT_MODE_RUNNING  # powered on, brakes released
+        self.loaded_program: str | None = None  # dashboard "load" (a .urp path)
+        self.tool = ToolSettings()  # the installation's TCP and payload (a program may set its own)
+        # Standard I/O set over RTDE (RTDEIOInterface): digital outputs (bits 0-7 standard, 8-15
+        # configurable, 16-17 tool, as actual_digital_output_bits), analog outputs, speed slider.
+        self.digital_outputs = 0
+        self.analog_outputs = [0.0, 0.0]
+        self.analog_output_types = 0  # analog_io_types bits 2, 3: output 0, 1 (0 current, 1 voltage)
+        self.speed_fraction = 1.0
         self.output_paused = False  # fault injection: connections stay open, no data flows
         self._lock = threading.RLock()  # controller state (script, registers, sessions)
         self._sessions: list[_RtdeSession] = []
@@ -140,8 +159,6 @@ class URController:
         self._threads: list[threading.Thread] = []
         self._stop = threading.Event()
         self._cycle = 0
-        self._last_pose = np.zeros(6)
-        self._last_t_s = 0.0
 
     # ---- life cycle ----------------------------------------------------------------------------
     def start(self) -> str:
@@ -215,6 +232,9 @@ class URController:
             handler(conn)
         except OSError:
             pass  # the client went away or the emulator dropped the link
+        except Exception as exc:  # noqa: BLE001 - one client's bad input must not end the emulator
+            log.warning("ur5e emulator: connection to port %s closed after an error: %r",
+                        conn.getsockname()[1] if conn.fileno() >= 0 else "?", exc)
         finally:
             with self._lock:
                 if conn in self._conns:
@@ -302,10 +322,9 @@ class URController:
                     self.script.running = False
                 if not self.script.running:
                     self.runtime_state = RUNTIME_STOPPED
-            dt = t_s - self._last_t_s
-            speed = (pose - self._last_pose) / dt if dt > 0 else np.zeros(6)
-            self._last_pose, self._last_t_s = pose, t_s
-            values = self._output_values(t_s, pose, speed)
+            if self.script is not None:
+                self.script.speed_fraction = self.speed_fraction
+            values = self._output_values(t_s, pose, self.arm.speed.copy())
             self._cycle += 1
             if self.output_paused:
                 return
@@ -319,19 +338,22 @@ class URController:
 
     def _output_values(self, t_s: float, pose: np.ndarray, speed: np.ndarray) -> dict:
         playing = self.runtime_state == RUNTIME_PLAYING
-        bits = SAFETY_BIT_NORMAL
-        if self.safety_mode == SAFETY_MODE_PROTECTIVE_STOP:
-            bits = SAFETY_BIT_PROTECTIVE_STOPPED | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
-        elif self.safety_mode == SAFETY_MODE_ROBOT_EMERGENCY_STOP:
-            bits = SAFETY_BIT_ROBOT_EMERGENCY_STOPPED | SAFETY_BIT_EMERGENCY_STOPPED | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
+        tool = self.script.tool if self.script is not None and self.script.running else self.tool
+        powered = self.robot_mode > ROBOT_MODE_POWER_OFF
         values = {
             "timestamp": t_s,
             "actual_TCP_pose": tuple(pose), "target_TCP_pose": tuple(pose),
             "actual_TCP_speed": tuple(speed), "target_TCP_speed": tuple(speed),
             "robot_mode": self.robot_mode, "safety_mode": self.safety_mode,
-            "safety_status_bits": bits, "runtime_state": self.runtime_state,
-            "robot_status_bits": ROBOT_STATUS_POWER_ON | (ROBOT_STATUS_PROGRAM_RUNNING if playing else 0),
-            "speed_scaling": 1.0, "target_speed_fraction": 1.0, "joint_mode": (255,) * 6,
+            "safety_status_bits": wire.safety_status_bits(self.safety_mode), "runtime_state": self.runtime_state,
+            "robot_status_bits": (ROBOT_STATUS_POWER_ON if powered else 0)
+            | (ROBOT_STATUS_PROGRAM_RUNNING if playing else 0),
+            "speed_scaling": self.speed_fraction, "target_speed_fraction": self.speed_fraction,
+            "joint_mode": (255,) * 6,
+            "payload": tool.payload_kg, "payload_cog": tuple(tool.payload_cog_m),
+            "actual_digital_output_bits": self.digital_outputs,
+            "standard_analog_output0": self.analog_outputs[0], "standard_analog_output1": self.analog_outputs[1],
+            "analog_io_types": self.analog_output_types << 2,
         }
         for i in range(48):
             values[f"output_int_register_{i}"] = self.regs.output_int[i]
@@ -346,14 +368,33 @@ class URController:
         with self._lock:
             self._sessions.append(session)
         reader = wire.PacketReader()
-        while not self._stop.is_set():
-            data = conn.recv(65536)
-            if not data:
-                return
-            for kind, payload in reader.feed(data):
-                reply = self._rtde_request(session, kind, payload)
-                if reply:
-                    session.send(reply)
+        bad = 0  # malformed packages on this connection: the first is logged, the rest counted
+        try:
+            while not self._stop.is_set():
+                data = conn.recv(65536)
+                if not data:
+                    return
+                try:
+                    packages = reader.feed(data)
+                except ValueError as exc:  # a size below the header: the stream cannot be framed any more
+                    bad += 1
+                    (log.warning if bad == 1 else log.info)("ur5e emulator: RTDE connection closed: %s", exc)
+                    session.send(wire.encode_text_message(f"malformed package: {exc}", level=0))
+                    return
+                for kind, payload in packages:
+                    try:
+                        reply = self._rtde_request(session, kind, payload)
+                    except (ValueError, IndexError, struct.error, UnicodeError) as exc:
+                        bad += 1
+                        if bad == 1:
+                            log.warning("ur5e emulator: malformed RTDE package %r (%d bytes) refused: %s",
+                                        chr(kind), len(payload), exc)
+                        reply = _refusal(kind, str(exc))
+                    if reply:
+                        session.send(reply)
+        finally:
+            if bad > 1:
+                log.info("ur5e emulator: %d malformed RTDE packages on one connection", bad)
 
     def _rtde_request(self, session: _RtdeSession, kind: int, payload: bytes) -> bytes | None:
         if kind == wire.RTDE_REQUEST_PROTOCOL_VERSION:
@@ -373,7 +414,7 @@ class URController:
         if kind == wire.RTDE_CONTROL_PACKAGE_SETUP_INPUTS:
             names = wire.decode_setup_inputs_request(payload)
             types = [wire.variable_type(n, "input") for n in names]
-            if "NOT_FOUND" in types:
+            if "NOT_FOUND" in types or not names:
                 return wire.encode_setup_reply(kind, 0, types)
             recipe = wire.Recipe(len(session.inputs) + 1, tuple(names), tuple(types))
             session.inputs[recipe.recipe_id] = recipe
@@ -388,39 +429,63 @@ class URController:
             recipe = session.inputs.get(payload[0]) if payload else None
             if recipe is None:
                 return wire.encode_text_message(f"unknown input recipe {payload[:1].hex()}", level=0)
+            values = recipe.decode(payload)
             with self._lock:
-                for name, value in recipe.decode(payload).items():
-                    self._write_input(name, value)
+                self._apply_inputs(values)
             return None
-        log.warning("ur5e emulator: RTDE package type %r not handled", chr(kind))
-        return None
+        raise ValueError(f"unknown package type {kind}")
 
-    def _write_input(self, name: str, value) -> None:
-        if name.startswith("input_int_register_"):
-            self.regs.input_int[int(name.rsplit("_", 1)[1])] = int(value)
-        elif name.startswith("input_double_register_"):
-            self.regs.input_double[int(name.rsplit("_", 1)[1])] = float(value)
+    def _apply_inputs(self, values: dict) -> None:
+        """One input package: registers, and the standard I/O and speed slider under their masks."""
+        for name, value in values.items():
+            if name.startswith("input_int_register_"):
+                self.regs.input_int[int(name.rsplit("_", 1)[1])] = int(value)
+            elif name.startswith("input_double_register_"):
+                self.regs.input_double[int(name.rsplit("_", 1)[1])] = float(value)
+        for group, shift in (("standard", 0), ("configurable", 8), ("tool", 16)):
+            mask = int(values.get(f"{group}_digital_output_mask", 0))
+            if mask:
+                level = int(values.get(f"{group}_digital_output", 0))
+                if group == "tool":
+                    mask &= 0b11  # two tool outputs
+                self.digital_outputs = (self.digital_outputs & ~(mask << shift)) | ((level & mask) << shift)
+        mask = int(values.get("standard_analog_output_mask", 0))
+        kinds = int(values.get("standard_analog_output_type", 0))
+        for i in (0, 1):
+            if mask & (1 << i):
+                self.analog_outputs[i] = min(max(float(values.get(f"standard_analog_output_{i}", 0.0)), 0.0), 1.0)
+                self.analog_output_types = (self.analog_output_types & ~(1 << i)) | (kinds & (1 << i))
+        if int(values.get("speed_slider_mask", 0)) & 1:
+            fraction = float(values.get("speed_slider_fraction", 1.0))
+            if math.isfinite(fraction):
+                self.speed_fraction = min(max(fraction, 0.0), 1.0)
 
     # ---- script upload (30003 / 30002) ----------------------------------------------------------
     def _serve_script(self, conn: socket.socket) -> None:
-        buf = b""
-        while not self._stop.is_set():
-            data = conn.recv(65536)
-            if not data:
-                return
-            buf += data
-            while True:
-                program, buf = _take_program(buf)
-                if program is None:
-                    break
-                self._run_program(program)
+        reader = ScriptReader(MAX_PROGRAM_BYTES)
+        try:
+            while not self._stop.is_set():
+                data = conn.recv(65536)
+                if not data:
+                    return
+                for program in reader.feed(data):
+                    self._run_program(program)
+        finally:
+            if reader.ignored_lines or reader.dropped_bytes:
+                log.warning("ur5e emulator: script connection closed; %d script lines outside a program ignored, "
+                            "%d bytes over the %d-byte program limit dropped", reader.ignored_lines,
+                            reader.dropped_bytes, MAX_PROGRAM_BYTES)
 
     def _run_program(self, program: str) -> None:
-        self.scripts_received.append(program)
-        name = program.split("(", 1)[0].removeprefix("def ").strip()
+        name = program.split("(", 1)[0].split(None, 1)[-1].strip()
+        self.scripts_received.append(name)
         with self._lock:
             if name != "rtde_control":
                 log.warning("ur5e emulator: program %r received and ignored (only rtde_control is emulated)", name)
+                return
+            if self.robot_mode != ROBOT_MODE_RUNNING:
+                log.warning("ur5e emulator: program not started: robot mode %s",
+                            ROBOT_MODE_NAMES.get(self.robot_mode, self.robot_mode))
                 return
             if self.safety_mode != SAFETY_MODE_NORMAL:
                 log.warning("ur5e emulator: program not started: robot is in %s",
@@ -444,18 +509,37 @@ class URController:
             for line in wire.dashboard_lines(buf):
                 self.dashboard_requests.append(line)
                 conn.sendall(wire.encode_dashboard_line(self._dashboard_answer(line)))
+                if line == "quit":
+                    return  # the server closes the connection after "Disconnected"
+            if len(buf) > wire.DASHBOARD_MAX_LINE_BYTES:  # no newline in sight: not a command
+                log.warning("ur5e emulator: dashboard line over %d bytes dropped", wire.DASHBOARD_MAX_LINE_BYTES)
+                buf.clear()
+
+    def _stop_program(self) -> None:
+        if self.script is not None:
+            self.script.halt()
+            self.script.running = False
+        self.runtime_state = RUNTIME_STOPPED
+        self.arm.stop()
 
     def _dashboard_answer(self, line: str) -> str:
+        """The Dashboard server's answer (Universal Robots, "Dashboard server e-Series", PolyScope 5)."""
+        command, _, argument = line.partition(" ")
         with self._lock:
-            program = "rtde_control" if self.script is not None else "<unnamed>"
+            if self.script is not None and self.script.running:
+                program = "rtde_control"
+            else:
+                program = self.loaded_program.rsplit("/", 1)[-1] if self.loaded_program else "<unnamed>"
             if line == "PolyscopeVersion":
                 return self.polyscope_version
             if line == "get serial number":
                 return self.serial_number
+            if line == "get robot model":
+                return ROBOT_MODEL
             if line == "is in remote control":
                 return "true" if self.remote_control else "false"
             if line == "robotmode":
-                return "Robotmode: RUNNING"
+                return "Robotmode: " + ROBOT_MODE_NAMES.get(self.robot_mode, "UNDEFINED")
             if line == "safetystatus":
                 return "Safetystatus: " + SAFETY_MODE_NAMES.get(self.safety_mode, "UNDEFINED")
             if line == "safetymode":
@@ -464,12 +548,28 @@ class URController:
                 return f"{RUNTIME_NAMES[self.runtime_state]} {program}"
             if line == "running":
                 return "Program running: " + ("true" if self.runtime_state == RUNTIME_PLAYING else "false")
+            if line == "get loaded program":
+                return f"Loaded program: {self.loaded_program}" if self.loaded_program else "No program loaded"
+            if command == "load" and argument and not argument.startswith("installation"):
+                # There is no program store: any .urp name counts as present.
+                if not argument.endswith(".urp"):
+                    return f"File not found: {argument}"
+                self.loaded_program = argument if argument.startswith("/") else f"{PROGRAMS_DIR}/{argument}"
+                return f"Loading program: {argument}"
+            if line == "power on":
+                if self.robot_mode <= ROBOT_MODE_POWER_OFF:
+                    self.robot_mode = ROBOT_MODE_IDLE
+                return "Powering on"
+            if line == "brake release":
+                if self.robot_mode <= ROBOT_MODE_IDLE:  # powers the arm on first where it is off
+                    self.robot_mode = ROBOT_MODE_RUNNING
+                return "Brake releasing"
+            if line == "power off":
+                self._stop_program()
+                self.robot_mode = ROBOT_MODE_POWER_OFF
+                return "Powering off"
             if line == "stop":
-                if self.script is not None:
-                    self.script.halt()
-                    self.script.running = False
-                self.runtime_state = RUNTIME_STOPPED
-                self.arm.stop()
+                self._stop_program()
                 return "Stopped"
             if line == "pause":
                 if self.runtime_state == RUNTIME_PLAYING:
@@ -479,7 +579,7 @@ class URController:
                 return "Failed to execute: Pause"
             if line == "play":
                 if self.runtime_state == RUNTIME_PAUSED and self.safety_mode == SAFETY_MODE_NORMAL \
-                        and self.script is not None and self.script.running:
+                        and self.robot_mode == ROBOT_MODE_RUNNING and self.script is not None and self.script.running:
                     self.runtime_state = RUNTIME_PLAYING
                     return "Starting program"
                 return "Failed to execute: Play"
@@ -491,26 +591,85 @@ class URController:
                        "protective stop before unlocking"
             if line in ("close safety popup", "close popup"):
                 return "closing safety popup" if line == "close safety popup" else "closing popup"
-            if line in ("quit",):
+            if line == "quit":
                 return "Disconnected"
             return f"could not understand: '{line}'"
 
 
-def _take_program(buf: bytes) -> tuple[str | None, bytes]:
-    """The first complete `def name(): ... end` program in buf (a line "end" at column 0 closes
-    it), and what follows; (None, buf) while incomplete."""
-    text = buf.decode("utf-8", errors="replace")
-    start = text.find("def ")
-    if start < 0:
-        return None, buf
-    i = text.find("\nend", start)
-    while i >= 0:
-        j = i + len("\nend")
-        if j == len(text) or text[j] in "\r\n":
-            end = j + 1 if j < len(text) else j
-            return text[start:j], text[end:].encode()
-        i = text.find("\nend", j)
-    return None, buf
+def _refusal(kind: int, why: str) -> bytes:
+    """The answer to a request the controller could not decode: "not accepted" for the requests
+    that have a yes/no answer, recipe 0 for a set-up, a text message (level exception) otherwise."""
+    if kind in (wire.RTDE_REQUEST_PROTOCOL_VERSION, wire.RTDE_CONTROL_PACKAGE_START, wire.RTDE_CONTROL_PACKAGE_PAUSE):
+        return wire.encode_accepted(kind, False)
+    if kind in (wire.RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS, wire.RTDE_CONTROL_PACKAGE_SETUP_INPUTS):
+        return wire.encode_setup_reply(kind, 0, [])
+    return wire.encode_text_message(f"malformed package {kind}: {why}", level=0)
+
+
+class ScriptReader:
+    """Programs out of a script-port byte stream, line by line in bounded memory.
+
+    A program runs from a line `def name():` (or `sec`) to a line `end` at column 0; lines
+    outside one are one-line programs (counted in ignored_lines: the emulator runs none). A
+    program, or a line, longer than limit_bytes is dropped (dropped_bytes) and reading goes on at
+    the next line.
+    """
+
+    def __init__(self, limit_bytes: int) -> None:
+        self.limit = limit_bytes
+        self.ignored_lines = 0
+        self.dropped_bytes = 0
+        self._line = bytearray()
+        self._program: list[str] | None = None
+        self._size = 0
+        self._skip_line = False  # dropping the rest of an overlong line
+
+    @property
+    def buffered_bytes(self) -> int:
+        return len(self._line) + self._size
+
+    def feed(self, data: bytes) -> list[str]:
+        out: list[str] = []
+        pos = 0
+        while pos < len(data):
+            nl = data.find(b"\n", pos)
+            end = len(data) if nl < 0 else nl
+            chunk, pos = data[pos:end], end + 1
+            if self._skip_line:
+                self.dropped_bytes += len(chunk)
+                self._skip_line = nl < 0
+                continue
+            if self.buffered_bytes + len(chunk) > self.limit:
+                self.dropped_bytes += self.buffered_bytes + len(chunk)
+                self._line.clear()
+                self._program, self._size = None, 0
+                self._skip_line = nl < 0
+                continue
+            self._line += chunk
+            if nl < 0:
+                break
+            out.extend(self._take_line())
+        if self._program is not None and self._line.strip() == b"end":
+            out.extend(self._take_line())  # the last line of an upload may come without a newline
+        return out
+
+    def _take_line(self) -> list[str]:
+        raw = bytes(self._line)
+        self._line.clear()
+        text = raw.decode("utf-8", errors="replace").rstrip("\r")
+        if self._program is None:
+            if text.startswith(("def ", "sec ")):
+                self._program, self._size = [text], len(raw) + 1
+            elif text.strip():
+                self.ignored_lines += 1
+            return []
+        self._program.append(text)
+        self._size += len(raw) + 1
+        if text.rstrip() == "end":
+            program = "\n".join(self._program)
+            self._program, self._size = None, 0
+            return [program]
+        return []
 
 
 # ---- process entry: python -m hardware.ur5e.controller FD HOST T0 ------------------------------
@@ -519,7 +678,10 @@ def _info(ctl: URController) -> dict:
     return {"scripts_received": len(ctl.scripts_received), "dashboard_requests": list(ctl.dashboard_requests),
             "commands": list(script.commands) if script else [],
             "unsupported": list(script.unsupported) if script else [],
-            "runtime_state": ctl.runtime_state, "safety_mode": ctl.safety_mode,
+            "runtime_state": ctl.runtime_state, "safety_mode": ctl.safety_mode, "robot_mode": ctl.robot_mode,
+            "tcp_offset": list(script.tool.tcp_offset) if script else None,
+            "payload_kg": script.tool.payload_kg if script else None,
+            "payload_cog_m": list(script.tool.payload_cog_m) if script else None,
             "connections": len(ctl._conns)}
 
 

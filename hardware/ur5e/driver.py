@@ -27,6 +27,8 @@ State and health
   500 Hz package) and turns each new controller timestamp into a Pose (frame "base",
   device_t_ns = controller timestamp, host_t_ns at poll). seq = timestamp / 2 ms, so packages the
   poll did not see count as `lost` (the client keeps only the latest package).
+- Tool: on every control-script start (connect, reconnect, restart_program) the driver sets the
+  Hand-E's TCP offset and payload from the config (setTcp, setPayload) and reads the TCP back.
 - fault(): link lost, emergency stop, protective stop, control program not running, stall.
   A dropped link is reconnected (reconnect() on both clients, counted in health.reconnects); a
   move in progress is not resumed, and nothing is ever resumed after a protective stop: that
@@ -46,15 +48,17 @@ from scipy.spatial.transform import Rotation
 
 from hardware.interfaces import Arm, DeviceError
 from hardware.ur5e.config import UR5eConfig
+from hardware.ur5e.wire import (
+    RUNTIME_NAMES,
+    RUNTIME_PLAYING,
+    SAFETY_BIT_PROTECTIVE_STOPPED,
+    SAFETY_EMERGENCY_STOPPED,
+)
 from layerskin_exp.types import Pose
 
 log = logging.getLogger(__name__)
 
 CONTROLLER_PERIOD_S = 0.002
-RUNTIME_PLAYING = 2
-RUNTIME_NAMES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
-SAFETY_PROTECTIVE_STOPPED = 1 << 2
-SAFETY_EMERGENCY_STOPPED = (1 << 5) | (1 << 6) | (1 << 7)
 ASYNC_RUNNING_BIT = 1 << 15
 
 
@@ -124,7 +128,12 @@ class UR5eArm(Arm):
         self._recv, self._ctrl = result["recv"], result["ctrl"]
         self._link_error = None
         self._last_seq = None
-        self._last_rx_ns = time.monotonic_ns()
+        try:
+            self._set_tool()
+        except Exception as exc:
+            self._close_clients()
+            raise DeviceError(f"arm: connected to {host} but {exc}") from exc
+        self._last_rx_ns = time.monotonic_ns()  # the receive thread starts now: no stall before it
         try:
             self._read_state()
         except Exception as exc:
@@ -181,6 +190,33 @@ class UR5eArm(Arm):
         with self._io:
             if not self._ctrl.reuploadScript():
                 raise DeviceError("arm: the controller did not restart the control script; check the pendant")
+            # reuploadScript returns once the program is sent, before the controller runs it.
+            deadline = time.monotonic() + self.cfg.connect_timeout_s
+            while not self._ctrl.isProgramRunning():
+                if time.monotonic() > deadline:
+                    raise DeviceError(f"arm: the control script did not start within {self.cfg.connect_timeout_s} s "
+                                      "(hardware.ur5e.connect_timeout_s); check the pendant")
+                time.sleep(0.005)
+            try:
+                self._set_tool()
+            except DeviceError as exc:
+                raise DeviceError(f"arm: {exc}") from exc
+
+    def _set_tool(self) -> None:
+        """Set the gripper's TCP offset and payload (hardware.ur5e.tcp_offset_m_rad, payload_*) in the
+        control script just started (a program starts from the installation's), and read the TCP
+        back: poses and moves refer to that TCP, so a controller that did not take it is an error."""
+        cfg = self.cfg
+        tcp = [float(x) for x in cfg.tcp_offset_m_rad]
+        with self._io:
+            if not self._ctrl.setTcp(tcp):
+                raise DeviceError("the controller refused the TCP offset (hardware.ur5e.tcp_offset_m_rad)")
+            if not self._ctrl.setPayload(float(cfg.payload_kg), [float(x) for x in cfg.payload_cog_m]):
+                raise DeviceError("the controller refused the payload (hardware.ur5e.payload_kg, payload_cog_m)")
+            got = np.asarray(self._ctrl.getTCPOffset(), float)
+        if got.shape != (6,) or not np.allclose(got, tcp, atol=1e-9):
+            raise DeviceError(f"the controller reports TCP offset {got.tolist()}, not the one set {tcp} "
+                              "(hardware.ur5e.tcp_offset_m_rad)")
 
     # ---- receive thread ---------------------------------------------------------------------------
     def _read_state(self) -> float:
@@ -261,6 +297,7 @@ class UR5eArm(Arm):
                 self._recv = rtde_receive.RTDEReceiveInterface(self.cfg.host, self.cfg.rtde_frequency_hz)
                 self._ctrl = rtde_control.RTDEControlInterface(self.cfg.host)
                 self._read_state()
+                self._set_tool()
             except Exception as exc:  # noqa: BLE001 - try again after the interval
                 log.info("ur5e: reconnect to %s failed (%s)", self.cfg.host, exc)
                 return
@@ -287,7 +324,7 @@ class UR5eArm(Arm):
             return f"arm: link lost ({self._link_error}); reconnecting to {self.cfg.host}"
         if self._safety_bits & SAFETY_EMERGENCY_STOPPED:
             return "arm: emergency stop (release the e-stop, then restart the program)"
-        if self._safety_bits & SAFETY_PROTECTIVE_STOPPED:
+        if self._safety_bits & SAFETY_BIT_PROTECTIVE_STOPPED:
             return "arm: protective stop; inspect the cause, unlock it on the pendant, then restart_program()"
         if self._runtime_state != RUNTIME_PLAYING:
             name = RUNTIME_NAMES.get(self._runtime_state, str(self._runtime_state))
@@ -302,7 +339,7 @@ class UR5eArm(Arm):
         kind = self._move_kind
         if kind is None:
             return False
-        if self._safety_bits & (SAFETY_PROTECTIVE_STOPPED | SAFETY_EMERGENCY_STOPPED) \
+        if self._safety_bits & (SAFETY_BIT_PROTECTIVE_STOPPED | SAFETY_EMERGENCY_STOPPED) \
                 or self._runtime_state != RUNTIME_PLAYING:
             self._move_kind = None  # the safety system stopped the arm; the script's registers froze
             return False

@@ -25,6 +25,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from hardware.emulation import Emulator
 from hardware.interfaces import DeviceError
@@ -165,10 +166,11 @@ class UR5eEmulator(Emulator):
                 with self.rt.lock:
                     arm = self.rt.rig.arm
                     pose = np.asarray(arm.tcp_pose6(), float).tolist()
+                    speed = np.asarray(arm.tcp_speed6(), float).tolist()
                     moving = bool(arm.is_moving())
                     t_s = float(self.rt.world.t_s)
                 error, self._error = self._error, None
-                self._send(("state", t_s, pose, moving, self._applied_id, error))
+                self._send(("state", t_s, pose, moving, self._applied_id, error, speed))
                 k += 1
                 delay = origin + k * PERIOD_S - time.monotonic()
                 if delay > 0:
@@ -184,10 +186,14 @@ class UR5eEmulator(Emulator):
     def _handle(self, msg: tuple) -> None:
         kind, msg_id = msg[0], msg[1]
         if kind == "move":
-            pose, v, a, w = msg[2:]
+            pose, v, a, w, stop_at_workspace = msg[2:]
             try:
                 with self.rt.lock:
-                    self.rt.rig.arm.move_linear(np.asarray(pose), v, a, w)
+                    arm = self.rt.rig.arm
+                    if stop_at_workspace:
+                        pose = _stop_at_box(arm.tcp_pose6(), np.asarray(pose, float),
+                                            arm.cfg.workspace_min_m, arm.cfg.workspace_max_m)
+                    arm.move_linear(np.asarray(pose), v, a, w)
             except DeviceError as exc:
                 self._error = str(exc)
                 log.warning("ur5e emulator: %s", exc)
@@ -203,3 +209,25 @@ class UR5eEmulator(Emulator):
             self._start_error = msg[2]
             self._ready.set()
         self._applied_id = max(self._applied_id, msg_id)
+
+
+def _stop_at_box(here6: np.ndarray, target6: np.ndarray, lo, hi) -> np.ndarray:
+    """target6 pulled back along the straight move from here6 to where that move leaves the box
+    [lo, hi] (m), the turn shortened in proportion: where a speedl meets the workspace boundary,
+    the arm stops on it, as at a UR safety plane."""
+    p0, d = here6[:3], target6[:3] - here6[:3]
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    s = 1.0
+    for i in range(3):
+        if d[i] > 0:
+            s = min(s, (hi[i] - p0[i]) / d[i])
+        elif d[i] < 0:
+            s = min(s, (lo[i] - p0[i]) / d[i])
+    s = max(s, 0.0)
+    if s >= 1.0:
+        return target6
+    log.info("ur5e emulator: speedl stops at the workspace boundary %s..%s m", lo.tolist(), hi.tolist())
+    r0 = Rotation.from_rotvec(here6[3:])
+    turn = (Rotation.from_rotvec(target6[3:]) * r0.inv()).as_rotvec()
+    rot = Rotation.from_rotvec(s * turn) * r0
+    return np.concatenate((np.clip(p0 + s * d, lo, hi), rot.as_rotvec()))

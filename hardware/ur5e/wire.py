@@ -44,6 +44,49 @@ PORT_RTDE = 30004
 PORT_SECONDARY = 30002  # script upload, as the ur_rtde client uses it (see README)
 PORT_REALTIME = 30003
 
+# ---- controller state words (RTDE guide, "robot_mode", "safety_mode", "runtime_state",
+# "robot_status_bits", "safety_status_bits"); the driver reads them, the emulator writes them ----
+ROBOT_MODE_NAMES = {-1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING", 3: "POWER_OFF",
+                    4: "POWER_ON", 5: "IDLE", 6: "BACKDRIVE", 7: "RUNNING", 8: "UPDATING_FIRMWARE"}
+ROBOT_MODE_POWER_OFF = 3
+ROBOT_MODE_IDLE = 5
+ROBOT_MODE_RUNNING = 7
+
+SAFETY_MODE_NAMES = {1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP",
+                     6: "SYSTEM_EMERGENCY_STOP", 7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT"}
+SAFETY_MODE_NORMAL = 1
+SAFETY_MODE_PROTECTIVE_STOP = 3
+SAFETY_MODE_SYSTEM_EMERGENCY_STOP = 6
+SAFETY_MODE_ROBOT_EMERGENCY_STOP = 7
+
+RUNTIME_NAMES = {0: "STOPPING", 1: "STOPPED", 2: "PLAYING", 3: "PAUSING", 4: "PAUSED", 5: "RESUMING"}
+RUNTIME_STOPPED = 1
+RUNTIME_PLAYING = 2
+RUNTIME_PAUSED = 4
+
+ROBOT_STATUS_POWER_ON = 1 << 0
+ROBOT_STATUS_PROGRAM_RUNNING = 1 << 1
+
+SAFETY_BIT_NORMAL = 1 << 0
+SAFETY_BIT_PROTECTIVE_STOPPED = 1 << 2
+SAFETY_BIT_SYSTEM_EMERGENCY_STOPPED = 1 << 5
+SAFETY_BIT_ROBOT_EMERGENCY_STOPPED = 1 << 6
+SAFETY_BIT_EMERGENCY_STOPPED = 1 << 7  # set with either of the two above
+SAFETY_BIT_STOPPED_DUE_TO_SAFETY = 1 << 10
+SAFETY_EMERGENCY_STOPPED = SAFETY_BIT_SYSTEM_EMERGENCY_STOPPED | SAFETY_BIT_ROBOT_EMERGENCY_STOPPED \
+    | SAFETY_BIT_EMERGENCY_STOPPED
+
+
+def safety_status_bits(safety_mode: int) -> int:
+    """safety_status_bits as the controller reports them in safety_mode."""
+    if safety_mode == SAFETY_MODE_PROTECTIVE_STOP:
+        return SAFETY_BIT_PROTECTIVE_STOPPED | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
+    if safety_mode == SAFETY_MODE_ROBOT_EMERGENCY_STOP:
+        return SAFETY_BIT_ROBOT_EMERGENCY_STOPPED | SAFETY_BIT_EMERGENCY_STOPPED | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
+    if safety_mode == SAFETY_MODE_SYSTEM_EMERGENCY_STOP:
+        return SAFETY_BIT_SYSTEM_EMERGENCY_STOPPED | SAFETY_BIT_EMERGENCY_STOPPED | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
+    return SAFETY_BIT_NORMAL
+
 # RTDE type name -> struct format of one value.
 TYPE_FORMATS = {
     "BOOL": "?",
@@ -253,6 +296,7 @@ def _names(raw: bytes) -> list[str]:
 
 # ---- dashboard server (29999): one text line per request and per answer --------------------
 DASHBOARD_WELCOME = "Connected: Universal Robots Dashboard Server"
+DASHBOARD_MAX_LINE_BYTES = 65536  # a longer "line" is dropped unanswered (no command is that long)
 
 
 def dashboard_lines(buf: bytearray) -> list[str]:

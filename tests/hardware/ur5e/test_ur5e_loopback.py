@@ -13,7 +13,16 @@ from scipy.spatial.transform import Rotation
 
 from hardware.interfaces import DeviceError
 from hardware.ur5e import UR5eArm, UR5eConfig
-from hardware.ur5e.control_script import CMD_IS_STEADY, CMD_MOVEL, CMD_SPEED_STOP, CMD_SPEEDL, CMD_STOPL
+from hardware.ur5e.control_script import (
+    CMD_GET_TCP_OFFSET,
+    CMD_IS_STEADY,
+    CMD_MOVEL,
+    CMD_SET_PAYLOAD,
+    CMD_SET_TCP,
+    CMD_SPEED_STOP,
+    CMD_SPEEDL,
+    CMD_STOPL,
+)
 from hardware.ur5e.emulator import UR5eEmulator
 
 pytest.importorskip("rtde_control")
@@ -57,6 +66,10 @@ def test_connect_streams_poses_and_moves_the_world(bench):
     rt, emu, arm = bench("127.0.0.21")
     info = emu.wait_info(lambda i: i["scripts_received"] == 1 and i["runtime_state"] == 2)
     assert info["dashboard_requests"][:2] == ["PolyscopeVersion", "get serial number"]
+    # The Hand-E's TCP offset and payload, from the config, in the running control script.
+    cfg = UR5eConfig()
+    info = emu.wait_info(lambda i: i["tcp_offset"] == list(cfg.tcp_offset_m_rad))
+    assert info["payload_kg"] == cfg.payload_kg and info["payload_cog_m"] == list(cfg.payload_cog_m)
     assert arm.fault(time.monotonic_ns()) is None
     np.testing.assert_allclose(arm.tcp_pose6(), twin_pose(rt), atol=1e-9)
     assert wait_for(lambda: arm.health.received > 50)
@@ -89,7 +102,8 @@ def test_connect_streams_poses_and_moves_the_world(bench):
     np.testing.assert_allclose(final[:3], here[:3], atol=1e-5)
     assert took > 0.9  # 1.5 deg at 1.5 deg/s is a second; moveL at the tool speed would take far less
     commands = emu.wait_info(lambda i: CMD_SPEED_STOP in i["commands"])["commands"]
-    assert commands[:3] == [CMD_MOVEL, CMD_SPEEDL, CMD_SPEED_STOP] or CMD_IS_STEADY in commands
+    assert commands[:3] == [CMD_SET_TCP, CMD_SET_PAYLOAD, CMD_GET_TCP_OFFSET]  # the driver's tool set-up
+    assert commands[3:6] == [CMD_MOVEL, CMD_SPEEDL, CMD_SPEED_STOP] or CMD_IS_STEADY in commands
     assert emu.info["unsupported"] == []
 
 
@@ -131,6 +145,8 @@ def test_protective_stop_is_a_fault_and_nothing_resumes(bench):
     np.testing.assert_allclose(twin_pose(rt), held, atol=1e-9)  # no motion resumed
     arm.restart_program()
     assert wait_for(lambda: arm.fault(time.monotonic_ns()) is None)
+    # A new script starts from the installation's tool: the driver set its own again.
+    assert emu.wait_info(lambda i: i["scripts_received"] == 2)["tcp_offset"] == list(arm.cfg.tcp_offset_m_rad)
 
 
 def test_link_loss_reconnects_and_stall_is_reported(bench):
@@ -140,6 +156,7 @@ def test_link_loss_reconnects_and_stall_is_reported(bench):
     assert wait_for(lambda: arm.health.reconnects == 1 and arm.fault(time.monotonic_ns()) is None, 10.0)
     received = arm.health.received
     assert wait_for(lambda: arm.health.received > received + 20)
+    assert emu.wait_info(lambda i: i["scripts_received"] >= 2)["tcp_offset"] == list(arm.cfg.tcp_offset_m_rad)
     start = arm.tcp_pose6()
     arm.move_linear(start + [0.002, 0, 0, 0, 0, 0], 0.01, 0.1)
     assert wait_for(lambda: not arm.is_moving())
@@ -165,3 +182,11 @@ def test_config_validates():
         UR5eConfig(stall_timeout_s=0.2)
     with pytest.raises(ConfigError, match="host"):
         UR5eConfig(host="")
+    with pytest.raises(ConfigError, match=r"tcp_offset_m_rad=\(0.0, 0.0, 0.2\)"):
+        UR5eConfig(tcp_offset_m_rad=(0.0, 0.0, 0.2))
+    with pytest.raises(ConfigError, match="tcp_offset_m_rad"):
+        UR5eConfig(tcp_offset_m_rad=(0.0, 0.0, float("nan"), 0.0, 0.0, 0.0))
+    with pytest.raises(ConfigError, match=r"payload_kg=6.0: .*\[0, 5\] kg"):
+        UR5eConfig(payload_kg=6.0)
+    with pytest.raises(ConfigError, match="payload_cog_m"):
+        UR5eConfig(payload_cog_m=(0.0, 0.0, 1.0))

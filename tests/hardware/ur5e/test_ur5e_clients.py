@@ -1,0 +1,299 @@
+"""The emulated UR5e against third-party clients: ur_rtde's own control, receive, IO and dashboard
+clients (not this project's driver), and hostile bytes on its ports.
+
+Each test serves on its own loopback address (the clients' ports are fixed). Waits are bounded
+polls; no assertion is about how fast anything ran.
+"""
+
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from hardware.ur5e import wire
+from hardware.ur5e.emulator import UR5eEmulator
+from tests.hardware.waiting import wait_for
+
+rtde_control = pytest.importorskip("rtde_control")
+rtde_receive = pytest.importorskip("rtde_receive")
+rtde_io = pytest.importorskip("rtde_io")
+dashboard_client = pytest.importorskip("dashboard_client")
+
+
+@pytest.fixture
+def controller(realtime_world):
+    """Factory: (rt, emulator) on a fresh loopback host (rig overrides as for realtime_world);
+    clients made through `clients.append` are disconnected at teardown."""
+    made, clients = [], []
+
+    def make(host: str, **rig):
+        rt = realtime_world("gripper", **rig)
+        emu = UR5eEmulator(rt, host=host)
+        emu.start()
+        made.append(emu)
+        return rt, emu
+
+    make.clients = clients
+    yield make
+    for c in clients:
+        try:
+            if isinstance(c, rtde_control.RTDEControlInterface):
+                c.stopScript()
+            c.disconnect()
+        except Exception:  # noqa: BLE001 - best effort at teardown
+            pass
+    for emu in made:
+        emu.stop()
+
+
+def twin_pose(rt):
+    with rt.lock:
+        return np.asarray(rt.rig.arm.tcp_pose6(), float)
+
+
+def test_speedl_toward_the_table_moves_and_stops_on_the_workspace_boundary(controller):
+    rt, emu = controller("127.0.0.41")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.41", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.41")
+    controller.clients += [ctrl, recv]
+    with rt.lock:
+        floor_m = rt.rig.arm.cfg.workspace_min_m[2]  # the table, as the twin's reachable box has it
+    start = twin_pose(rt)
+    assert ctrl.moveL((start + [0, 0, floor_m + 0.012 - start[2], 0, 0, 0]).tolist(), 0.25, 1.5)
+    z0 = twin_pose(rt)[2]
+    assert z0 == pytest.approx(floor_m + 0.012, abs=1e-6)
+    # 30 s of this twist would pass the table: the program used to stop at once.
+    assert ctrl.speedL([0.0, 0.0, -0.01, 0.0, 0.0, 0.0], 0.5, 0.0)
+    assert wait_for(lambda: twin_pose(rt)[2] < z0 - 0.002, 5.0)
+    assert ctrl.isProgramRunning()
+    # It goes on to the boundary and stops on it, the program still running.
+    assert wait_for(lambda: twin_pose(rt)[2] < floor_m + 1e-6, 10.0)
+    time.sleep(0.1)
+    assert twin_pose(rt)[2] == pytest.approx(floor_m, abs=1e-6)
+    assert ctrl.isProgramRunning() and recv.getRuntimeState() == wire.RUNTIME_PLAYING
+    # Away from the boundary again, then a stop.
+    assert ctrl.speedL([0.0, 0.0, 0.01, 0.0, 0.0, 0.0], 0.5, 0.0)
+    assert wait_for(lambda: twin_pose(rt)[2] > floor_m + 0.0005, 5.0)
+    ctrl.speedStop(2.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed() == [0.0] * 6, 5.0)
+    assert emu.info["unsupported"] == []
+
+
+def _cruise_speeds(ctrl, recv, speed_m_s):
+    """actual_TCP_speed over the middle 20 mm of a 30 mm moveL along x (far from its ramps)."""
+    start = np.asarray(recv.getActualTCPPose())
+    assert ctrl.moveL((start + [0.03, 0, 0, 0, 0, 0]).tolist(), speed_m_s, 1.0, True)
+    out = []
+    while True:
+        pose, twist = np.asarray(recv.getActualTCPPose()), np.asarray(recv.getActualTCPSpeed())
+        gone = pose[0] - start[0]
+        if 0.005 < gone < 0.025:
+            out.append(twist)
+        if gone > 0.0299 or len(out) > 400:
+            break
+        time.sleep(0.002)
+    assert wait_for(lambda: ctrl.getAsyncOperationProgress() < 0, 5.0)
+    assert len(out) > 10
+    return np.array(out)
+
+
+def test_actual_tcp_speed_is_the_speed_of_the_tool(controller):
+    rt, emu = controller("127.0.0.42")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.42", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.42")
+    controller.clients += [ctrl, recv]
+    got = _cruise_speeds(ctrl, recv, 0.02)
+    np.testing.assert_allclose(got, np.tile([0.02, 0, 0, 0, 0, 0], (len(got), 1)), atol=1e-6)
+    assert wait_for(lambda: recv.getActualTCPSpeed() == [0.0] * 6)
+    # A turn about the base z axis: the angular part of the twist (rad/s, base frame).
+    assert ctrl.speedL([0.0, 0.0, 0.0, 0.0, 0.0, 0.05], 0.5, 0.0)
+    time.sleep(0.3)
+    np.testing.assert_allclose(recv.getActualTCPSpeed(), [0, 0, 0, 0, 0, 0.05], atol=1e-6)
+    ctrl.speedStop(2.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed() == [0.0] * 6)
+
+
+def test_io_interface_outputs_and_speed_slider_take_effect(controller):
+    rt, emu = controller("127.0.0.47")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.47", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.47")
+    io = rtde_io.RTDEIOInterface("127.0.0.47")
+    controller.clients += [ctrl, recv, io]
+    # Standard, configurable and tool digital outputs, an analog output and the speed slider.
+    assert io.setStandardDigitalOut(3, True) and io.setConfigurableDigitalOut(2, True)
+    assert io.setToolDigitalOut(1, True) and io.setAnalogOutputVoltage(0, 0.4)
+    assert io.setSpeedSlider(0.5)
+    want = (1 << 3) | (1 << (8 + 2)) | (1 << (16 + 1))
+    assert wait_for(lambda: recv.getActualDigitalOutputBits() == want)
+    assert recv.getDigitalOutState(3) and not recv.getDigitalOutState(4)
+    assert recv.getStandardAnalogOutput0() == pytest.approx(0.4)
+    assert recv.getSpeedScaling() == pytest.approx(0.5) and recv.getTargetSpeedFraction() == pytest.approx(0.5)
+    assert io.setStandardDigitalOut(3, False)
+    assert wait_for(lambda: recv.getActualDigitalOutputBits() == want & ~(1 << 3))
+    # The slider scales the speed of the moves commanded after it.
+    np.testing.assert_allclose(_cruise_speeds(ctrl, recv, 0.02)[:, 0], 0.01, atol=1e-6)
+
+
+def test_tcp_offset_and_payload_are_set_and_read_back(controller):
+    rt, emu = controller("127.0.0.43")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.43", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.43")
+    controller.clients += [ctrl, recv]
+    assert ctrl.getTCPOffset() == [0.0] * 6  # a new program: the installation's (none here)
+    tcp = [0.0, 0.01, 0.15, 0.0, 0.0, 0.1]
+    assert ctrl.setTcp(tcp)
+    assert ctrl.getTCPOffset() == pytest.approx(tcp)
+    assert ctrl.setPayload(1.2, [0.0, 0.0, 0.05])
+    assert wait_for(lambda: recv.getPayload() == pytest.approx(1.2))
+    assert recv.getPayloadCog() == pytest.approx([0.0, 0.0, 0.05])
+    assert ctrl.setPayload(0.9, [])  # no centre of gravity given: the current one stays
+    assert wait_for(lambda: recv.getPayload() == pytest.approx(0.9))
+    assert recv.getPayloadCog() == pytest.approx([0.0, 0.0, 0.05])
+    assert emu.info["unsupported"] == []
+
+
+def test_dashboard_answers_as_the_dashboard_server(controller):
+    rt, emu = controller("127.0.0.44")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.44", 500)
+    controller.clients.append(recv)
+    s = socket.create_connection(("127.0.0.44", wire.PORT_DASHBOARD), timeout=5.0)
+    f = s.makefile("rwb")
+
+    def ask(line):
+        f.write(line.encode() + b"\n")
+        f.flush()
+        return f.readline().decode().rstrip("\n")
+
+    assert f.readline().decode().startswith("Connected: Universal Robots Dashboard Server")
+    assert ask("get robot model") == "UR5"
+    assert ask("get loaded program") == "No program loaded"
+    assert ask("load grip.urp") == "Loading program: grip.urp"
+    assert ask("get loaded program") == "Loaded program: /programs/grip.urp"
+    assert ask("programState") == "STOPPED grip.urp"
+    assert ask("load notes.txt") == "File not found: notes.txt"
+    assert ask("power off") == "Powering off"
+    assert ask("robotmode") == "Robotmode: POWER_OFF"
+    assert wait_for(lambda: recv.getRobotMode() == wire.ROBOT_MODE_POWER_OFF)
+    assert not recv.getRobotStatus() & wire.ROBOT_STATUS_POWER_ON
+    assert ask("power on") == "Powering on"
+    assert ask("robotmode") == "Robotmode: IDLE"
+    assert ask("brake release") == "Brake releasing"
+    assert ask("robotmode") == "Robotmode: RUNNING"
+    assert wait_for(lambda: recv.getRobotStatus() & wire.ROBOT_STATUS_POWER_ON)
+    assert ask("quit") == "Disconnected"
+    assert f.readline() == b""  # the server closed the connection
+    s.close()
+
+    # ur_rtde's own dashboard client: loadURP raises unless the answer says "Loading program:".
+    d = dashboard_client.DashboardClient("127.0.0.44")
+    d.connect()
+    d.loadURP("pick.urp")
+    assert d.getLoadedProgram() == "Loaded program: /programs/pick.urp"
+    assert d.getRobotModel() == "UR5"
+    d.powerOff()
+    assert d.robotmode() == "Robotmode: POWER_OFF"
+    d.brakeRelease()  # from power off: powers on and releases the brakes
+    assert d.robotmode() == "Robotmode: RUNNING"
+    with pytest.raises(RuntimeError, match="File not found"):
+        d.loadURP("missing")
+    d.disconnect()
+
+
+def _rtde_exchange(sock, request: bytes) -> tuple[int, bytes]:
+    sock.sendall(request)
+    head = _read_exactly(sock, 3)
+    size, kind = struct.unpack(">HB", head)
+    return kind, _read_exactly(sock, size - 3)
+
+
+def _read_exactly(sock, n: int) -> bytes:
+    out = b""
+    while len(out) < n:
+        chunk = sock.recv(n - len(out))
+        if not chunk:
+            raise ConnectionError("closed")
+        out += chunk
+    return out
+
+
+def test_malformed_rtde_packages_are_refused_and_the_connection_lives(controller, capfd):
+    rt, emu = controller("127.0.0.45")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.45", 500)
+    controller.clients.append(recv)
+    s = socket.create_connection(("127.0.0.45", wire.PORT_RTDE), timeout=5.0)
+    # A protocol-version request one byte short: refused, the connection answers on.
+    assert _rtde_exchange(s, wire.pack(wire.RTDE_REQUEST_PROTOCOL_VERSION, b"\x02")) == (ord("V"), b"\x00")
+    assert _rtde_exchange(s, wire.encode_protocol_version_request(2)) == (ord("V"), b"\x01")
+    # An output set-up without its frequency, a data package of the wrong length, an unknown type.
+    kind, payload = _rtde_exchange(s, wire.pack(wire.RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS, b"\x01\x02"))
+    assert kind == ord("O") and payload[0] == 0
+    kind, payload = _rtde_exchange(s, wire.encode_setup_inputs_request(["input_int_register_30"]))
+    assert kind == ord("I") and payload[0] == 1
+    kind, payload = _rtde_exchange(s, wire.pack(wire.RTDE_DATA_PACKAGE, b"\x01\x00\x00"))
+    assert kind == ord("M")
+    kind, payload = _rtde_exchange(s, wire.pack(ord("Z"), b"\x00"))
+    assert kind == ord("M")
+    # A size below the header cannot be framed: a last text message, then the controller closes.
+    kind, _ = _rtde_exchange(s, b"\x00\x01Z")
+    assert kind == ord("M")
+    assert wait_for(lambda: s.recv(1) == b"", 5.0)
+    s.close()
+    # The other client never noticed.
+    t = recv.getTimestamp()
+    assert wait_for(lambda: recv.getTimestamp() > t + 0.05)
+    assert recv.isConnected()
+    time.sleep(0.2)
+    err = capfd.readouterr().err
+    assert "Traceback" not in err
+    assert len([line for line in err.splitlines() if "RTDE" in line]) == 1  # one line for that connection
+
+
+def _peak_rss_kb(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmHWM"))
+
+
+def test_a_16_mb_upload_without_def_is_dropped_in_bounded_memory(controller):
+    rt, emu = controller("127.0.0.46")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.46", 500)
+    controller.clients.append(recv)
+    stamps, done = [], threading.Event()
+
+    def watch():
+        last = None
+        while not done.is_set():
+            ts = recv.getTimestamp()
+            if ts != last:
+                stamps.append((time.monotonic(), ts))
+                last = ts
+            time.sleep(0.001)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        assert wait_for(lambda: len(stamps) > 20)
+        peak_before_kb = _peak_rss_kb(emu._proc.pid)
+        s = socket.create_connection(("127.0.0.46", wire.PORT_REALTIME), timeout=60.0)
+        t0 = time.monotonic()
+        s.sendall(b"x" * (16 << 20))  # one 16 MB "line": no def, no newline
+        s.sendall(b"\ntextmsg(\"one line\")\n")
+        s.close()
+        t1 = time.monotonic()
+        n = len(stamps)
+        assert wait_for(lambda: len(stamps) > n + 20)
+    finally:
+        done.set()
+        watcher.join()
+    # Dropped as it came (the process grew by far less than the upload; the old reader kept and
+    # re-decoded all of it: +28 MB), and the 500 Hz stream went on meanwhile (controller time
+    # between the samples seen; it stalled for seconds before).
+    assert _peak_rss_kb(emu._proc.pid) - peak_before_kb < 8 * 1024
+    during = [ts for t, ts in stamps if t0 - 0.05 <= t <= t1 + 0.05]
+    assert len(during) >= 2 and max(np.diff(during)) < 0.5
+    # A real control script still starts afterwards on the same port.
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.46")
+    controller.clients.append(ctrl)
+    assert ctrl.isProgramRunning()
