@@ -103,7 +103,7 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
              ", dirty" if prov["git_dirty"] else "", rig.backend, prov["overrides"])
     live = None
     if getattr(typed, "live", False):
-        from layerskin_exp.log.live import LiveView
+        from layerskin_exp.log.view.live import LiveView
 
         live = LiveView(port=typed.live_port)
         print(f"live view: open {live.url} in Foxglove (Open connection > Foxglove WebSocket)", flush=True)

@@ -8,9 +8,9 @@ import warnings
 
 import numpy as np
 
-from layerskin_exp.log.reader import Session, load_session
-from layerskin_exp.log.recover import recover
-from layerskin_exp.log.scan import SessionFileError
+from layerskin_exp.log.session.reader import Session, load_session
+from layerskin_exp.log.container.recover import recover
+from layerskin_exp.log.container.scan import SessionFileError
 
 
 def describe(s: Session) -> str:
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     sub.add_parser("layout", help="print the Foxglove layout every session carries (JSON, for Layouts > Import)")
     args = parser.parse_args(argv)
     if args.command == "layout":
-        from layerskin_exp.log.layout import session_layout
+        from layerskin_exp.log.view.layout import session_layout
 
         print(session_layout().to_json())
         return 0

@@ -76,7 +76,7 @@ def _session_file(tmp_path, compression="lz4"):
 
 
 def test_directory_named_like_a_session(tmp_path):
-    from layerskin_exp.log.recover import recover
+    from layerskin_exp.log.container.recover import recover
 
     d = tmp_path / "x.mcap"
     d.mkdir()
@@ -116,7 +116,7 @@ def test_corrupted_compression_name_skips_that_chunk(tmp_path):
 
 
 def test_huge_uncompressed_size_is_not_allocated(tmp_path):
-    from layerskin_exp.log.scan import scan
+    from layerskin_exp.log.container.scan import scan
 
     path, raw, chunks = _session_file(tmp_path)
     for c in chunks[2:4]:
@@ -144,7 +144,7 @@ def test_inspect_shows_the_damage(tmp_path):
 def test_recover_rewrites_around_a_damaged_chunk(tmp_path):
     from mcap.reader import make_reader
 
-    from layerskin_exp.log.recover import recover
+    from layerskin_exp.log.container.recover import recover
 
     path, raw, chunks = _session_file(tmp_path)
     bad = chunks[len(chunks) // 2]

@@ -19,7 +19,7 @@ from log_records import HOST0_NS, frame, records
 
 from layerskin_exp.log import SessionWarning, SessionWriter, load_session
 from layerskin_exp.log.cli import main as cli_main
-from layerskin_exp.log.recover import recover
+from layerskin_exp.log.container.recover import recover
 
 CHUNK_SPAN_NS = 100_000_000
 
@@ -153,7 +153,7 @@ def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compressio
     and the session is not complete although the file's outcome says so."""
     from mcap.reader import make_reader
 
-    from layerskin_exp.log import scan as scan_module
+    from layerskin_exp.log.container import scan as scan_module
 
     monkeypatch.setattr(scan_module, "_THREADS", threads)
     monkeypatch.setattr(scan_module, "_BYTES_PER_THREAD", 1)
@@ -196,7 +196,7 @@ def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compressio
 
 
 def test_multithreaded_decompression_matches_single(tmp_path, monkeypatch):
-    from layerskin_exp.log import scan as scan_module
+    from layerskin_exp.log.container import scan as scan_module
 
     path = tmp_path / "s.mcap"
     with SessionWriter(path) as w:

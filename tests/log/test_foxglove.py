@@ -12,7 +12,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
 from layerskin_exp.log import load_session
-from layerskin_exp.log import schema as S
+from layerskin_exp.log.session import schema as S
 from layerskin_exp.types import ADC_MAX
 from protocols.app import run_app
 from protocols.grip import run_grip_trial

@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 
 from layerskin_exp.log import SessionFileError, SessionWriter, load_session
 from layerskin_exp.log.cli import main as cli_main
-from layerskin_exp.log.recover import recover
+from layerskin_exp.log.container.recover import recover
 
 N_CASES = 200
 

@@ -15,8 +15,8 @@ from ws_client import FoxgloveClient
 
 from hardware import build_rig
 from layerskin_exp.log import load_session
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.live import FIXED_TOPICS, LiveView
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.view.live import FIXED_TOPICS, LiveView
 from protocols.app import run_app
 from protocols.grip import run_grip_trial
 from tests.protocols.conftest import TINY_GRIP, compose_app

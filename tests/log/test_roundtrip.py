@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 
 from layerskin_exp import __version__
 from layerskin_exp.log import SessionClosedError, SessionWriter, load_session
-from layerskin_exp.log import schema as S
+from layerskin_exp.log.session import schema as S
 from layerskin_exp.types import (
     GripperState,
     MarkerDetection,
@@ -226,7 +226,7 @@ def test_int_arrays_are_accepted_as_counts(tmp_path):
 
 
 def test_gather_rows_matches_slicing_at_every_alignment():
-    from layerskin_exp.log.reader import _gather_rows
+    from layerskin_exp.log.session.reader import _gather_rows
 
     rng = np.random.default_rng(5)
     data = rng.integers(0, 256, 20_000, dtype=np.uint8)

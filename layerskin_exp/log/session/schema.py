@@ -13,7 +13,7 @@ device time onto the host timeline with the stored clock maps (t_ns), as before.
 
 Frames: every Foxglove message names its frame (skin images "skin", poses the frame they are
 expressed in, the camera image "camera"); FrameTransform messages on /tf relate them (see
-layerskin_exp.log.frames).
+layerskin_exp.log.view.frame_tree).
 
 Channels whose metadata has no "stream" key (/log, image annotations) are views for Foxglove of
 data that is already in a stream; the reader skips them.

@@ -32,7 +32,7 @@ from mcap.records import Channel, Metadata, Schema
 from numpy.lib.stride_tricks import sliding_window_view
 
 from layerskin_exp.log.errors import SessionFileError
-from layerskin_exp.log.framing import (
+from layerskin_exp.log.container.framing import (
     MAGIC,
     ChunkHead,
     Summary,

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import foxglove.layouts as fl
 
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.frames import BASE
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.view.frame_tree import BASE
 from layerskin_exp.types import ADC_MAX
 
 SUMMARY_TOPIC = S.SKIN_SUMMARY_TOPIC

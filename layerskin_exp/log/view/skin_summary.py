@@ -11,7 +11,7 @@ import numpy as np
 
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.features import centre_of_pressure
-from layerskin_exp.log import schema as S
+from layerskin_exp.log.session import schema as S
 from layerskin_exp.types import TwoLayerFrame
 
 DISPLAY_PERIOD_NS = 33_000_000  # ~30 Hz

@@ -19,9 +19,9 @@ from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 
 import layerskin_exp
-from layerskin_exp.log import frames as F
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.lock import WriterLock
+from layerskin_exp.log.view import frame_tree as F
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.container.lock import WriterLock
 from layerskin_exp.sync import estimate_clock_map
 from layerskin_exp.types import (
     SKIN_SHAPE,
@@ -258,7 +258,7 @@ class SessionWriter:
             self._add_metadata(name, value)
         self._add_metadata(S.META_LABELS, labels)
         # Foxglove opens the file with this layout (both layers 0..4095, plots, 3D scene).
-        from layerskin_exp.log.layout import session_layout
+        from layerskin_exp.log.view.layout import session_layout
 
         self._mcap.add_metadata(S.META_LAYOUT, {"": session_layout().to_json()})
 

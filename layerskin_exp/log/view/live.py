@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import logging
 
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.view import DISPLAY_PERIOD_NS
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.view.skin_summary import DISPLAY_PERIOD_NS
 
 log = logging.getLogger(__name__)
 
@@ -98,7 +98,7 @@ class LiveView:
 
     @staticmethod
     def layout_json() -> str:
-        from layerskin_exp.log.layout import session_layout
+        from layerskin_exp.log.view.layout import session_layout
 
         return session_layout().to_json()
 
