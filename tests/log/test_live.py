@@ -66,7 +66,8 @@ def test_client_receives_a_running_trial_decimated(tmp_path):
         assert 5 <= len(images) <= span_s * 31 + 2 < n_file
         # the pixels are the frames written to the file at those times
         sent = np.frombuffer(images[-1][1].data, "<u2").reshape(16, 16)
-        i = int(np.flatnonzero(session.streams["skin"]["host_t_ns"] == images[-1][0])[0])
+        # sent with the file's log time (Unix ns), not the host's monotonic time
+        i = int(np.flatnonzero(session.unix_ns(session.streams["skin"]["host_t_ns"]) == images[-1][0])[0])
         np.testing.assert_array_equal(sent, session.streams["skin"][layer][i])
     summary = [m for _, m in got[S.SKIN_SUMMARY_TOPIC]]
     assert max(m["deep"]["total_counts"] for m in summary) > 500 and any(m["deep"]["cop_mm"] for m in summary)

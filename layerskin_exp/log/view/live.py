@@ -77,9 +77,10 @@ class LiveView:
                                                     context=self.context)
         return ch
 
-    def frame(self, frame, head: bytes) -> None:
-        """Both layers of a skin frame (head: its RawImage bytes before the pixels), thinned."""
-        t = int(frame.host_t_ns)
+    def frame(self, frame, head: bytes, t_ns: int) -> None:
+        """Both layers of a skin frame (head: its RawImage bytes before the pixels; t_ns: its log
+        time, Unix ns), thinned."""
+        t = int(t_ns)
         if self._last_frame_ns is not None and t - self._last_frame_ns < self.period_ns:
             return
         self._last_frame_ns = t

@@ -7,6 +7,8 @@ measurable; the analysis never reads it (it recomputes features from the raw cou
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from layerskin_exp.config import SkinConfig
@@ -58,6 +60,7 @@ class SkinView:
                            "cop_mm": [float(v) for v in cop] if loaded else []}
             px = (cop - self._origin_mm) * self._px_per_mm + 0.5
             # image rows run along +y like the map's rows
-            out.append((S.cop_topic(layer), S.ImageAnnotations, S.cop_payload(px, host)))
+            # the annotation carries its image's timestamp: the writer supplies it (Unix time)
+            out.append((S.cop_topic(layer), S.ImageAnnotations, partial(S.cop_payload, px)))
         out.append((S.SKIN_SUMMARY_TOPIC, "layerskin.SkinSummary", S.dumps(body)))
         return out
