@@ -19,8 +19,7 @@ import numpy as np
 
 from hardware.interfaces import DeviceError, Rig
 from layerskin_exp.log import SessionFileError, SessionWriter, load_session
-from layerskin_exp.log.view import FrameTree
-from layerskin_exp.log.view import SkinView
+from layerskin_exp.log.view import FrameTree, SkinView
 from layerskin_exp.types import (
     GripperState,
     MarkerDetection,

@@ -137,9 +137,12 @@ def test_recover_cli(tmp_path, capsys):
     cut.write_bytes(path.read_bytes()[:-2000])
     assert cli_main(["recover", str(cut), str(tmp_path / "out.mcap")]) == 0
     assert "recovered" in capsys.readouterr().out
-    assert cli_main(["inspect", str(tmp_path / "out.mcap")]) == 0
+    assert cli_main(["inspect", str(tmp_path / "out.mcap")]) == 1  # readable, but not a complete trial
     out = capsys.readouterr().out
     assert "skin" in out and "complete: False" in out
+    assert cli_main(["inspect", str(cut)]) == 1  # the cut-off file itself
+    assert cli_main(["inspect", str(path)]) == 0
+    assert "complete: True" in capsys.readouterr().out
     assert HOST0_NS > 0
 
 

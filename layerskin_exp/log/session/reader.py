@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from layerskin_exp.log.session import schema as S
-from layerskin_exp.log.errors import SessionFileError
 from layerskin_exp.log.container.scan import ChannelMessages, Lost, McapScan, scan
+from layerskin_exp.log.errors import SessionFileError
+from layerskin_exp.log.session import schema as S
 from layerskin_exp.sync import ClockMap, estimate_clock_map
 from layerskin_exp.types import SKIN_SHAPE
 

@@ -19,10 +19,10 @@ from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 
 import layerskin_exp
-from layerskin_exp.log.view import frame_tree as F
+from layerskin_exp.log.container.lock import WriterLock
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.session.epoch import session_offset_ns
-from layerskin_exp.log.container.lock import WriterLock
+from layerskin_exp.log.view import frame_tree as F
 from layerskin_exp.sync import estimate_clock_map
 from layerskin_exp.types import (
     SKIN_SHAPE,
@@ -273,10 +273,6 @@ class SessionWriter:
         for name, value in records.items():
             self._add_metadata(name, value)
         self._add_metadata(S.META_LABELS, labels)
-        # Foxglove opens the file with this layout (both layers 0..4095, plots, 3D scene).
-        from layerskin_exp.log.view.layout import session_layout
-
-        self._mcap.add_metadata(S.META_LAYOUT, {"": session_layout().to_json()})
 
     def _add_metadata(self, name: str, values) -> None:
         # MCAP metadata maps str -> str: each value is stored as JSON so types come back.
@@ -641,9 +637,21 @@ class SessionWriter:
             if d
         }
 
+    def _write_layout(self) -> None:
+        """The Foxglove layout of the topics written (see view/layout.py), in the SDK's form and
+        in the app's import form; a layout that cannot be built is left out, never the session."""
+        from layerskin_exp.log.view.layout import app_layout, session_layout
+
+        try:
+            layout = session_layout(self._channels)
+        except ValueError:  # nothing written that a panel could show
+            return
+        self._mcap.add_metadata(S.META_LAYOUT, {"": layout.to_json()})
+        self._mcap.add_metadata(S.META_LAYOUT_APP, {"": S.dumps(app_layout(layout)).decode()})
+
     def close(self, outcome: str = "complete", *, move_to=None) -> None:
-        """Record the clock sync and the outcome ("complete" or "aborted: <reason>"), write the
-        MCAP summary and close the file. Closing twice is a no-op.
+        """Record the clock sync, the Foxglove layout of what was written and the outcome
+        ("complete" or "aborted: <reason>"), write the MCAP summary and close the file. Closing twice is a no-op.
 
         move_to: rename the finished file to this path (atomically, fsynced) while the lock is
         still held, so no other writer can claim the old name between closing and renaming.
@@ -659,6 +667,7 @@ class SessionWriter:
             except Exception as exc:  # never lose the session over a failed fit
                 maps = {"error": f"{type(exc).__name__}: {exc}"}
             self._add_metadata(S.META_CLOCK_SYNC, maps)
+            self._write_layout()
             self._add_metadata(S.META_OUTCOME, {"outcome": outcome})
             self._mcap.finish()
             self._file.flush()

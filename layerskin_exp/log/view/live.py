@@ -98,10 +98,13 @@ class LiveView:
         self._channel(topic, schema).log(payload, log_time=int(t_ns))
 
     @staticmethod
-    def layout_json() -> str:
-        from layerskin_exp.log.view.layout import session_layout
+    def layout_json(setup: str, *, estimate: bool = False, camera: bool = False) -> str:
+        """The app-format layout (Layouts > Import) of a rig's live view."""
+        import json
 
-        return session_layout().to_json()
+        from layerskin_exp.log.view.layout import rig_layout
+
+        return json.dumps(rig_layout(setup, estimate=estimate, camera=camera))
 
     def close(self) -> None:
         self.server.stop()
