@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 
 from benchmarks.log_write import N_FRAMES, skin_frames, write_session
 from layerskin_exp.log import load_session
-from layerskin_exp.log.writer import DEFAULT_COMPRESSION
+from layerskin_exp.log.session.writer import DEFAULT_COMPRESSION
 
 
 def _naive(path: Path, max_pairs: int) -> tuple[float, int]:

@@ -25,8 +25,8 @@ from mcap.writer import CompressionType, Writer
 from mcap_protobuf.writer import Writer as ProtobufWriter
 
 from layerskin_exp.log import SessionWriter
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.writer import DEFAULT_COMPRESSION
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.session.writer import DEFAULT_COMPRESSION
 from layerskin_exp.types import TwoLayerFrame
 
 FRAME_PERIOD_NS = 2_360_000  # one frame pair every 2.36 ms (~424 Hz)

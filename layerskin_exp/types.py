@@ -100,7 +100,7 @@ class FrameTransform:
     and rotation quaternion (4,) x, y, z, w, so that p_parent = R p_child + t.
 
     The session's frame tree: base -> tool -> skin, base -> camera, camera -> marker_<id>
-    (see layerskin_exp.log.frames). Geometry, not a device sample: it has no device clock.
+    (see layerskin_exp.log.view.frame_tree). Geometry, not a device sample: it has no device clock.
     """
 
     parent_frame_id: str

@@ -103,13 +103,16 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
              ", dirty" if prov["git_dirty"] else "", rig.backend, prov["overrides"])
     live = None
     if getattr(typed, "live", False):
-        from layerskin_exp.log.live import LiveView
+        from layerskin_exp.log.view.live import LiveView
 
         live = LiveView(port=typed.live_port)
         print(f"live view: open {live.url} in Foxglove (Open connection > Foxglove WebSocket)", flush=True)
+    finished = False
     try:
         check_termination()  # SIGTERM while connecting
-        return body(typed, rig, metadata, **({"live": live} if live is not None else {}))
+        result = body(typed, rig, metadata, **({"live": live} if live is not None else {}))
+        finished = True
+        return result
     except KeyboardInterrupt:
         rig.stop_motion()
         print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
@@ -138,4 +141,6 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         rig.stop_motion()
         rig.disconnect()
         if live is not None:
+            if finished and getattr(typed, "live_hold", False):
+                live.hold(termination_pending)  # Ctrl-C or SIGTERM ends it
             live.close()

@@ -191,6 +191,7 @@ class ForceCalibrationConfig:
     progress: bool = True
     live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
     live_port: int = 8765
+    live_hold: bool = False  # with live: keep serving after the run until Ctrl-C
 
     def __post_init__(self) -> None:
         s = self.safety
@@ -303,6 +304,7 @@ class GripDepthConfig:
     progress: bool = True
     live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
     live_port: int = 8765
+    live_hold: bool = False  # with live: keep serving after the run until Ctrl-C
     # An estimator artifact (the report's out/models/T-s5.pt): when set, every skin frame goes
     # through the online estimator and the session logs /estimate/force and /estimate/slip.
     estimator: str | None = None

@@ -20,7 +20,8 @@ import hashlib
 import json
 
 # Keys that never shape the data (dotted paths into the resolved config).
-RUN_ONLY_KEYS = ("data_root", "progress", "trial_timeout_s", "hydra", "live", "live_port", "save_images")
+RUN_ONLY_KEYS = ("data_root", "progress", "trial_timeout_s", "hydra", "live", "live_port", "live_hold",
+                 "save_images")
 # Keys that select a trial within a design (their values are in the trial labels).
 TRIAL_SELECTOR_KEYS = ("grip_depth", "trial", "trajectory")
 DESIGN_ID_LENGTH = 10

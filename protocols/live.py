@@ -1,14 +1,21 @@
-"""`python -m protocols.live PROTOCOL [overrides]`: run a protocol and watch it in Foxglove.
+"""`python -m protocols.live PROTOCOL [--hold] [overrides]`: run a protocol and watch it in Foxglove.
 
     python -m protocols.live grip_depth hardware=loopback grip_depth=9     # (lsx-live ...)
     python -m protocols.live force_calibration positions.count=2 live_port=8766
+    python -m protocols.live grip_depth --hold                            # stays up after the run
 
 The same as the protocol's own command with live=true: a Foxglove WebSocket server on
 127.0.0.1:live_port serves both layer maps, their CoP, force, poses, the frame tree and the
-events, thinned to display rate. In Foxglove: Open connection > Foxglove WebSocket >
-ws://127.0.0.1:8765, then Layouts > Import the file `python -m layerskin_exp.log layout`
-writes (the layout every session file carries). The simulated rig (hardware=sim) runs much
-faster than real time; hardware=loopback runs in real time.
+events, thinned to display rate. --hold (live_hold=true) keeps it serving after the run until
+Ctrl-C, so a client that connects late still sees the run's end; every client gets the events
+logged before it subscribed.
+
+In Foxglove: Open connection > Foxglove WebSocket > ws://127.0.0.1:8765, then Layouts > Import
+the file `python -m layerskin_exp.log layout gripper` (or `platform`) writes. The server is the
+Foxglove SDK's and speaks the subprotocol foxglove.sdk.v1 (and v1.1), which the current Foxglove
+app offers; clients that offer only foxglove.websocket.v1 (older Foxglove Studio releases) are
+refused by the SDK, reported once as a warning. The simulated rig (hardware=sim) runs much faster
+than real time; hardware=loopback runs in real time.
 """
 
 from __future__ import annotations
@@ -27,8 +34,9 @@ def cli(argv: list[str] | None = None) -> int:
     import importlib
 
     module = importlib.import_module(PROTOCOLS[argv[0]])
-    rest = [a for a in argv[1:] if not a.startswith("live=")]
-    sys.argv = [f"{sys.argv[0]} {argv[0]}", "live=true", *rest]
+    hold = ["live_hold=true"] if "--hold" in argv[1:] else []
+    rest = [a for a in argv[1:] if not a.startswith("live=") and a != "--hold"]
+    sys.argv = [f"{sys.argv[0]} {argv[0]}", "live=true", *hold, *rest]
     module.cli()
     return 0
 

@@ -20,8 +20,7 @@ import numpy as np
 from hardware.interfaces import DeviceError
 from hardware.rig import Rig
 from layerskin_exp.log import SessionFileError, SessionWriter, load_session
-from layerskin_exp.log.frames import FrameTree
-from layerskin_exp.log.view import SkinView
+from layerskin_exp.log.view import FrameTree, SkinView
 from layerskin_exp.types import (
     GripperState,
     MarkerDetection,

@@ -16,7 +16,7 @@ host timeline, "host_t_ns", "device_t_ns", "seq"; all (N,) int64):
     camera   image (N, H, W) uint8 (or a list if sizes differ)
     events   kind, message list[str], detail list[dict]  (t_ns = host_t_ns, no seq)
     transforms  parent_frame_id, child_frame_id list[str], translation_m (N, 3), rotation_xyzw (N, 4)
-             (t_ns = host_t_ns; the frame tree of layerskin_exp.log.frames)
+             (t_ns = host_t_ns; the frame tree of layerskin_exp.log.view.frame_tree)
 Poses written with write_pose(p, topic) on other topics appear under their topic name.
 
 One live writer per file: SessionWriter holds an OS lock on its file until close; a second
@@ -29,8 +29,8 @@ read at all raises SessionFileError naming the file.
 """
 
 from layerskin_exp.log.errors import SessionFileError, SessionInUseError
-from layerskin_exp.log.reader import LostRange, Session, SessionWarning, load_session
-from layerskin_exp.log.writer import SessionClosedError, SessionWriter
+from layerskin_exp.log.session.reader import LostRange, Session, SessionWarning, load_session
+from layerskin_exp.log.session.writer import SessionClosedError, SessionWriter
 
 __all__ = [
     "LostRange",

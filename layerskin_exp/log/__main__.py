@@ -1,4 +1,4 @@
-"""python -m layerskin_exp.log inspect FILE | recover IN OUT"""
+"""python -m layerskin_exp.log inspect FILE | recover IN OUT | layout platform|gripper|FILE"""
 
 import sys
 

@@ -1,16 +1,19 @@
-"""Command line: inspect a session file, recover one whose writer died, print the Foxglove layout."""
+"""Command line: inspect a session file, recover one whose writer died, print a Foxglove layout."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import sys
 import warnings
+from datetime import datetime, timezone
 
 import numpy as np
 
-from layerskin_exp.log.reader import Session, load_session
-from layerskin_exp.log.recover import recover
-from layerskin_exp.log.scan import SessionFileError
+from layerskin_exp.log.container.recover import recover
+from layerskin_exp.log.errors import SessionFileError
+from layerskin_exp.log.session.reader import Session, load_session
 
 
 def describe(s: Session) -> str:
@@ -41,6 +44,8 @@ def describe(s: Session) -> str:
     starts = [a["t_ns"][0] for a in s.streams.values() if len(a["t_ns"])]
     ends = [a["t_ns"][-1] for a in s.streams.values() if len(a["t_ns"])]
     if starts:
+        began = datetime.fromtimestamp(int(s.unix_ns(min(starts))) / 1e9, timezone.utc)
+        lines.append(f"  started: {began:%Y-%m-%d %H:%M:%S.%f} UTC (log times: host + {s.epoch_offset_ns} ns)")
         lines.append(f"  duration: {(max(ends) - min(starts)) / 1e9:.3f} s")
     lines.append(
         f"  {'stream':<14}{'count':>9}{'rate Hz':>10}{'dur s':>9}{'seq gaps':>10}{'lost':>7}"
@@ -70,30 +75,65 @@ def describe(s: Session) -> str:
     return "\n".join(lines)
 
 
+EXIT_COMPLETE = 0
+EXIT_INCOMPLETE = 1  # readable, but damaged, cut off (no outcome) or aborted
+EXIT_UNREADABLE = 2
+
+
+def _layout(target: str, estimate: bool, camera: bool) -> str:
+    """The app-format layout of a rig (target "platform"/"gripper") or stored in a session file."""
+    from layerskin_exp.log.session import schema as S
+    from layerskin_exp.log.view.layout import SETUPS, rig_layout
+
+    if target in SETUPS:
+        return json.dumps(rig_layout(target, estimate=estimate, camera=camera), indent=1)
+    from layerskin_exp.log.container.scan import scan
+
+    stored = dict(scan(target).metadata).get(S.META_LAYOUT_APP)
+    if not stored:
+        raise SessionFileError(f"{target}: no stored layout (the writer did not close this file); "
+                               f"print a rig's instead: layout {'|'.join(SETUPS)}")
+    return json.dumps(json.loads(stored[""]), indent=1)
+
+
+def _emit(text: str) -> None:
+    """Print; a reader that stops early (`| head`) ends the output quietly, not with a traceback."""
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:
+        # Python would report the pipe again when it flushes stdout at exit: point it at devnull.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m layerskin_exp.log", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    p_inspect = sub.add_parser("inspect", help="print streams, rates, gaps, duration, outcome, labels")
+    p_inspect = sub.add_parser(
+        "inspect", help="print streams, rates, gaps, duration, outcome, labels; exit 0 for a complete "
+        "trial, 1 for a readable one that is damaged, cut off or aborted, 2 for an unreadable file")
     p_inspect.add_argument("file")
     p_recover = sub.add_parser("recover", help="rewrite a file whose writer died into a valid MCAP")
     p_recover.add_argument("input")
     p_recover.add_argument("output")
-    sub.add_parser("layout", help="print the Foxglove layout every session carries (JSON, for Layouts > Import)")
+    p_layout = sub.add_parser("layout", help="print a Foxglove layout (JSON for the app's Layouts > Import): "
+                              "a rig's, for the live view, or the one a session file stores")
+    p_layout.add_argument("target", help="platform | gripper | a session file")
+    p_layout.add_argument("--estimate", action="store_true", help="with the live estimator's panels")
+    p_layout.add_argument("--camera", action="store_true", help="with the camera image (gripper rig)")
     args = parser.parse_args(argv)
-    if args.command == "layout":
-        from layerskin_exp.log.layout import session_layout
-
-        print(session_layout().to_json())
-        return 0
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # damage is listed in the report itself
+            if args.command == "layout":
+                _emit(_layout(args.target, args.estimate, args.camera))
+                return 0
             if args.command == "inspect":
-                print(describe(load_session(args.file, warn=False)))
-            else:
-                n = recover(args.input, args.output)
-                print(f"recovered {n} messages from {args.input} into {args.output} (marked incomplete)")
+                s = load_session(args.file, warn=False)
+                _emit(describe(s))
+                return EXIT_COMPLETE if s.complete else EXIT_INCOMPLETE
+            n = recover(args.input, args.output)
+            _emit(f"recovered {n} messages from {args.input} into {args.output} (marked incomplete)")
     except (SessionFileError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_UNREADABLE
     return 0

@@ -76,7 +76,7 @@ def _session_file(tmp_path, compression="lz4"):
 
 
 def test_directory_named_like_a_session(tmp_path):
-    from layerskin_exp.log.recover import recover
+    from layerskin_exp.log.container.recover import recover
 
     d = tmp_path / "x.mcap"
     d.mkdir()
@@ -111,12 +111,14 @@ def test_corrupted_compression_name_skips_that_chunk(tmp_path):
     path.write_bytes(bytes(raw))
     s = load_session(path, warn=False)
     assert not s.complete and s.chunks_skipped == 1
-    assert (s.lost[0].start_ns, s.lost[0].end_ns) == (bad.message_start_time, bad.message_end_time)
+    # the lost span is on the host timeline: the chunk's log (Unix) times less the session's offset
+    assert (s.lost[0].start_ns, s.lost[0].end_ns) == (bad.message_start_time - s.epoch_offset_ns,
+                                                      bad.message_end_time - s.epoch_offset_ns)
     assert 0 < 300 - len(s.streams["skin"]["seq"]) < 100
 
 
 def test_huge_uncompressed_size_is_not_allocated(tmp_path):
-    from layerskin_exp.log.scan import scan
+    from layerskin_exp.log.container.scan import scan
 
     path, raw, chunks = _session_file(tmp_path)
     for c in chunks[2:4]:
@@ -135,16 +137,17 @@ def test_inspect_shows_the_damage(tmp_path):
     raw[bad.chunk_start_offset + bad.chunk_length // 2 : bad.chunk_start_offset + bad.chunk_length // 2 + 8] = bytes(8)
     path.write_bytes(bytes(raw))
     r = subprocess.run([sys.executable, "-m", "layerskin_exp.log", "inspect", str(path)], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 1, r.stderr  # damaged: readable, not complete
     assert "complete: False" in r.stdout and "DAMAGED: 1 chunk(s) skipped" in r.stdout
-    assert f"lost: {bad.message_start_time} .. {bad.message_end_time} ns" in r.stdout
+    off = load_session(path, warn=False).epoch_offset_ns  # the report gives host times
+    assert f"lost: {bad.message_start_time - off} .. {bad.message_end_time - off} ns" in r.stdout
     assert "outcome: complete" in r.stdout
 
 
 def test_recover_rewrites_around_a_damaged_chunk(tmp_path):
     from mcap.reader import make_reader
 
-    from layerskin_exp.log.recover import recover
+    from layerskin_exp.log.container.recover import recover
 
     path, raw, chunks = _session_file(tmp_path)
     bad = chunks[len(chunks) // 2]
@@ -159,3 +162,32 @@ def test_recover_rewrites_around_a_damaged_chunk(tmp_path):
     assert not r.complete and r.outcome is None and not r.damaged
     assert r.streams["skin"]["seq"].tolist() == damaged.streams["skin"]["seq"].tolist()
     assert r.metadata["recovered"]["lost"][0]["start_ns"] == bad.message_start_time
+
+
+@pytest.mark.parametrize("args", [["layout", "gripper"], ["layout", "platform", "--estimate"]])
+def test_output_into_a_closed_pipe_ends_quietly(args):
+    """`python -m layerskin_exp.log layout | head`: the reader closes the pipe before the JSON is
+    written; the command ends with exit 0 and nothing on stderr (it printed a BrokenPipeError)."""
+    p = subprocess.Popen([sys.executable, "-m", "layerskin_exp.log", *args], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.close()  # before the interpreter has even started: its first write meets a closed pipe
+    err = p.stderr.read()
+    assert p.wait() == 0 and err == b"", err.decode()
+
+
+def test_layout_of_a_session_file_and_of_a_file_without_one(tmp_path):
+    import json
+
+    from log_records import frame
+
+    from layerskin_exp.log import SessionWriter
+
+    path = tmp_path / "s.mcap"
+    with SessionWriter(path, metadata={"backend": "lab"}) as w:
+        w.write(frame(0))
+    r = subprocess.run([sys.executable, "-m", "layerskin_exp.log", "layout", str(path)], capture_output=True, text=True)
+    assert r.returncode == 0 and "configById" in json.loads(r.stdout)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])  # no layout: written at close
+    r = subprocess.run([sys.executable, "-m", "layerskin_exp.log", "layout", str(cut)], capture_output=True, text=True)
+    assert r.returncode == 2 and "no stored layout" in r.stderr and r.stderr.count("\n") == 1

@@ -19,7 +19,7 @@ from log_records import HOST0_NS, frame, records
 
 from layerskin_exp.log import SessionWarning, SessionWriter, load_session
 from layerskin_exp.log.cli import main as cli_main
-from layerskin_exp.log.recover import recover
+from layerskin_exp.log.container.recover import recover
 
 CHUNK_SPAN_NS = 100_000_000
 
@@ -137,9 +137,12 @@ def test_recover_cli(tmp_path, capsys):
     cut.write_bytes(path.read_bytes()[:-2000])
     assert cli_main(["recover", str(cut), str(tmp_path / "out.mcap")]) == 0
     assert "recovered" in capsys.readouterr().out
-    assert cli_main(["inspect", str(tmp_path / "out.mcap")]) == 0
+    assert cli_main(["inspect", str(tmp_path / "out.mcap")]) == 1  # readable, but not a complete trial
     out = capsys.readouterr().out
     assert "skin" in out and "complete: False" in out
+    assert cli_main(["inspect", str(cut)]) == 1  # the cut-off file itself
+    assert cli_main(["inspect", str(path)]) == 0
+    assert "complete: True" in capsys.readouterr().out
     assert HOST0_NS > 0
 
 
@@ -153,7 +156,7 @@ def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compressio
     and the session is not complete although the file's outcome says so."""
     from mcap.reader import make_reader
 
-    from layerskin_exp.log import scan as scan_module
+    from layerskin_exp.log.container import scan as scan_module
 
     monkeypatch.setattr(scan_module, "_THREADS", threads)
     monkeypatch.setattr(scan_module, "_BYTES_PER_THREAD", 1)
@@ -165,9 +168,11 @@ def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compressio
     with open(path, "rb") as fh:
         summary = make_reader(fh).get_summary()
     chunk_indexes = summary.chunk_indexes
-    skin_chunks = [c for c in chunk_indexes if c.message_start_time >= frames[0].host_t_ns]
+    off = w.epoch_offset_ns  # chunk times are log (Unix) times: host time + the session's offset
+    skin_chunks = [c for c in chunk_indexes if c.message_start_time - off >= frames[0].host_t_ns]
     assert len(skin_chunks) >= 6
     bad = skin_chunks[len(skin_chunks) // 2]
+    bad_start_ns, bad_end_ns = bad.message_start_time - off, bad.message_end_time - off
     raw = bytearray(path.read_bytes())
     raw[bad.chunk_start_offset + bad.chunk_length - 200] ^= 0x5A  # inside the chunk's records
     if not with_summary:  # a damaged summary: the reader must find its way without the index
@@ -176,8 +181,8 @@ def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compressio
 
     with pytest.warns(SessionWarning, match="chunk"):
         s = load_session(path)
-    gone = [f for f in frames if bad.message_start_time <= f.host_t_ns <= bad.message_end_time]
-    kept = [f for f in frames if not bad.message_start_time <= f.host_t_ns <= bad.message_end_time]
+    gone = [f for f in frames if bad_start_ns <= f.host_t_ns <= bad_end_ns]
+    kept = [f for f in frames if not bad_start_ns <= f.host_t_ns <= bad_end_ns]
     assert 0 < len(gone) < 100 and kept[-1] is frames[-1]
     skin = s.streams["skin"]
     np.testing.assert_array_equal(skin["seq"], [f.seq for f in kept])
@@ -188,7 +193,7 @@ def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compressio
     lost = s.lost[0]
     assert str(bad.chunk_start_offset) in lost.reason
     if with_summary:
-        assert (lost.start_ns, lost.end_ns) == (bad.message_start_time, bad.message_end_time)
+        assert (lost.start_ns, lost.end_ns) == (bad_start_ns, bad_end_ns)
         assert lost.messages == {"skin": 2 * len(gone)}
     else:  # bounded by the good chunks either side, and containing the lost frames
         assert lost.start_ns <= gone[0].host_t_ns and gone[-1].host_t_ns <= lost.end_ns
@@ -196,7 +201,7 @@ def test_damaged_chunk_is_skipped_and_reported(tmp_path, monkeypatch, compressio
 
 
 def test_multithreaded_decompression_matches_single(tmp_path, monkeypatch):
-    from layerskin_exp.log import scan as scan_module
+    from layerskin_exp.log.container import scan as scan_module
 
     path = tmp_path / "s.mcap"
     with SessionWriter(path) as w:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import base64
 import json
+import logging
+import threading
 import time
 
 import numpy as np
@@ -15,8 +17,8 @@ from ws_client import FoxgloveClient
 
 from hardware import build_rig
 from layerskin_exp.log import load_session
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.live import FIXED_TOPICS, LiveView
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.view.live import FIXED_TOPICS, LiveView
 from protocols.app import run_app
 from protocols.grip import run_grip_trial
 from tests.protocols.conftest import TINY_GRIP, compose_app
@@ -66,7 +68,8 @@ def test_client_receives_a_running_trial_decimated(tmp_path):
         assert 5 <= len(images) <= span_s * 31 + 2 < n_file
         # the pixels are the frames written to the file at those times
         sent = np.frombuffer(images[-1][1].data, "<u2").reshape(16, 16)
-        i = int(np.flatnonzero(session.streams["skin"]["host_t_ns"] == images[-1][0])[0])
+        # sent with the file's log time (Unix ns), not the host's monotonic time
+        i = int(np.flatnonzero(session.unix_ns(session.streams["skin"]["host_t_ns"]) == images[-1][0])[0])
         np.testing.assert_array_equal(sent, session.streams["skin"][layer][i])
     summary = [m for _, m in got[S.SKIN_SUMMARY_TOPIC]]
     assert max(m["deep"]["total_counts"] for m in summary) > 500 and any(m["deep"]["cop_mm"] for m in summary)
@@ -87,3 +90,83 @@ def test_live_option_serves_and_stops_with_the_run(tmp_path, capsys):
     port = int(url.rsplit(":", 1)[1])
     with pytest.raises((ConnectionRefusedError, ConnectionResetError)):  # the server ended with the run
         FoxgloveClient("127.0.0.1", port, timeout=2)
+
+
+def _log_client(port: int, start: bool = True) -> FoxgloveClient:
+    """A client subscribed to /log; start: read on in a thread (else the caller reads)."""
+    c = FoxgloveClient("127.0.0.1", port)
+    c.read_until(lambda c: any(ch["topic"] == S.LOG_TOPIC for ch in c.channels.values()))
+    c.subscribe([next(k for k, ch in c.channels.items() if ch["topic"] == S.LOG_TOPIC)])
+    if start:
+        c.start()
+    return c
+
+
+def _event(view: LiveView, k: int) -> int:
+    t = 1_800_000_000 * 10**9 + k
+    view.message(S.LOG_TOPIC, S.Log, S.log_payload("phase", f"event {k}", {}, t), t, key=None)
+    return t
+
+
+def test_a_late_client_gets_the_earlier_events_once_and_others_no_repeat():
+    with LiveView(port=0) as view:
+        early = _log_client(view.port)
+        time.sleep(0.2)
+        sent = [_event(view, k) for k in range(3)]
+        late = _log_client(view.port)
+        time.sleep(0.3)
+        sent.append(_event(view, 3))
+        time.sleep(0.3)
+        early.close()
+        late.close()
+    assert [t for _, t, _ in early.messages] == sent
+    assert sorted(t for _, t, _ in late.messages) == sent  # the first three replayed, then live
+
+
+def test_a_foxglove_websocket_v1_client_is_refused_with_one_warning(caplog):
+    """The SDK's server speaks foxglove.sdk.v1 only; refusals are reported once, not as an error each."""
+    with caplog.at_level(logging.DEBUG), LiveView(port=0) as view:
+        for _ in range(3):
+            with pytest.raises(ConnectionError, match="400"):
+                FoxgloveClient("127.0.0.1", view.port, subprotocol="foxglove.websocket.v1", timeout=5)
+        FoxgloveClient("127.0.0.1", view.port, subprotocol="foxglove.sdk.v1.1", timeout=5).close()
+        time.sleep(0.3)
+    refusals = [r for r in caplog.records if "handshake failed" in r.getMessage()]
+    assert len(refusals) == 3 and not [r for r in refusals if r.levelno >= logging.ERROR]
+    assert sum(r.levelno == logging.WARNING for r in refusals) <= 1  # once per process
+    assert all("foxglove.sdk.v1" in r.getMessage() for r in refusals if r.levelno == logging.WARNING)
+
+
+def test_hold_keeps_serving_after_the_run_until_stopped(tmp_path, capsys):
+    """live_hold=true (`python -m protocols.live ... --hold`): after the trial the server stays up,
+    a client joining then gets the trial's events, and a stop request (what Ctrl-C or SIGTERM
+    makes) ends it. Run in a thread here, where the app leaves signal handling alone."""
+    from protocols import runner
+
+    cfg, _ = compose_app("grip_depth", [*TINY_GRIP, f"data_root={tmp_path}", "progress=false", "live=true",
+                                        "live_port=0", "live_hold=true"])
+    done = {}
+    th = threading.Thread(target=lambda: done.setdefault("result", run_app(cfg, "gripper", run_grip_trial)))
+    th.start()
+    try:
+        out = ""
+        deadline = time.monotonic() + 120
+        while "run finished" not in out and th.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.1)
+            out += capsys.readouterr().out
+        assert "run finished" in out and th.is_alive(), out
+        port = int(out.split("ws://127.0.0.1:", 1)[1].split()[0])
+        session = load_session(next(tmp_path.rglob("*.mcap")))  # closed before the hold began
+        client = _log_client(port, start=False)  # after the run: the server is still up
+        client.read_until(lambda c: len(c.messages) >= len(session.streams["events"]["kind"]), limit=1000)
+        client.close()
+        assert sorted(t for _, t, _ in client.messages) == sorted(session.unix_ns(session.streams["events"]["host_t_ns"]))
+        time.sleep(0.5)
+        assert th.is_alive()  # still holding
+        runner.request_termination("interrupted (Ctrl-C)")
+        th.join(timeout=30)
+        assert not th.is_alive() and done["result"].outcome == "complete"
+    finally:
+        runner.request_termination("test over")
+        th.join(timeout=30)
+        runner._termination.clear()  # the request was this test's; later tests run trials again

@@ -10,7 +10,7 @@ import pytest
 from log_records import records
 
 from layerskin_exp.log import SessionWriter
-from layerskin_exp.log import writer as W
+from layerskin_exp.log.session import writer as W
 
 META = {"config": {"a": 1}, "backend": "sim", "calibration": {"gain": [1.0]}}
 

@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 
 from layerskin_exp import __version__
 from layerskin_exp.log import SessionClosedError, SessionWriter, load_session
-from layerskin_exp.log import schema as S
+from layerskin_exp.log.session import schema as S
 from layerskin_exp.types import (
     GripperState,
     MarkerDetection,
@@ -149,7 +149,7 @@ def test_skin_payload_is_the_protobuf_encoding(tmp_path):
 def test_file_opens_with_the_mcap_library(tmp_path):
     """Foxglove-facing layout: RawImage channels with protobuf schemas, log/publish/sequence."""
     path = tmp_path / "s.mcap"
-    _write(path, records(50))
+    off = _write(path, records(50)).epoch_offset_ns
     with open(path, "rb") as fh:
         reader = make_reader(fh)
         summary = reader.get_summary()
@@ -159,8 +159,10 @@ def test_file_opens_with_the_mcap_library(tmp_path):
         assert topics["/ft/wrench"] == "layerskin.Wrench"
         for _schema, _channel, msg in reader.iter_messages(topics=["/skin/deep"]):
             f = frame(msg.sequence)
-            assert (msg.log_time, msg.publish_time) == (f.host_t_ns, f.device_t_ns)
+            # log time: host receive time on the Unix epoch; publish time: the device's own
+            assert (msg.log_time, msg.publish_time) == (f.host_t_ns + off, f.device_t_ns)
             img = RawImage.FromString(msg.data)
+            assert img.timestamp.ToNanoseconds() == msg.log_time
             assert img.encoding == "mono16" and img.step == 32
             np.testing.assert_array_equal(np.frombuffer(img.data, "<u2").reshape(16, 16), f.deep)
         names = {m.name for m in reader.iter_metadata()}
@@ -226,7 +228,7 @@ def test_int_arrays_are_accepted_as_counts(tmp_path):
 
 
 def test_gather_rows_matches_slicing_at_every_alignment():
-    from layerskin_exp.log.reader import _gather_rows
+    from layerskin_exp.log.session.reader import _gather_rows
 
     rng = np.random.default_rng(5)
     data = rng.integers(0, 256, 20_000, dtype=np.uint8)
@@ -249,3 +251,59 @@ def test_streams_argument_decodes_only_those(tmp_path):
             np.testing.assert_array_equal(part.streams[name][key], value)
     assert set(load_session(path, streams="events").streams) == {"events"}
     assert part.labels == full.labels and part.outcome == "complete"
+
+
+def _arrays(s) -> dict:
+    return {(name, k): v for name, a in s.streams.items() for k, v in a.items()}
+
+
+def test_log_times_are_unix_and_the_aligned_arrays_do_not_depend_on_the_offset(tmp_path):
+    """Two offsets, same records: MCAP log times differ by exactly the offset difference, and
+    every array the reader returns (host, device and aligned times included) is identical."""
+    recs = records(300)
+    year_2000_ns = 946_684_800 * 10**9
+    a = _write(tmp_path / "a.mcap", recs, epoch_offset_ns=year_2000_ns)
+    b = _write(tmp_path / "b.mcap", recs, epoch_offset_ns=year_2000_ns + 7 * 86_400 * 10**9 + 123)
+    sa, sb = load_session(a.path), load_session(b.path)
+    assert (sa.epoch_offset_ns, sb.epoch_offset_ns) == (a.epoch_offset_ns, b.epoch_offset_ns)
+    xa, xb = _arrays(sa), _arrays(sb)
+    assert xa.keys() == xb.keys()
+    for key, v in xa.items():
+        if isinstance(v, np.ndarray):
+            np.testing.assert_array_equal(v, xb[key], err_msg=str(key))
+        else:
+            assert v == xb[key], key
+    # the aligned timeline is the host one, as the records gave it
+    np.testing.assert_array_equal(sa.streams["skin"]["host_t_ns"], [f.host_t_ns for f in _of(recs, TwoLayerFrame)])
+    with open(b.path, "rb") as fh:
+        logs = [(m.log_time, m.channel_id) for _, _, m in make_reader(fh).iter_messages()]
+    host = sorted(int(t) for t in np.concatenate([v for (n, k), v in xb.items() if k == "host_t_ns"]))
+    assert min(t for t, _ in logs) == host[0] + b.epoch_offset_ns
+    assert all(t >= year_2000_ns for t, _ in logs)
+
+
+def test_offset_is_chosen_from_the_backend(tmp_path):
+    """Hardware sessions are dated by the wall clock; simulated ones by a day per config, the
+    same for the same config (byte-identical reruns) and different for another config."""
+    import time
+
+    from layerskin_exp.log.session.epoch import SIM_EPOCH_NS
+
+    before = time.time_ns() - time.monotonic_ns()
+    with SessionWriter(tmp_path / "lab.mcap", metadata={"backend": "lab"}) as w:
+        pass
+    after = time.time_ns() - time.monotonic_ns()
+    assert before - 1_000_000 <= w.epoch_offset_ns <= after + 1_000_000
+    sims = []
+    for name, seed in (("s1", 1), ("s1b", 1), ("s2", 2)):
+        with SessionWriter(tmp_path / f"{name}.mcap", metadata={"backend": "sim", "config": {"seed": seed}},
+                           labels={"k": 1}) as w:
+            for r in records(20):
+                w.write(r)
+        sims.append(w.epoch_offset_ns)
+    assert sims[0] == sims[1] != sims[2]
+    assert all(SIM_EPOCH_NS <= o < SIM_EPOCH_NS + 100 * 366 * 86_400 * 10**9 and (o - SIM_EPOCH_NS) % 86_400_000_000_000 == 0
+               for o in sims)
+    assert (tmp_path / "s1.mcap").read_bytes() == (tmp_path / "s1b.mcap").read_bytes()
+    assert load_session(tmp_path / "s2.mcap").metadata == load_session(tmp_path / "s1.mcap").metadata | {
+        "config": {"seed": 2}}

@@ -108,6 +108,9 @@ class FoxgloveClient:
 
     def start(self) -> None:
         """Keep reading in a thread (until the connection ends)."""
+        # the connect timeout guards the handshake; a busy trial may stay silent for longer
+        self.sock.settimeout(None)
+
         def run():
             try:
                 self.read_until(lambda _: False, limit=10**9)

@@ -9,8 +9,8 @@ import numpy as np
 from mcap.writer import Writer
 
 import layerskin_exp
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.scan import SessionFileError, scan
+from layerskin_exp.log.container.scan import SessionFileError, scan
+from layerskin_exp.log.session import schema as S
 
 
 def recover(src, dst) -> int:

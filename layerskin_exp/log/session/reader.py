@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from layerskin_exp.log import schema as S
+from layerskin_exp.log.container.scan import ChannelMessages, Lost, McapScan, scan
 from layerskin_exp.log.errors import SessionFileError
-from layerskin_exp.log.scan import ChannelMessages, Lost, McapScan, scan
+from layerskin_exp.log.session import schema as S
 from layerskin_exp.sync import ClockMap, estimate_clock_map
 from layerskin_exp.types import SKIN_SHAPE
 
@@ -26,8 +26,8 @@ class SessionWarning(UserWarning):
 class LostRange:
     """Data a damaged file did not give back.
 
-    start_ns / end_ns: host (log) time span the lost messages lie in, the timeline of every
-        stream's "host_t_ns" (None where nothing in the file bounds it);
+    start_ns / end_ns: host time span the lost messages lie in, the timeline of every stream's
+        "host_t_ns" (log time - Session.epoch_offset_ns; None where nothing in the file bounds it);
     messages: messages lost per stream ("skin" counts both layers' messages), None if unknown;
     reason: what was damaged and where (byte offset).
     """
@@ -61,6 +61,8 @@ class Session:
         everything else was read.
     damaged: any damage found, including damage that lost no messages (metadata, indexes).
     chunks_skipped: chunks that could not be read.
+    epoch_offset_ns: MCAP log_time - host_t_ns, the session's place on the Unix epoch (0 for a
+        file written before log times were Unix times, or whose "log_time" record is lost).
     """
 
     path: Path
@@ -74,6 +76,11 @@ class Session:
     lost: list[LostRange] = field(default_factory=list)
     damaged: bool = False
     chunks_skipped: int = 0
+    epoch_offset_ns: int = 0
+
+    def unix_ns(self, host_t_ns):
+        """Unix ns (the file's log time) of host times (int or array)."""
+        return host_t_ns + self.epoch_offset_ns
 
 
 def _decode_meta(values: dict) -> dict:
@@ -120,16 +127,21 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         msgs.append("the session metadata record is damaged; its channels are read without it")
     metadata = {k: v for k, v in session_meta.items() if k not in ("format", "format_version")}
     for name, values in records.items():
-        if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_LAYOUT):
+        if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_LAYOUT,
+                        S.META_LAYOUT_APP, S.META_LOG_TIME):
             metadata[name] = values
+    epoch = records.get(S.META_LOG_TIME, {}).get("offset_ns", 0)
+    if not isinstance(epoch, int) or isinstance(epoch, bool) or epoch < 0:
+        msgs.append(f"log_time record holds offset {epoch!r}; log times read as host times")
+        epoch = 0
     outcome = records.get(S.META_OUTCOME, {}).get("outcome")
     if outcome is not None and not isinstance(outcome, str):
         msgs.append(f"outcome record holds {outcome!r}, not a string; treated as absent")
         outcome = None
     labels = records.get(S.META_LABELS, {})
     wanted = None if streams is None else ({streams} if isinstance(streams, str) else set(streams))
-    lost = [_lost_range(x, sc) for x in sc.lost]
-    streams = _decode_streams(sc, msgs, wanted, lost)
+    lost = [_lost_range(x, sc, epoch) for x in sc.lost]
+    streams = _decode_streams(sc, msgs, wanted, lost, epoch)
     stored = records.get(S.META_CLOCK_SYNC, {})
     clock_sync = {}
     for name, arrays in streams.items():
@@ -172,6 +184,7 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         lost=lost,
         damaged=damaged,
         chunks_skipped=sc.chunks_skipped,
+        epoch_offset_ns=epoch,
     )
 
 
@@ -182,29 +195,32 @@ def _stream_of(sc: McapScan, cid: int) -> str:
     return c.metadata.get("stream") or c.topic
 
 
-def _lost_range(x: Lost, sc: McapScan) -> LostRange:
+def _lost_range(x: Lost, sc: McapScan, epoch: int) -> LostRange:
     per = None
     if x.messages is not None:
         per = {}
         for cid, k in x.messages.items():
             name = _stream_of(sc, cid)
             per[name] = per.get(name, 0) + int(k)
-    return LostRange(x.start_ns, x.end_ns, per, x.reason)
+    start = None if x.start_ns is None else x.start_ns - epoch
+    end = None if x.end_ns is None else x.end_ns - epoch
+    return LostRange(start, end, per, x.reason)
 
 
 # ------------------------------------------------------------------------------ per-stream decoding
 
 
-def _times(m: ChannelMessages) -> dict:
+def _times(m: ChannelMessages, epoch: int) -> dict:
     h = m.header
     return {
-        "host_t_ns": h["log_time"].astype(np.int64),
+        "host_t_ns": h["log_time"].astype(np.int64) - epoch,
         "device_t_ns": h["publish_time"].astype(np.int64),
         "seq": h["sequence"].astype(np.int64),
     }
 
 
-def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None, lost: list[LostRange]) -> dict:
+def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None, lost: list[LostRange],
+                    epoch: int) -> dict:
     groups: dict[str, list[ChannelMessages]] = {}
     for _cid, m in sc.messages.items():
         stream = m.channel.metadata.get("stream")
@@ -218,9 +234,9 @@ def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None, lost
     streams = {}
     for stream, chans in groups.items():
         try:
-            streams[stream] = _decode_stream(sc, stream, chans, msgs)
+            streams[stream] = _decode_stream(sc, stream, chans, msgs, epoch)
         except Exception as exc:  # noqa: BLE001 - a damaged payload can fail any decoder; keep the rest
-            t = np.concatenate([m.header["log_time"] for m in chans]).astype(np.int64)
+            t = np.concatenate([m.header["log_time"] for m in chans]).astype(np.int64) - epoch
             lost.append(LostRange(int(t.min()) if t.size else None, int(t.max()) if t.size else None,
                                   {stream: int(t.size)}, f"stream {stream!r} cannot be decoded "
                                   f"({type(exc).__name__}: {exc})"))
@@ -228,18 +244,18 @@ def _decode_streams(sc: McapScan, msgs: list[str], wanted: set[str] | None, lost
     return streams
 
 
-def _decode_stream(sc: McapScan, stream: str, chans: list[ChannelMessages], msgs: list[str]) -> dict:
+def _decode_stream(sc: McapScan, stream: str, chans: list[ChannelMessages], msgs: list[str], epoch: int) -> dict:
     if stream == "skin":
-        return _decode_skin(sc, chans, msgs)
+        return _decode_skin(sc, chans, msgs, epoch)
     if stream == "markers":
-        return _decode_markers(sc, chans)
+        return _decode_markers(sc, chans, epoch)
     if stream == "camera":
-        return _decode_camera(sc, chans[0])
+        return _decode_camera(sc, chans[0], epoch)
     if stream == "transforms":
-        return _decode_transforms(sc, chans[0])
+        return _decode_transforms(sc, chans[0], epoch)
     if chans[0].channel.message_encoding == "protobuf":
-        return _decode_poses(sc, chans[0])
-    return _decode_json(sc, chans[0], stream)
+        return _decode_poses(sc, chans[0], epoch)
+    return _decode_json(sc, chans[0], stream, epoch)
 
 
 def _gather_rows(data: np.ndarray, start: np.ndarray, nbytes: int) -> np.ndarray:
@@ -299,12 +315,12 @@ def _skin_pixels(sc: McapScan, m: ChannelMessages, msgs: list[str]) -> np.ndarra
     return pix.view("<u2").reshape(n, *SKIN_SHAPE)
 
 
-def _decode_skin(sc: McapScan, chans: list[ChannelMessages], msgs: list[str]) -> dict:
+def _decode_skin(sc: McapScan, chans: list[ChannelMessages], msgs: list[str], epoch: int) -> dict:
     layers = {m.channel.metadata.get("layer"): m for m in chans}
     sup, deep = layers.get("superficial"), layers.get("deep")
     if sup is None or deep is None:
         raise SessionFileError(f"skin stream needs both layers' channels, found {sorted(map(str, layers))}")
-    times_s, times_d = _times(sup), _times(deep)
+    times_s, times_d = _times(sup, epoch), _times(deep, epoch)
     pix_s, pix_d = _skin_pixels(sc, sup, msgs), _skin_pixels(sc, deep, msgs)
     if sup.count == deep.count and np.array_equal(times_s["seq"], times_d["seq"]):
         keep_s = keep_d = slice(None)
@@ -330,9 +346,9 @@ def _float_array(rows, key, width=None) -> np.ndarray:
     return a
 
 
-def _decode_json(sc: McapScan, m: ChannelMessages, stream: str) -> dict:
+def _decode_json(sc: McapScan, m: ChannelMessages, stream: str, epoch: int) -> dict:
     rows = _json_rows(sc, m)
-    out = _times(m)
+    out = _times(m, epoch)
     if stream == "events":
         out.pop("seq")
         out["kind"] = [r["kind"] for r in rows]
@@ -352,7 +368,7 @@ def _decode_json(sc: McapScan, m: ChannelMessages, stream: str) -> dict:
     return out
 
 
-def _decode_poses(sc: McapScan, m: ChannelMessages) -> dict:
+def _decode_poses(sc: McapScan, m: ChannelMessages, epoch: int) -> dict:
     from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 
     n = m.count
@@ -363,14 +379,14 @@ def _decode_poses(sc: McapScan, m: ChannelMessages) -> dict:
         p, q = msg.pose.position, msg.pose.orientation
         vals[i] = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
         frame_ids.append(msg.frame_id)
-    out = _times(m)
+    out = _times(m, epoch)
     out["position_m"] = vals[:, :3].copy()
     out["orientation_xyzw"] = vals[:, 3:].copy()
     out["frame_id"] = frame_ids
     return out
 
 
-def _decode_markers(sc: McapScan, chans: list[ChannelMessages]) -> dict:
+def _decode_markers(sc: McapScan, chans: list[ChannelMessages], epoch: int) -> dict:
     poses = [m for m in chans if m.channel.metadata.get("part") == "pose"]
     dets = {
         m.channel.metadata.get("marker_id"): m for m in chans if m.channel.metadata.get("part") == "detection"
@@ -378,7 +394,7 @@ def _decode_markers(sc: McapScan, chans: list[ChannelMessages]) -> dict:
     parts = []
     for pm in poses:
         mid = pm.channel.metadata.get("marker_id")
-        p = _decode_poses(sc, pm)
+        p = _decode_poses(sc, pm, epoch)
         rows = _json_rows(sc, dets[mid]) if mid in dets else []
         n = min(len(rows), pm.count)
         p = {k: v[:n] for k, v in p.items()}
@@ -398,14 +414,14 @@ def _decode_markers(sc: McapScan, chans: list[ChannelMessages]) -> dict:
     return out
 
 
-def _decode_camera(sc: McapScan, m: ChannelMessages) -> dict:
+def _decode_camera(sc: McapScan, m: ChannelMessages, epoch: int) -> dict:
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 
     images = []
     for payload in sc.payloads(m):
         msg = CompressedImage.FromString(payload)
         images.append(cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_UNCHANGED))
-    out = _times(m)
+    out = _times(m, epoch)
     if images and all(im.shape == images[0].shape for im in images):
         out["image"] = np.stack(images)
     else:
@@ -413,7 +429,7 @@ def _decode_camera(sc: McapScan, m: ChannelMessages) -> dict:
     return out
 
 
-def _decode_transforms(sc: McapScan, m: ChannelMessages) -> dict:
+def _decode_transforms(sc: McapScan, m: ChannelMessages, epoch: int) -> dict:
     from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 
     n = m.count
@@ -425,7 +441,7 @@ def _decode_transforms(sc: McapScan, m: ChannelMessages) -> dict:
         vals[i] = (t.x, t.y, t.z, q.x, q.y, q.z, q.w)
         parents.append(msg.parent_frame_id)
         children.append(msg.child_frame_id)
-    out = _times(m)
+    out = _times(m, epoch)
     out["parent_frame_id"] = parents
     out["child_frame_id"] = children
     out["translation_m"] = vals[:, :3].copy()

@@ -19,9 +19,10 @@ from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 
 import layerskin_exp
-from layerskin_exp.log import frames as F
-from layerskin_exp.log import schema as S
-from layerskin_exp.log.lock import WriterLock
+from layerskin_exp.log.container.lock import WriterLock
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.session.epoch import session_offset_ns
+from layerskin_exp.log.view import frame_tree as F
 from layerskin_exp.sync import estimate_clock_map
 from layerskin_exp.types import (
     SKIN_SHAPE,
@@ -155,6 +156,8 @@ class SessionWriter:
     chunk_span_ns / chunk_bytes: a chunk is closed and handed to the OS as soon as it spans
         chunk_span_ns of log (host) time or holds chunk_bytes, so a kill loses at most that
         much data. Protocol events are flushed at once.
+    epoch_offset_ns: MCAP log_time and Foxglove timestamps are host_t_ns + this (Unix ns);
+        None chooses it from the metadata's backend (see layerskin_exp.log.session.epoch).
 
     Use as a context manager: an exception inside closes the file with outcome
     "aborted: <Type: message>" (KeyboardInterrupt -> "aborted: interrupted") and propagates.
@@ -170,6 +173,7 @@ class SessionWriter:
         chunk_span_ns: int = 100_000_000,
         chunk_bytes: int = 1 << 20,
         overwrite: bool = False,
+        epoch_offset_ns: int | None = None,
     ) -> None:
         if compression not in _COMPRESSION:
             raise ValueError(f"compression={compression!r}: use one of {sorted(_COMPRESSION)}")
@@ -181,7 +185,7 @@ class SessionWriter:
         # The file object owns the locked descriptor: closing it (or losing it) drops the lock.
         self._file = os.fdopen(self._lock.fd, "wb")
         try:
-            self._start(metadata or {}, labels or {}, compression, chunk_span_ns, chunk_bytes)
+            self._start(metadata or {}, labels or {}, compression, chunk_span_ns, chunk_bytes, epoch_offset_ns)
         except BaseException:
             # Refused metadata, or a failing disk: give the file and its lock back at once.
             self._lock.forget_owner()
@@ -201,7 +205,17 @@ class SessionWriter:
         # A live view (layerskin_exp.live.LiveView) sees a decimated copy of what is written.
         self.live = None
 
-    def _start(self, metadata: dict, labels: dict, compression: str, chunk_span_ns: int, chunk_bytes: int) -> None:
+    def _start(self, metadata: dict, labels: dict, compression: str, chunk_span_ns: int, chunk_bytes: int,
+               epoch_offset_ns: int | None) -> None:
+        if epoch_offset_ns is None:
+            epoch_offset_ns, how = session_offset_ns(metadata)
+        else:
+            how = "given"
+        if not 0 <= int(epoch_offset_ns) <= _U64_MAX:
+            raise ValueError(f"epoch_offset_ns={epoch_offset_ns}: must be Unix ns in 0..{_U64_MAX}")
+        # host_t_ns + this = MCAP log_time and Foxglove timestamp (Unix ns); see session/epoch.py
+        self.epoch_offset_ns = int(epoch_offset_ns)
+        self._epoch_how = how
         self._mcap = Writer(
             self._file,
             chunk_size=1 << 40,  # chunks are closed here, by span and size, not by the library
@@ -249,18 +263,16 @@ class SessionWriter:
             else:
                 session[str(key)] = value
         reserved = {S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_RECOVERED,
-                    S.META_LAYOUT}
+                    S.META_LAYOUT, S.META_LOG_TIME}
         clash = reserved & set(records)
         if clash:
             raise ValueError(f"metadata keys {sorted(clash)} are reserved by the session log; rename them")
         self._add_metadata(S.META_SESSION, session)
+        self._add_metadata(S.META_LOG_TIME, {"epoch": "unix", "offset_ns": self.epoch_offset_ns,
+                                             "chosen": self._epoch_how})
         for name, value in records.items():
             self._add_metadata(name, value)
         self._add_metadata(S.META_LABELS, labels)
-        # Foxglove opens the file with this layout (both layers 0..4095, plots, 3D scene).
-        from layerskin_exp.log.layout import session_layout
-
-        self._mcap.add_metadata(S.META_LAYOUT, {"": session_layout().to_json()})
 
     def _add_metadata(self, name: str, values) -> None:
         # MCAP metadata maps str -> str: each value is stored as JSON so types come back.
@@ -304,9 +316,8 @@ class SessionWriter:
                 f"session {self.path} is closed (outcome {self.outcome!r}); open a new SessionWriter"
             )
 
-    @staticmethod
-    def _check_times(host_t_ns: int, device_t_ns: int, seq: int) -> None:
-        if not (0 <= host_t_ns <= _U64_MAX and 0 <= device_t_ns <= _U64_MAX):
+    def _check_times(self, host_t_ns: int, device_t_ns: int, seq: int) -> None:
+        if not (0 <= host_t_ns <= _U64_MAX - self.epoch_offset_ns and 0 <= device_t_ns <= _U64_MAX):
             raise ValueError(
                 f"times must be non-negative ns (MCAP stores u64): host_t_ns={host_t_ns}, "
                 f"device_t_ns={device_t_ns}"
@@ -316,18 +327,23 @@ class SessionWriter:
 
     def _add(self, channel: int, host_t_ns: int, device_t_ns: int, seq: int, payload: bytes) -> None:
         self._check_times(host_t_ns, device_t_ns, seq)
+        log_t = host_t_ns + self.epoch_offset_ns
         self._pending.append(
-            _MESSAGE.pack(_MESSAGE_OP, _MESSAGE_FIXED + len(payload), channel, seq, host_t_ns, device_t_ns)
+            _MESSAGE.pack(_MESSAGE_OP, _MESSAGE_FIXED + len(payload), channel, seq, log_t, device_t_ns)
             + payload
         )
         self._pending_channel.append(channel)
-        self._pending_log.append(host_t_ns)
+        self._pending_log.append(log_t)
         start = self._chunk_start_ns
         if start is None:
-            self._chunk_start_ns = start = host_t_ns
+            self._chunk_start_ns = start = log_t
         self._chunk_fill += len(payload) + 31
-        if host_t_ns - start >= self._chunk_span_ns or self._chunk_fill >= self._chunk_bytes:
+        if log_t - start >= self._chunk_span_ns or self._chunk_fill >= self._chunk_bytes:
             self.flush()
+
+    def unix_ns(self, host_t_ns: int) -> int:
+        """The MCAP log_time / Foxglove timestamp of a message received at host_t_ns."""
+        return int(host_t_ns) + self.epoch_offset_ns
 
     def flush(self) -> None:
         """Close the open chunk and hand everything written so far to the OS."""
@@ -372,25 +388,26 @@ class SessionWriter:
         dev, host, seq = int(frame.device_t_ns), int(frame.host_t_ns), int(frame.seq)
         if dev < 0 or host < 0 or not 0 <= seq <= _U32_MAX:
             self._check_times(host, dev, seq)
-        head = S.skin_head(host)  # Foxglove time = host time (see schema)
+        t = host + self.epoch_offset_ns  # log time = Foxglove time (see session/epoch.py)
+        head = S.skin_head(t)
         size = _MESSAGE_FIXED + len(head) + S.SKIN_DATA_BYTES
         pack = _MESSAGE.pack
         sup_id, deep_id = self._skin_sup, self._skin_deep
         self._pending += (
-            pack(_MESSAGE_OP, size, sup_id, seq, host, dev) + head + sup.tobytes(),
-            pack(_MESSAGE_OP, size, deep_id, seq, host, dev) + head + deep.tobytes(),
+            pack(_MESSAGE_OP, size, sup_id, seq, t, dev) + head + sup.tobytes(),
+            pack(_MESSAGE_OP, size, deep_id, seq, t, dev) + head + deep.tobytes(),
         )
         self._pending_channel += (sup_id, deep_id)
-        self._pending_log += (host, host)
+        self._pending_log += (t, t)
         self._skin_dev.append(dev)
         self._skin_host.append(host)
         if self.live is not None:
-            self.live.frame(frame, head)
+            self.live.frame(frame, head, t)
         start = self._chunk_start_ns
         if start is None:
-            self._chunk_start_ns = start = host
+            self._chunk_start_ns = start = t
         self._chunk_fill += _SKIN_PAIR_BYTES
-        if host - start >= self._chunk_span_ns or self._chunk_fill >= self._chunk_bytes:
+        if t - start >= self._chunk_span_ns or self._chunk_fill >= self._chunk_bytes:
             self.flush()
 
     def _write_json(
@@ -408,7 +425,7 @@ class SessionWriter:
         payload = S.dumps(body)
         self._add(channel, host, dev, seq, payload)
         if self.live is not None:
-            self.live.message(topic, schema, payload, host)
+            self.live.message(topic, schema, payload, host + self.epoch_offset_ns)
         pairs = self._clock(stream)
         pairs[0].append(dev)
         pairs[1].append(host)
@@ -483,11 +500,11 @@ class SessionWriter:
             _vec(pose.position_m, 3, "position_m"),
             _vec(pose.orientation_xyzw, 4, "orientation_xyzw"),
             pose.frame_id,
-            host,
+            host + self.epoch_offset_ns,
         )
         self._add(channel, host, dev, seq, payload)
         if self.live is not None:
-            self.live.message(topic, PoseInFrame, payload, host)
+            self.live.message(topic, PoseInFrame, payload, host + self.epoch_offset_ns)
         pairs = self._clock(stream)
         pairs[0].append(dev)
         pairs[1].append(host)
@@ -533,21 +550,28 @@ class SessionWriter:
 
     def _transform(self, parent: str, child: str, translation_m, rotation_xyzw, host: int) -> None:
         channel = self._channel(S.TF_TOPIC, FrameTransformMsg, {"stream": "transforms"})
+        t = host + self.epoch_offset_ns
         payload = S.transform_payload(parent, child, _vec(translation_m, 3, "translation_m"),
-                                      _vec(rotation_xyzw, 4, "rotation_xyzw"), host)
+                                      _vec(rotation_xyzw, 4, "rotation_xyzw"), t)
         self._add(channel, host, host, 0, payload)
         if self.live is not None:
-            self.live.message(S.TF_TOPIC, FrameTransformMsg, payload, host, key=child)
+            self.live.message(S.TF_TOPIC, FrameTransformMsg, payload, t, key=child)
 
-    def write_view(self, topic: str, schema, payload: bytes, host_t_ns: int) -> None:
+    def write_view(self, topic: str, schema, payload, host_t_ns: int) -> None:
         """A message for Foxglove only, derived from data a stream already holds (image
         annotations, display-rate skin summaries): schema is a Foxglove protobuf class or a JSON
-        schema name of schema.JSON_SCHEMAS. The reader skips these channels."""
+        schema name of schema.JSON_SCHEMAS. payload: bytes, or payload(t_ns) -> bytes for a
+        message that carries its own Foxglove timestamp (given the message's Unix log time).
+        The reader skips these channels."""
         self._check_open()
+        host = int(host_t_ns)
+        t = host + self.epoch_offset_ns
+        if callable(payload):
+            payload = payload(t)
         channel = self._channel(topic, schema, {"view": "foxglove"})
-        self._add(channel, int(host_t_ns), int(host_t_ns), 0, payload)
+        self._add(channel, host, host, 0, payload)
         if self.live is not None:
-            self.live.message(topic, schema, payload, int(host_t_ns))
+            self.live.message(topic, schema, payload, t)
 
     def write_event(self, e: ProtocolEvent) -> None:
         """Protocol events are rare and matter most after a crash: flushed at once."""
@@ -564,10 +588,11 @@ class SessionWriter:
         self._add(channel, host, dev, 0, S.dumps(body))
         # The same event for Foxglove's Log panel.
         log_channel = self._channel(S.LOG_TOPIC, Log, {"view": "foxglove"})
-        log_payload = S.log_payload(body["kind"], body["message"], body["detail"], host)
+        t = host + self.epoch_offset_ns
+        log_payload = S.log_payload(body["kind"], body["message"], body["detail"], t)
         self._add(log_channel, host, host, 0, log_payload)
         if self.live is not None:
-            self.live.message(S.LOG_TOPIC, Log, log_payload, host, key=None)
+            self.live.message(S.LOG_TOPIC, Log, log_payload, t, key=None)
         self.flush()
 
     def write_image(self, gray_uint8: np.ndarray, device_t_ns: int, host_t_ns: int, seq: int = 0,
@@ -587,7 +612,7 @@ class SessionWriter:
         if not ok:
             raise ValueError(f"could not PNG-encode an image of shape {img.shape}")
         msg = CompressedImage(format="png", frame_id=S.CAMERA_FRAME, data=png.tobytes())
-        msg.timestamp.FromNanoseconds(int(host_t_ns))
+        msg.timestamp.FromNanoseconds(int(host_t_ns) + self.epoch_offset_ns)
         channel = self._channel(S.CAMERA_TOPIC, CompressedImage, {"stream": "camera"})
         self._add(channel, int(host_t_ns), int(device_t_ns), int(seq), msg.SerializeToString())
         pairs = self._clock("camera")
@@ -596,7 +621,7 @@ class SessionWriter:
         if detections:
             outlines = [np.asarray(d.corners_px, float) for d in detections]
             self.write_view(S.CAMERA_MARKERS_TOPIC, ImageAnnotations,
-                            S.outlines_payload(outlines, int(host_t_ns)), int(host_t_ns))
+                            lambda t: S.outlines_payload(outlines, t), int(host_t_ns))
 
     # ------------------------------------------------------------------ closing
 
@@ -612,9 +637,21 @@ class SessionWriter:
             if d
         }
 
+    def _write_layout(self) -> None:
+        """The Foxglove layout of the topics written (see view/layout.py), in the SDK's form and
+        in the app's import form; a layout that cannot be built is left out, never the session."""
+        from layerskin_exp.log.view.layout import app_layout, session_layout
+
+        try:
+            layout = session_layout(self._channels)
+        except ValueError:  # nothing written that a panel could show
+            return
+        self._mcap.add_metadata(S.META_LAYOUT, {"": layout.to_json()})
+        self._mcap.add_metadata(S.META_LAYOUT_APP, {"": S.dumps(app_layout(layout)).decode()})
+
     def close(self, outcome: str = "complete", *, move_to=None) -> None:
-        """Record the clock sync and the outcome ("complete" or "aborted: <reason>"), write the
-        MCAP summary and close the file. Closing twice is a no-op.
+        """Record the clock sync, the Foxglove layout of what was written and the outcome
+        ("complete" or "aborted: <reason>"), write the MCAP summary and close the file. Closing twice is a no-op.
 
         move_to: rename the finished file to this path (atomically, fsynced) while the lock is
         still held, so no other writer can claim the old name between closing and renaming.
@@ -630,6 +667,7 @@ class SessionWriter:
             except Exception as exc:  # never lose the session over a failed fit
                 maps = {"error": f"{type(exc).__name__}: {exc}"}
             self._add_metadata(S.META_CLOCK_SYNC, maps)
+            self._write_layout()
             self._add_metadata(S.META_OUTCOME, {"outcome": outcome})
             self._mcap.finish()
             self._file.flush()

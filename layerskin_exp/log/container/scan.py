@@ -31,8 +31,7 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Metadata, Schema
 from numpy.lib.stride_tricks import sliding_window_view
 
-from layerskin_exp.log.errors import SessionFileError
-from layerskin_exp.log.framing import (
+from layerskin_exp.log.container.framing import (
     MAGIC,
     ChunkHead,
     Summary,
@@ -43,6 +42,7 @@ from layerskin_exp.log.framing import (
     read_summary,
     resync,
 )
+from layerskin_exp.log.errors import SessionFileError
 
 # Message record layout inside a chunk: opcode u8, length u64, channel u16, sequence u32,
 # log_time u64, publish_time u64, then the payload (31 bytes of header in all).

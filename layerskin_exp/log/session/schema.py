@@ -5,15 +5,17 @@ Foxglove Studio as it is; streams with no fitting Foxglove schema are JSON with 
 Every channel carries metadata {"stream": <reader stream name>, ...} so the reader groups
 channels by what they hold, not by topic spelling.
 
-Times (one host timeline for Foxglove): MCAP log_time = host receive ns; the `timestamp` of
-every Foxglove message is that same host time, so plots by receive time or by message time
-agree across devices. The device's own clock stays in the MCAP publish_time (and sequence =
-device sequence number); JSON payloads repeat host_t_ns / device_t_ns / seq. The reader maps
-device time onto the host timeline with the stored clock maps (t_ns), as before.
+Times (one timeline for Foxglove): MCAP log_time = host receive time on the Unix epoch (ns),
+host_t_ns + the session's constant offset (metadata record "log_time", see epoch.py); the
+`timestamp` of every Foxglove message is that same time, so plots by receive time or by message
+time agree across devices. The host's monotonic receive time is log_time - offset; the device's
+own clock stays in the MCAP publish_time (and sequence = device sequence number); JSON payloads
+repeat host_t_ns / device_t_ns / seq. The reader maps device time onto the host timeline with
+the stored clock maps (t_ns).
 
 Frames: every Foxglove message names its frame (skin images "skin", poses the frame they are
 expressed in, the camera image "camera"); FrameTransform messages on /tf relate them (see
-layerskin_exp.log.frames).
+layerskin_exp.log.view.frame_tree).
 
 Channels whose metadata has no "stream" key (/log, image annotations) are views for Foxglove of
 data that is already in a stream; the reader skips them.
@@ -75,7 +77,9 @@ META_LABELS = "labels"
 META_OUTCOME = "outcome"
 META_CLOCK_SYNC = "clock_sync"
 META_RECOVERED = "recovered"
+META_LOG_TIME = "log_time"  # {"epoch": "unix", "offset_ns": log_time - host_t_ns, "chosen": how}
 META_LAYOUT = "foxglove.layout"  # the Foxglove layout, as the SDK's MCAPWriter.write_layout stores it
+META_LAYOUT_APP = "layerskin.foxglove_app_layout"  # the same layout in the app's Layouts > Import format
 
 # ---------------------------------------------------------------------------- protobuf schemas
 

@@ -1,0 +1,204 @@
+"""LiveView: what a SessionWriter writes, served while it runs over Foxglove's WebSocket protocol.
+
+Attach one to a writer (`writer.live = view`) and it sees every record the writer logs. Skin
+frames (424 Hz) and fast streams are thinned to one message per `period_ns` of host time per
+topic (per child frame on /tf); protocol events are never dropped. The payloads are the very
+bytes written to the file, with the file's log times (Unix ns), handed to the Foxglove SDK's
+server (Rust, its own threads), so the writer pays one time comparison per frame and, ~30 times
+a second, one send.
+
+Channels for the fixed topics are advertised at start, so a client can subscribe before the
+first trial begins; marker topics are advertised when they first appear. A client that joins
+late gets every protocol event (/log) logged so far when it subscribes to /log, sent to it alone.
+
+Subprotocols: the SDK's server (foxglove-sdk 0.30) speaks `foxglove.sdk.v1` (and `.v1.1`), which
+the current Foxglove app offers. It refuses clients that offer only `foxglove.websocket.v1`
+(older Foxglove Studio releases, ws-protocol clients) with HTTP 400; the SDK does not allow
+accepting them. A refusal is reported once as a warning naming the subprotocol, later ones at
+debug level, instead of the SDK's error line per refused connection.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.view.skin_summary import DISPLAY_PERIOD_NS
+
+log = logging.getLogger(__name__)
+
+SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.sdk.v1.1")
+REPLAY_MAX_EVENTS = 100_000  # events kept for late clients (a campaign logs tens per trial)
+
+# topic -> schema (protobuf class or JSON schema name) of what a session can carry from the start
+FIXED_TOPICS = {
+    S.SKIN_TOPICS["superficial"]: S.RawImage,
+    S.SKIN_TOPICS["deep"]: S.RawImage,
+    S.cop_topic("superficial"): S.ImageAnnotations,
+    S.cop_topic("deep"): S.ImageAnnotations,
+    S.SKIN_SUMMARY_TOPIC: "layerskin.SkinSummary",
+    S.WRENCH_TOPIC: "layerskin.Wrench",
+    S.STAGE_TOPIC: "layerskin.StagePosition",
+    S.TCP_TOPIC: S.PoseInFrame,
+    S.GRIPPER_TOPIC: "layerskin.GripperState",
+    S.TF_TOPIC: S.FrameTransform,
+    S.LOG_TOPIC: S.Log,
+}
+
+
+class _RefusedClients(logging.Filter):
+    """The SDK logs an ERROR per refused handshake; one warning says what it means."""
+
+    warned = False
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if "handshake failed" not in record.getMessage():
+            return True
+        if not _RefusedClients.warned:
+            _RefusedClients.warned = True
+            log.warning("live view: refused a client (%s); the server speaks %s, so a client offering only "
+                        "foxglove.websocket.v1 (older Foxglove Studio) cannot connect; use the current Foxglove "
+                        "app. Further refusals are logged at debug level.", record.getMessage(),
+                        " / ".join(SUBPROTOCOLS))
+        else:
+            log.debug("live view: %s", record.getMessage())
+        return False
+
+
+_SDK_SERVER_LOG = logging.getLogger("foxglove.websocket.server")
+if not any(isinstance(f, _RefusedClients) for f in _SDK_SERVER_LOG.filters):
+    _SDK_SERVER_LOG.addFilter(_RefusedClients())
+
+
+class _Listener:
+    """The SDK's ServerListener: a subscription to /log gets the events logged before it."""
+
+    def __init__(self, view: LiveView) -> None:
+        self.view = view
+
+    def on_subscribe(self, client, channel) -> None:
+        if channel.topic == S.LOG_TOPIC:
+            self.view._replay_events(client)
+
+    def __getattr__(self, name: str):
+        # every other ServerListener callback (on_unsubscribe, on_client_advertise, ...): no-op
+        if name.startswith("on_"):
+            return lambda *args, **kwargs: None
+        raise AttributeError(name)
+
+
+class LiveView:
+    """A Foxglove WebSocket server on host:port (port 0: any free port, see .port).
+
+    Open it in Foxglove with "Open connection" -> Foxglove WebSocket -> ws://127.0.0.1:<port>;
+    `layout_json(setup)` is the rig's layout in the app's import format. close() stops the
+    server; hold(stop) keeps it serving (after a run) until stop() says so or Ctrl-C.
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, period_ns: int = DISPLAY_PERIOD_NS,
+                 name: str = "layerskin-exp") -> None:
+        import foxglove
+
+        self._foxglove = foxglove
+        self.period_ns = int(period_ns)
+        self.context = foxglove.Context()
+        self._channels: dict[str, object] = {}
+        self._last: dict[tuple, int] = {}
+        self._last_frame_ns: int | None = None
+        self._events: list[tuple[bytes, int]] = []  # (Log payload, log time) of every event so far
+        self._events_lock = threading.Lock()
+        for topic, schema in FIXED_TOPICS.items():
+            self._channel(topic, schema)
+        self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context,
+                                            server_listener=_Listener(self))
+        self.host, self.port = host, self.server.port
+        log.info("live view on ws://%s:%d (subprotocol %s)", host, self.port, " / ".join(SUBPROTOCOLS))
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    def _channel(self, topic: str, schema):
+        ch = self._channels.get(topic)
+        if ch is None:
+            fg = self._foxglove
+            if isinstance(schema, str):
+                spec = fg.Schema(name=schema, encoding="jsonschema", data=S.JSON_SCHEMAS[schema])
+                encoding = "json"
+            else:
+                spec = fg.Schema(name=schema.DESCRIPTOR.full_name, encoding="protobuf",
+                                 data=S.proto_schema_data(schema))
+                encoding = "protobuf"
+            ch = self._channels[topic] = fg.Channel(topic, schema=spec, message_encoding=encoding,
+                                                    context=self.context)
+        return ch
+
+    def frame(self, frame, head: bytes, t_ns: int) -> None:
+        """Both layers of a skin frame (head: its RawImage bytes before the pixels; t_ns: its log
+        time, Unix ns), thinned."""
+        t = int(t_ns)
+        if self._last_frame_ns is not None and t - self._last_frame_ns < self.period_ns:
+            return
+        self._last_frame_ns = t
+        self._channels[S.SKIN_TOPICS["superficial"]].log(head + frame.superficial.tobytes(), log_time=t)
+        self._channels[S.SKIN_TOPICS["deep"]].log(head + frame.deep.tobytes(), log_time=t)
+
+    def message(self, topic: str, schema, payload: bytes, t_ns: int, key: str | None = "") -> None:
+        """One message as written to the file. key: thinned per (topic, key); None: always sent."""
+        if topic == S.LOG_TOPIC:
+            with self._events_lock:  # a client subscribing now gets it either live or replayed
+                if len(self._events) < REPLAY_MAX_EVENTS:
+                    self._events.append((payload, int(t_ns)))
+                self._channel(topic, schema).log(payload, log_time=int(t_ns))
+            return
+        if key is not None:
+            k = (topic, key)
+            last = self._last.get(k)
+            if last is not None and t_ns - last < self.period_ns:
+                return
+            self._last[k] = t_ns
+        self._channel(topic, schema).log(payload, log_time=int(t_ns))
+
+    @staticmethod
+    def layout_json(setup: str, *, estimate: bool = False, camera: bool = False) -> str:
+        """The app-format layout (Layouts > Import) of a rig's live view."""
+        import json
+
+        from layerskin_exp.log.view.layout import rig_layout
+
+        return json.dumps(rig_layout(setup, estimate=estimate, camera=camera))
+
+    def _replay_events(self, client) -> None:
+        """Send the events logged so far to one client (its sink), not again to the others.
+
+        foxglove-sdk 0.30's Python Client carries only its id; a websocket client's sink id is
+        drawn from the same sequence as its client id as long as the process opens no other SDK
+        sink (this module opens none), so the id addresses its sink. tests/log/test_live.py checks
+        that a late client gets each event once and an early one sees no repeat."""
+        sink = getattr(client, "sink_id", None) or client.id
+        channel = self._channels[S.LOG_TOPIC]
+        with self._events_lock:
+            for payload, t_ns in self._events:
+                channel.log(payload, log_time=t_ns, sink_id=sink)
+
+    def hold(self, stop: Callable[[], bool] = lambda: False, poll_s: float = 0.2) -> None:
+        """Keep serving until stop() is true or Ctrl-C (after a run, so a client can still look)."""
+        print(f"run finished; the live view stays up on {self.url} until you stop it (Ctrl-C)", flush=True)
+        try:
+            while not stop():
+                time.sleep(poll_s)
+        except KeyboardInterrupt:
+            pass
+
+    def close(self) -> None:
+        self.server.stop()
+
+    def __enter__(self) -> LiveView:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
