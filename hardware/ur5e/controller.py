@@ -649,7 +649,7 @@ class ScriptReader:
             if nl < 0:
                 break
             out.extend(self._take_line())
-        if self._program is not None and self._line.strip() == b"end":
+        if self._program is not None and self._line.rstrip() == b"end":
             out.extend(self._take_line())  # the last line of an upload may come without a newline
         return out
 

@@ -292,7 +292,7 @@ def test_a_16_mb_upload_without_def_is_dropped_in_bounded_memory(controller):
     # between the samples seen; it stalled for seconds before).
     assert _peak_rss_kb(emu._proc.pid) - peak_before_kb < 8 * 1024
     during = [ts for t, ts in stamps if t0 - 0.05 <= t <= t1 + 0.05]
-    assert len(during) >= 2 and max(np.diff(during)) < 0.5
+    assert len(during) >= 2 and max(np.diff(during)) < 1.0
     # A real control script still starts afterwards on the same port.
     ctrl = rtde_control.RTDEControlInterface("127.0.0.46")
     controller.clients.append(ctrl)

@@ -190,3 +190,33 @@ def test_config_validates():
         UR5eConfig(payload_kg=6.0)
     with pytest.raises(ConfigError, match="payload_cog_m"):
         UR5eConfig(payload_cog_m=(0.0, 0.0, 1.0))
+
+
+class _ToolClient:
+    """Stands in for the control client in the tool set-up: takes set_tcp and set_payload and
+    reports `reported` (None: what was set) as the TCP offset."""
+
+    def __init__(self, reported=None):
+        self.reported, self.tcp, self.payload = reported, None, None
+
+    def setTcp(self, pose):  # noqa: N802 - ur_rtde's names
+        self.tcp = list(pose)
+        return True
+
+    def setPayload(self, mass, cog):  # noqa: N802
+        self.payload = (mass, list(cog))
+        return True
+
+    def getTCPOffset(self):  # noqa: N802
+        return self.tcp if self.reported is None else self.reported
+
+
+def test_tool_setup_reads_the_tcp_back():
+    cfg = UR5eConfig(tcp_offset_m_rad=(0.0, 0.0, 0.15, 0.0, 0.0, 0.0), payload_kg=1.2, payload_cog_m=(0, 0, 0.05))
+    arm = UR5eArm(cfg)
+    arm._ctrl = _ToolClient()
+    arm._set_tool()
+    assert arm._ctrl.tcp == [0.0, 0.0, 0.15, 0.0, 0.0, 0.0] and arm._ctrl.payload == (1.2, [0.0, 0.0, 0.05])
+    arm._ctrl = _ToolClient(reported=[0.0] * 6)  # a controller that did not take it
+    with pytest.raises(DeviceError, match=r"TCP offset \[0\.0, .*tcp_offset_m_rad"):
+        arm._set_tool()

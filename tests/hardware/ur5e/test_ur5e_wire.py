@@ -111,3 +111,29 @@ def test_dashboard_lines():
     buf += DASHBOARD[2][-3:]
     assert wire.dashboard_lines(buf) == ["is in remote control"] and not buf
     assert wire.encode_dashboard_line(wire.DASHBOARD_WELCOME) == b"Connected: Universal Robots Dashboard Server\n"
+
+
+def test_script_reader_takes_programs_in_any_chunks_and_drops_what_is_too_long():
+    from hardware.ur5e.controller import ScriptReader
+
+    program = b"def rtde_control():\n  textmsg(\"x\")\n  if True:\n    sync()\n  end\nend"
+    stream = b"textmsg(\"alone\")\n" + program + b"\n" + b"y" * 300 + b"\n" + program
+    for chunk in (1, 7, 64, len(stream)):
+        r = ScriptReader(limit_bytes=200)
+        got = [p for i in range(0, len(stream), chunk) for p in r.feed(stream[i:i + chunk])]
+        # The indented "end" closes an if, not the program; the last "end" needs no newline.
+        assert got == [program.decode()] * 2
+        assert r.ignored_lines == 1 and r.dropped_bytes == 300 and r.buffered_bytes == 0
+    # A program that outgrows the limit is dropped whole; the next one is read.
+    r = ScriptReader(limit_bytes=200)
+    assert r.feed(b"def big():\n" + b"  sync()\n" * 40 + b"end\n") == []
+    assert r.dropped_bytes > 200
+    assert r.feed(program + b"\n") == [program.decode()]
+
+
+def test_safety_status_bits_follow_the_safety_mode():
+    assert wire.safety_status_bits(wire.SAFETY_MODE_NORMAL) == wire.SAFETY_BIT_NORMAL
+    assert wire.safety_status_bits(wire.SAFETY_MODE_PROTECTIVE_STOP) & wire.SAFETY_BIT_PROTECTIVE_STOPPED
+    for mode in (wire.SAFETY_MODE_ROBOT_EMERGENCY_STOP, wire.SAFETY_MODE_SYSTEM_EMERGENCY_STOP):
+        bits = wire.safety_status_bits(mode)
+        assert bits & wire.SAFETY_EMERGENCY_STOPPED and not bits & wire.SAFETY_BIT_PROTECTIVE_STOPPED
