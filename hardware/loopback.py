@@ -15,6 +15,7 @@ import logging
 import socket
 from dataclasses import dataclass, field
 
+from hardware.emulation import free_loopback_host
 from hardware.interfaces import DeviceError
 from hardware.lab import MonotonicClock, attach_devices
 from hardware.rig import Rig
@@ -41,22 +42,11 @@ BENCH_DEFAULTS = {"netft": {"http_port": 0}}
 def free_ur_host(first: int = 2, last: int = 254) -> str:
     """A loopback address 127.0.0.N on which none of the UR controller's fixed ports is taken
     (so two loopback benches, or a test and a standalone emulator, never collide)."""
-    for n in range(first, last + 1):
-        host = f"127.0.0.{n}"
-        socks = []
-        try:
-            for port in UR_PORTS:
-                s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-                socks.append(s)
-                s.bind((host, port))
-            return host
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise DeviceError("loopback: no free 127.0.0.N address for the UR5e emulator's fixed ports "
-                      f"{UR_PORTS}; stop other UR emulators")
+    try:
+        return free_loopback_host({port: socket.SOCK_STREAM for port in UR_PORTS}, first, last)
+    except OSError:
+        raise DeviceError("loopback: no free 127.0.0.N address for the UR5e emulator's fixed ports "
+                          f"{UR_PORTS}; stop other UR emulators") from None
 
 
 def emulator_class(device: str):
