@@ -35,6 +35,7 @@ def _conf_dir() -> Path:
 
 CONF_DIR = _conf_dir()
 
+
 class ConfigError(ValueError):
     """A configuration value is wrong. The message names the key, the value and the fix."""
 
