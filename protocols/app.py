@@ -23,15 +23,30 @@ from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, re
 from layerskin_exp.config import ConfigError, validate
 from layerskin_exp.log import SessionInUseError
 from layerskin_exp.provenance import provenance
-from protocols.runner import Terminated, check_termination, request_termination, termination_pending
+from protocols.runner import (
+    Terminated,
+    TrialConflictError,
+    check_termination,
+    request_termination,
+    termination_pending,
+)
 
-__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "run_app"]
+__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "run_app"]
 
 log = logging.getLogger(__name__)
 
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
+
+
+def refuse_renamed(argv: list[str], renamed: dict[str, str]) -> None:
+    """A key that was renamed (units now in its name): one line naming the new key, exit 2."""
+    for a in argv:
+        key, sep, value = a.partition("=")
+        key = key.lstrip("+~")
+        if sep and key in renamed:
+            refuse(ConfigError(f"{key}={value}: renamed; use {renamed[key]}"))
 
 
 def _on_sigterm(signum, frame) -> None:
@@ -123,6 +138,11 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     except ConfigError as e:
         rig.stop_motion()
         refuse(e)
+    except TrialConflictError as e:  # a complete trial of another identity is in the way: left untouched
+        rig.stop_motion()
+        log.error("run refused: %s", one_line(e))
+        print(f"error: {one_line(e)}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
     except SessionInUseError as e:  # another run holds this trial's file: nothing was written here
         rig.stop_motion()
         log.error("run refused: %s", one_line(e))

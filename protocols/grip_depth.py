@@ -12,7 +12,8 @@ from layerskin_exp.config import register_all
 register_all()
 
 from layerskin_exp.cli import CONF_DIR  # noqa: E402
-from protocols.app import preflight, run_app  # noqa: E402
+from protocols.app import preflight, refuse_renamed, run_app  # noqa: E402
+from protocols.config import RENAMED_KEYS  # noqa: E402
 from protocols.grip import run_grip_trial  # noqa: E402
 
 
@@ -25,6 +26,7 @@ def main(cfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console script: refuse a bad command line as a whole, then let Hydra run it."""
+    refuse_renamed(sys.argv[1:], RENAMED_KEYS)
     preflight("grip_depth", sys.argv[1:])
     main()
 
