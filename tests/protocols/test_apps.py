@@ -30,8 +30,9 @@ def test_calibration_cli_writes_labelled_trials(tmp_path, hydra_dirs):
     cfg, typed = compose_app("force_calibration", [*TINY_CALIBRATION, f"data_root={data}"])
     plan = plan_trials(typed)
     folder = design_dir(data / "force_calibration")
-    files = sorted(folder.iterdir())
+    files = sorted(folder.glob("*.mcap*"))
     assert [f.name for f in files] == sorted(f"{t.name}.mcap" for t in plan)
+    assert (folder / "design.yaml").is_file()
     for f in files:
         assert load_session(f, warn=False).metadata["backend"] == "sim"
     for trial in plan:
@@ -84,7 +85,7 @@ def test_resume_after_sigkill_runs_each_trial_once(tmp_path, hydra_dirs):
     assert r.returncode == 0, r.stderr[-2000:]
     _, typed = compose_app("force_calibration", args[:-2])
     plan = plan_trials(typed)
-    names = sorted(p.name for p in folder.iterdir())
+    names = sorted(p.name for p in folder.glob("*.mcap*"))
     assert names == sorted(f"{t.name}.mcap" for t in plan)  # each once, no .partial left
     for name, stamp in done_before.items():  # complete trials were not run again
         p = folder / name

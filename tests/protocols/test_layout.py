@@ -85,6 +85,16 @@ def test_a_complete_trial_is_never_replaced_by_another_identity(tmp_path):
     assert not list(tmp_path.glob("*.partial"))
 
 
+def test_a_rerun_asking_for_images_skips_the_complete_trial_and_says_what_it_lacks(tmp_path, caplog):
+    rig = platform_rig()
+    rig.connect()
+    path = tmp_path / "t.mcap"
+    run_trial(rig, path, {}, {"config": {"save_images": False}}, lambda log: None, identity="a" * 64)
+    again = run_trial(rig, path, {}, {"config": {"save_images": True}}, lambda log: None, identity="a" * 64)
+    assert again.skipped and "recorded with save_images=False" in again.summary()
+    assert any("already complete" in r.getMessage() and r.levelname == "WARNING" for r in caplog.records)
+
+
 def test_a_campaign_with_a_conflicting_file_refuses_before_its_first_trial(tmp_path):
     # The same folder and names but a different plan (here: the slides' vertical offsets), as when
     # the planning code changes between two runs: nothing runs, nothing is replaced.
