@@ -31,7 +31,7 @@ from protocols.runner import (
     termination_pending,
 )
 
-__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "run_app"]
+__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files", "run_app"]
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +47,35 @@ def refuse_renamed(argv: list[str], renamed: dict[str, str]) -> None:
         key = key.lstrip("+~")
         if sep and key in renamed:
             refuse(ConfigError(f"{key}={value}: renamed; use {renamed[key]}"))
+
+
+def _changes_the_files(key: str) -> bool:
+    """Whether an override of `key` can change which session files a job writes."""
+    from protocols.identity import RUN_ONLY_KEYS
+
+    if key == "data_root":
+        return True
+    if any(key == k or key.startswith(k + ".") for k in RUN_ONLY_KEYS):
+        return False
+    # device addresses, ports and timeouts say where the bench is, not what it does
+    return not (key.startswith("hardware.") and key != "hardware.backend" and not key.startswith("hardware.faults"))
+
+
+def refuse_shared_files(argv: list[str]) -> None:
+    """A multirun whose jobs differ only in settings that do not change the data (save_images,
+    estimator, progress, device addresses...) would have every job write the same session files:
+    refused as a whole, one line, exit 2. Read from the overrides alone (nothing is composed)."""
+    if not ("-m" in argv or "--multirun" in argv):
+        return
+    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    seen: dict[tuple, list[str]] = {}
+    for job in expand_sweep(overrides):
+        files = tuple(sorted(o for o in job if _changes_the_files(o.split("=", 1)[0].lstrip("+~"))))
+        if files in seen:
+            refuse(ConfigError(f"multirun: jobs '{' '.join(seen[files])}' and '{' '.join(job)}' would write the same "
+                               "session files: they differ only in settings that do not change the data; run them "
+                               "one after the other"))
+        seen[files] = job
 
 
 def _on_sigterm(signum, frame) -> None:

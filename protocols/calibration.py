@@ -59,6 +59,11 @@ class CalibrationTrial:
                 "direction_rad": self.direction_rad, "z_offset_mm": self.z_offset_mm}
 
 
+def campaign_root(cfg: ForceCalibrationConfig, config: dict) -> Path:
+    """The design folder the campaign of `cfg` writes; config: the resolved config."""
+    return Path(cfg.data_root) / PROTOCOL / design_id(config)
+
+
 def plan_positions(cfg: PositionsConfig, seed: int) -> np.ndarray:
     """(count, 2) contact centres in mm, inside the sensing area less the margin.
 
@@ -279,7 +284,7 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=Non
                           "calibration needs the platform setup")
     safety = Safety(cfg.safety, rig)
     ctl = PlatformControl(rig, safety, cfg)
-    root = Path(cfg.data_root) / PROTOCOL / design_id(metadata["config"])
+    root = campaign_root(cfg, metadata["config"])
     trials = plan_trials(cfg)
     identity = {t.name: trial_identity(metadata["config"], t.labels) for t in trials}
     # trial_is_complete refuses a conflicting file: before the first trial, not half-way through

@@ -12,7 +12,7 @@ from layerskin_exp.config import register_all
 register_all()
 
 from layerskin_exp.cli import CONF_DIR  # noqa: E402
-from protocols.app import preflight, run_app  # noqa: E402
+from protocols.app import preflight, refuse_shared_files, run_app  # noqa: E402
 from protocols.calibration import run_campaign  # noqa: E402
 
 
@@ -25,6 +25,7 @@ def main(cfg: DictConfig) -> dict:
 def cli() -> None:
     """Console script: refuse a bad command line as a whole, then let Hydra run it."""
     preflight("force_calibration", sys.argv[1:])
+    refuse_shared_files(sys.argv[1:])
     main()
 
 

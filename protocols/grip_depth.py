@@ -12,7 +12,7 @@ from layerskin_exp.config import register_all
 register_all()
 
 from layerskin_exp.cli import CONF_DIR  # noqa: E402
-from protocols.app import preflight, refuse_renamed, run_app  # noqa: E402
+from protocols.app import preflight, refuse_renamed, refuse_shared_files, run_app  # noqa: E402
 from protocols.config import RENAMED_KEYS  # noqa: E402
 from protocols.grip import run_grip_trial  # noqa: E402
 
@@ -28,6 +28,7 @@ def cli() -> None:
     """Console script: refuse a bad command line as a whole, then let Hydra run it."""
     refuse_renamed(sys.argv[1:], RENAMED_KEYS)
     preflight("grip_depth", sys.argv[1:])
+    refuse_shared_files(sys.argv[1:])
     main()
 
 

@@ -131,6 +131,7 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     ("protocols.grip_depth", "hardware=loopback +hardware.faults.skin_board.typo=1", "hardware.faults.skin_board.typo"),
     ("protocols.grip_depth", "release.opening_mm=nan", "release.opening_mm=nan: must be in"),
     ("protocols.grip_depth", "trajectory.speed=1", "use trajectory.translation.speed_mm_s (mm/s) or"),
+    ("protocols.grip_depth", "-m save_images=true,false", "would write the same session files"),
 ])
 def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
     r = run_cli(app, [*override.split(), f"data_root={tmp_path}/data", *hydra_dirs], tmp_path)
