@@ -81,7 +81,8 @@ class LoopbackHardwareConfig(LabHardwareConfig):
     the UR5e emulator's address ("auto": the first 127.0.0.N whose controller ports are free; a
     UR controller's ports are fixed). faults: device -> emulator fault-injection arguments, e.g.
     `+hardware.faults.skin_board.stalls=[[1.0,200]]`. world_period_s: how often the world is
-    advanced to wall time.
+    advanced to wall time. Fault names and values are checked against what each emulator
+    declares (`fault_parameters`, `check_faults`) when the config is validated.
     """
 
     backend: str = "loopback"
