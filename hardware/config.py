@@ -81,7 +81,8 @@ class LoopbackHardwareConfig(LabHardwareConfig):
     the UR5e emulator's address ("auto": the first 127.0.0.N whose controller ports are free; a
     UR controller's ports are fixed). faults: device -> emulator fault-injection arguments, e.g.
     `+hardware.faults.skin_board.stalls=[[1.0,200]]`. world_period_s: how often the world is
-    advanced to wall time.
+    advanced to wall time. Fault names and values are checked against what each emulator
+    declares (`fault_parameters`, `check_faults`) when the config is validated.
     """
 
     backend: str = "loopback"
@@ -99,6 +100,70 @@ class LoopbackHardwareConfig(LabHardwareConfig):
                 "must be 'auto' or a loopback address 127.x.y.z")
         require(0 < self.world_period_s <= 0.01, "hardware.world_period_s", self.world_period_s,
                 "must be in (0, 0.01] s")
+        check_faults(self.faults)
+
+
+# Emulator constructor arguments the bench sets itself, never a fault to inject.
+_BENCH_ARGS = ("self", "rt", "host", "port")
+# A bench-level fault any device takes: it stops delivering this many seconds after power-on.
+BENCH_FAULTS = {"stall_after_s": None}
+
+
+def fault_parameters(device: str) -> dict:
+    """name -> default of the fault-injection arguments the `device` emulator declares (its
+    constructor's keyword arguments, as each emulator documents them), plus BENCH_FAULTS."""
+    import inspect
+
+    from hardware.loopback import emulator_class
+
+    params = inspect.signature(emulator_class(device).__init__).parameters.values()
+    declared = {p.name: p.default for p in params
+                if p.name not in _BENCH_ARGS and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    return {**declared, **BENCH_FAULTS}
+
+
+def _check_fault_value(key: str, name: str, value, default) -> None:
+    """The value's type follows the declared default; numbers are finite and >= 0 (> 0 where the
+    default is > 0: periods, rates, sizes), `p_*` are probabilities, `stalls` are [at_s, ms] pairs."""
+    import math
+
+    if isinstance(default, bool):
+        require(isinstance(value, bool), key, value, "must be true or false")
+        return
+    if isinstance(default, tuple | list):
+        ok = isinstance(value, list | tuple) and all(
+            isinstance(item, list | tuple) and len(item) == 2 and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v >= 0 for v in item)
+            for item in value)
+        require(ok, key, value, "must be a list of [at_s, duration_ms] pairs of finite numbers >= 0")
+        return
+    kind = "an integer" if isinstance(default, int) and not isinstance(default, float) else "a number"
+    ok = isinstance(value, int) if kind == "an integer" else isinstance(value, int | float)
+    ok = ok and not isinstance(value, bool) and math.isfinite(value)
+    if name.startswith("p_"):
+        require(ok and 0.0 <= value <= 1.0, key, value, "must be a probability in [0, 1]")
+    elif isinstance(default, int | float) and default > 0:
+        require(ok and value > 0, key, value, f"must be {kind} > 0")
+    else:
+        require(ok and value >= 0, key, value, f"must be {kind} >= 0 (finite)")
+
+
+def check_faults(faults: dict) -> None:
+    """Refuse a fault-injection setting the emulators do not declare, or a value out of range
+    (ConfigError naming hardware.faults.<device>.<name>), before any emulator starts."""
+    from hardware.loopback import EMULATORS
+
+    for device, args in faults.items():
+        require(device in EMULATORS, f"hardware.faults.{device}", args,
+                f"no such emulator; choose among {list(EMULATORS)}")
+        require(isinstance(args, dict), f"hardware.faults.{device}", args,
+                "must map fault names to values, e.g. +hardware.faults.skin_board.p_bit_flip=0.001")
+        declared = fault_parameters(device)
+        for name, value in args.items():
+            key = f"hardware.faults.{device}.{name}"
+            require(name in declared, key, value, f"the {device} emulator has no such setting; choose among "
+                    f"{sorted(declared)}")
+            _check_fault_value(key, name, value, declared[name])
 
 
 def _store() -> None:

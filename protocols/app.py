@@ -23,15 +23,59 @@ from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, re
 from layerskin_exp.config import ConfigError, validate
 from layerskin_exp.log import SessionInUseError
 from layerskin_exp.provenance import provenance
-from protocols.runner import Terminated, check_termination, request_termination, termination_pending
+from protocols.runner import (
+    Terminated,
+    TrialConflictError,
+    check_termination,
+    request_termination,
+    termination_pending,
+)
 
-__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "run_app"]
+__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files", "run_app"]
 
 log = logging.getLogger(__name__)
 
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
+
+
+def refuse_renamed(argv: list[str], renamed: dict[str, str]) -> None:
+    """A key that was renamed (units now in its name): one line naming the new key, exit 2."""
+    for a in argv:
+        key, sep, value = a.partition("=")
+        key = key.lstrip("+~")
+        if sep and key in renamed:
+            refuse(ConfigError(f"{key}={value}: renamed; use {renamed[key]}"))
+
+
+def _changes_the_files(key: str) -> bool:
+    """Whether an override of `key` can change which session files a job writes."""
+    from protocols.identity import RUN_ONLY_KEYS
+
+    if key == "data_root":
+        return True
+    if any(key == k or key.startswith(k + ".") for k in RUN_ONLY_KEYS):
+        return False
+    # device addresses, ports and timeouts say where the bench is, not what it does
+    return not (key.startswith("hardware.") and key != "hardware.backend" and not key.startswith("hardware.faults"))
+
+
+def refuse_shared_files(argv: list[str]) -> None:
+    """A multirun whose jobs differ only in settings that do not change the data (save_images,
+    estimator, progress, device addresses...) would have every job write the same session files:
+    refused as a whole, one line, exit 2. Read from the overrides alone (nothing is composed)."""
+    if not ("-m" in argv or "--multirun" in argv):
+        return
+    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    seen: dict[tuple, list[str]] = {}
+    for job in expand_sweep(overrides):
+        files = tuple(sorted(o for o in job if _changes_the_files(o.split("=", 1)[0].lstrip("+~"))))
+        if files in seen:
+            refuse(ConfigError(f"multirun: jobs '{' '.join(seen[files])}' and '{' '.join(job)}' would write the same "
+                               "session files: they differ only in settings that do not change the data; run them "
+                               "one after the other"))
+        seen[files] = job
 
 
 def _on_sigterm(signum, frame) -> None:
@@ -126,6 +170,11 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     except ConfigError as e:
         rig.stop_motion()
         refuse(e)
+    except TrialConflictError as e:  # a complete trial of another identity is in the way: left untouched
+        rig.stop_motion()
+        log.error("run refused: %s", one_line(e))
+        print(f"error: {one_line(e)}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
     except SessionInUseError as e:  # another run holds this trial's file: nothing was written here
         rig.stop_motion()
         log.error("run refused: %s", one_line(e))

@@ -23,10 +23,20 @@ from hardware.rig import Rig
 from layerskin_exp.config import ConfigError
 from layerskin_exp.rig import SENSING_HALF_WIDTH_MM
 from protocols.config import ForceCalibrationConfig, PositionsConfig
-from protocols.identity import design_id, trial_identity
+from protocols.identity import design_id, trial_identity, write_manifest
 from protocols.loop import ControlLoop
 from protocols.runner import TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
-from protocols.safety import FORCE_LIMIT, SLOW_ZONE, Safety
+from protocols.safety import Safety
+from protocols.stops import (
+    DEPTH_LIMIT,
+    FORCE_LIMIT,
+    LOADING,
+    SHEAR_REACHED,
+    SKIN_EDGE,
+    SLOW_ZONE,
+    TARGET_REACHED,
+    trip_name,
+)
 
 PROTOCOL = "force_calibration"
 
@@ -49,6 +59,11 @@ class CalibrationTrial:
         return {"protocol": PROTOCOL, "position_index": self.position_index,
                 "position_mm": [float(v) for v in self.position_mm], "kind": self.kind, "repeat": self.repeat,
                 "direction_rad": self.direction_rad, "z_offset_mm": self.z_offset_mm}
+
+
+def campaign_root(cfg: ForceCalibrationConfig, config: dict) -> Path:
+    """The design folder the campaign of `cfg` writes; config: the resolved config."""
+    return Path(cfg.data_root) / PROTOCOL / design_id(config)
 
 
 def plan_positions(cfg: PositionsConfig, seed: int) -> np.ndarray:
@@ -140,10 +155,10 @@ class PlatformControl:
                                        f"platform move to {np.round(target_mm, 3).tolist()} mm")
         if kind == "trip":
             self.wait_stopped()
-            if reason.startswith(FORCE_LIMIT):
+            if trip_name(reason) == FORCE_LIMIT:
                 return FORCE_LIMIT
             rig.clear_trip()  # a stop condition checked per sample, not a fault
-            if reason.startswith(SLOW_ZONE):  # near the limit: go on at a crawl
+            if trip_name(reason) == SLOW_ZONE:  # near the limit: go on at a crawl
                 return self.move(target_mm, min(speed_mm_s, self.cfg.safety.slow_zone_speed_mm_s), stop_when)
         elif kind == "stop":
             self.platform.stop()
@@ -182,18 +197,18 @@ class PlatformControl:
             if not contact["seen"] and fz_n.max() >= cfg.approach.contact_force_n:
                 contact["seen"] = True
                 self.log.event("contact", "contact", fz_n=float(fz_n.max()))
-            return "target_reached" if fz_n.max() >= target_n else None
+            return TARGET_REACHED if fz_n.max() >= target_n else None
 
         def slow_down(wrenches) -> str | None:
             reached = check(wrenches)
             if reached is not None:
                 return reached
             if wrenches and max(w.force_n[2] for w in wrenches) >= min(cfg.press.slow_above_n, target_n):
-                return "loading"
+                return LOADING
             return None
 
         def on_target(sample) -> str | None:  # checked by the backend on every F/T sample
-            return "target_reached" if sample.force_n[2] >= target_n else None
+            return TARGET_REACHED if sample.force_n[2] >= target_n else None
 
         x, y = self.position_mm()[:2]
         bottom = np.array([x, y, cfg.safety.platform_min_mm[2]])
@@ -202,12 +217,12 @@ class PlatformControl:
             rig.add_guard(on_target)
         try:
             reason = self.move(bottom, cfg.press.speed_mm_s, slow_down)
-            if reason == "loading":
+            if reason == LOADING:
                 reason = self.move(bottom, min(cfg.press.load_speed_mm_s, cfg.press.speed_mm_s), check)
         finally:
             rig.remove_guard(on_target)
-        reason = reason or "depth_limit"
-        if reason != "target_reached" or stop_reason_on_target:
+        reason = reason or DEPTH_LIMIT
+        if reason != TARGET_REACHED or stop_reason_on_target:
             fz = None if self.log.last_wrench is None else float(self.log.last_wrench.force_n[2])
             self.log.stop(reason, fz_n=fz, tripped=self.log.rig.tripped)
         return reason
@@ -217,7 +232,7 @@ def run_press(ctl: PlatformControl, trial: CalibrationTrial) -> None:
     cfg = ctl.cfg
     ctl.log.event("phase", "press", target_n=cfg.press.target_normal_n)
     reason = ctl.press(cfg.press.target_normal_n, stop_reason_on_target=True)
-    if reason == "target_reached":
+    if reason == TARGET_REACHED:
         ctl.log.event("phase", "hold")
         ctl.hold(cfg.press.hold_s)
     ctl.lift(trial.position_mm)
@@ -245,7 +260,7 @@ def run_slide(ctl: PlatformControl, trial: CalibrationTrial) -> None:
 
     def shear(wrenches) -> str | None:
         if wrenches and max(np.hypot(w.force_n[0], w.force_n[1]) for w in wrenches) >= cfg.slide.shear_stop_n:
-            return "shear_reached"
+            return SHEAR_REACHED
         return None
 
     reason = None
@@ -255,7 +270,7 @@ def run_slide(ctl: PlatformControl, trial: CalibrationTrial) -> None:
         reason = ctl.move(wp, cfg.slide.speed_mm_s, shear)
         if reason is not None:
             break
-    reason = reason or "skin_edge"
+    reason = reason or SKIN_EDGE
     last = log.last_wrench
     log.stop(reason, fz_n=None if last is None else float(last.force_n[2]),
              shear_n=None if last is None else float(np.hypot(*last.force_n[:2])),
@@ -271,10 +286,13 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=Non
                           "calibration needs the platform setup")
     safety = Safety(cfg.safety, rig)
     ctl = PlatformControl(rig, safety, cfg)
-    root = Path(cfg.data_root) / PROTOCOL / design_id(metadata["config"])
+    root = campaign_root(cfg, metadata["config"])
     trials = plan_trials(cfg)
     identity = {t.name: trial_identity(metadata["config"], t.labels) for t in trials}
+    # trial_is_complete refuses a conflicting file: before the first trial, not half-way through
     todo = [t for t in trials if not trial_is_complete(root / f"{t.name}.mcap", identity[t.name])]
+    if todo:
+        write_manifest(root, metadata["config"])
     results: list[TrialResult] = []
     with tqdm(total=len(trials), initial=len(trials) - len(todo), unit="trial", desc=PROTOCOL,
               disable=not cfg.progress, dynamic_ncols=True) as bar:

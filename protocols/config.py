@@ -9,7 +9,9 @@ each protocol setting is also checked against them here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+import tempfile
+from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +44,7 @@ HARD = {
     # Robotiq Hand-E: 20-150 mm/s jaw speed, 50 mm stroke.
     "max_gripper_speed_mm_s": 150.0,
     "max_grip_depth_mm": 50.0,
+    "gripper_stroke_mm": 50.0,
     # Summed counts of both layers near full scale mean most taxels are saturated: the sensor no
     # longer measures what it carries.
     "max_skin_load_fraction": 0.8,
@@ -52,10 +55,61 @@ TRIAL_TIMEOUT_S = (1.0, 3600.0)
 
 
 def _check_data_root(data_root: str) -> None:
+    """The session files can be written there: found now, not after the devices connect."""
     require(bool(data_root), "data_root", data_root, "give a folder for the session files")
-    path = Path(data_root)
+    path = Path(data_root).absolute()
     require(not path.exists() or path.is_dir(), "data_root", data_root,
             "exists and is not a folder; give a folder for the session files")
+    existing = next(p for p in (path, *path.parents) if p.exists())
+    require(existing.is_dir(), "data_root", data_root, f"{existing} is not a folder; give a writable folder")
+    try:  # a probe file, removed at once: permissions, read-only mounts and /proc all answer here
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as exc:
+        require(False, "data_root", data_root,
+                f"cannot write in {existing} ({exc.strerror or exc}); give a writable folder")
+
+
+def _check_finite(node, prefix: str = "", skip: tuple[str, ...] = ("hardware", "skin", "sim")) -> None:
+    """Every number in a protocol config is finite (inf and nan pass `x > 0`-style checks or none)."""
+    for f in fields(node):
+        if f.name in skip:
+            continue
+        value, key = getattr(node, f.name), f"{prefix}{f.name}"
+        if is_dataclass(value):
+            _check_finite(value, f"{key}.", ())
+        elif isinstance(value, float):
+            require(math.isfinite(value), key, value, "must be a finite number")
+        elif isinstance(value, list | tuple):
+            require(all(math.isfinite(v) for v in value if isinstance(v, float)), key, value,
+                    "must hold finite numbers")
+
+
+def _check_duration(key: str, value: float, timeout_s: float) -> None:
+    require(0 <= value <= timeout_s, key, value, f"must be in [0, trial_timeout_s={timeout_s}] s")
+
+
+def _arm_accel_cap(cfg) -> tuple[float, str]:
+    """The arm driver's acceleration cap (m/s^2) and its key, on this config's backend."""
+    ur5e = getattr(cfg.hardware, "ur5e", None)
+    if ur5e is not None:
+        return float(ur5e.max_accel_m_s2), "hardware.ur5e.max_accel_m_s2"
+    arm = getattr(getattr(cfg.sim, "rig", None), "arm", None)
+    if arm is not None:
+        return float(arm.max_accel_m_s2), "sim.rig.arm.max_accel_m_s2"
+    return 1.5, "max_accel_m_s2"
+
+
+def _check_fault_devices(hardware, setup: str) -> None:
+    """Fault injection names only emulators this protocol's setup runs (loopback backend)."""
+    faults = getattr(hardware, "faults", None)
+    if not faults:
+        return
+    from hardware.loopback import SETUP_DEVICES
+
+    for device in faults:
+        require(device in SETUP_DEVICES[setup], f"hardware.faults.{device}", faults[device],
+                f"no {device} emulator on the {setup} setup; choose among {list(SETUP_DEVICES[setup])}")
 
 
 @dataclass
@@ -227,6 +281,9 @@ class ForceCalibrationConfig:
                 self.control_period_s, f"must be in [{CONTROL_PERIOD_S[0]}, {CONTROL_PERIOD_S[1]}] s")
         require(TRIAL_TIMEOUT_S[0] <= self.trial_timeout_s <= TRIAL_TIMEOUT_S[1], "trial_timeout_s",
                 self.trial_timeout_s, f"must be in [{TRIAL_TIMEOUT_S[0]}, {TRIAL_TIMEOUT_S[1]}] s")
+        _check_duration("press.hold_s", self.press.hold_s, self.trial_timeout_s)
+        _check_finite(self)
+        _check_fault_devices(self.hardware, "platform")
         _check_data_root(self.data_root)
 
 
@@ -236,27 +293,67 @@ class ForceCalibrationConfig:
 
 
 @dataclass
-class TrajectoryConfig:
-    """A piecewise-linear motion imposed after the grip.
+class TranslationConfig:
+    """Arm translation: the TCP moves `waypoints_mm` along `axis` (base frame; X0 = [1, 0, 0])."""
 
-    translation: waypoints in mm along `axis` (base frame, X0 = [1, 0, 0]), speed in mm/s.
-    torsion: waypoints in degrees about `axis` (tool frame: the normal of the skin pad), speed in °/s.
+    waypoints_mm: list[float] = field(default_factory=lambda: [0.0, 5.0, 0.0, -5.0, 0.0])
+    speed_mm_s: float = 2.0
+    accel_mm_s2: float = 100.0
+    axis: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])
+
+
+@dataclass
+class TorsionConfig:
+    """Gripper torsion: the tool turns `waypoints_deg` about `axis` (tool frame: the skin normal),
+    about the TCP."""
+
+    waypoints_deg: list[float] = field(default_factory=lambda: [0.0, 25.0, 0.0, -25.0, 0.0])
+    speed_deg_s: float = 1.5
+    accel_rad_s2: float = 0.1  # the arm's angular acceleration (UR speedL's rotational part)
+    axis: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])
+
+
+# Keys of the trajectory before units were in their names: refused, naming the new key.
+RENAMED_KEYS = {
+    "trajectory.speed": "trajectory.translation.speed_mm_s (mm/s) or trajectory.torsion.speed_deg_s (deg/s)",
+    "trajectory.waypoints": "trajectory.translation.waypoints_mm or trajectory.torsion.waypoints_deg",
+    "trajectory.accel_mm_s2": "trajectory.translation.accel_mm_s2 or trajectory.torsion.accel_rad_s2",
+    "trajectory.axis": "trajectory.translation.axis or trajectory.torsion.axis",
+}
+
+
+@dataclass
+class TrajectoryConfig:
+    """The motion imposed after the grip: `motion` picks which of the two runs.
+
+    Both motions' parameters are always there (the `trajectory=translation|torsion` presets only
+    set `motion`), so a trial's design does not depend on which motion it runs.
     """
 
     motion: str = "translation"
-    waypoints: list[float] = field(default_factory=lambda: [0.0, 5.0, 0.0, -5.0, 0.0])
-    speed: float = 2.0
-    axis: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])
-    accel_mm_s2: float = 100.0  # UR linear acceleration (also used, in rad/s^2 / 1000, for torsion)
+    translation: TranslationConfig = field(default_factory=TranslationConfig)
+    torsion: TorsionConfig = field(default_factory=TorsionConfig)
 
     def __post_init__(self) -> None:
         require(self.motion in ("translation", "torsion"), "trajectory.motion", self.motion,
                 "use 'translation' or 'torsion'")
-        require(len(self.waypoints) >= 1, "trajectory.waypoints", self.waypoints, "give at least one waypoint")
-        require(self.speed > 0, "trajectory.speed", self.speed, "must be > 0 (mm/s or °/s)")
-        require(len(self.axis) == 3 and sum(a * a for a in self.axis) > 0, "trajectory.axis", self.axis,
-                "must be a non-zero 3-vector")
-        require(self.accel_mm_s2 > 0, "trajectory.accel_mm_s2", self.accel_mm_s2, "must be > 0")
+        for key, points in (("trajectory.translation.waypoints_mm", self.translation.waypoints_mm),
+                            ("trajectory.torsion.waypoints_deg", self.torsion.waypoints_deg)):
+            require(len(points) >= 1 and all(math.isfinite(w) for w in points), key, points,
+                    "give at least one finite waypoint")
+        for key, axis in (("trajectory.translation.axis", self.translation.axis),
+                          ("trajectory.torsion.axis", self.torsion.axis)):
+            require(len(axis) == 3 and all(math.isfinite(a) for a in axis) and sum(a * a for a in axis) > 0,
+                    key, axis, "must be a finite non-zero 3-vector")
+
+    @property
+    def waypoints(self) -> list[float]:
+        """The waypoints of the motion that runs (mm for translation, degrees for torsion)."""
+        return list(self.translation.waypoints_mm if self.motion == "translation" else self.torsion.waypoints_deg)
+
+    @property
+    def axis(self) -> list[float]:
+        return list(self.translation.axis if self.motion == "translation" else self.torsion.axis)
 
 
 @dataclass
@@ -317,36 +414,53 @@ class GripDepthConfig:
                 f"must be > 0 mm and at most safety.max_grip_depth_mm={s.max_grip_depth_mm}")
         require(self.trial >= 0, "trial", self.trial, "must be a trial index >= 0")
         a = self.approach
-        require(0 <= a.min_opening_mm < a.start_opening_mm <= HARD["max_grip_depth_mm"], "approach.start_opening_mm",
-                a.start_opening_mm, f"must exceed approach.min_opening_mm >= 0 and fit the gripper's "
-                f"{HARD['max_grip_depth_mm']} mm stroke")
+        stroke_mm = HARD["gripper_stroke_mm"]
+        require(0 <= a.min_opening_mm < stroke_mm, "approach.min_opening_mm", a.min_opening_mm,
+                f"must be in [0, {stroke_mm}) mm (the gripper's stroke)")
+        require(a.min_opening_mm < a.start_opening_mm <= stroke_mm, "approach.start_opening_mm",
+                a.start_opening_mm, f"must be in (approach.min_opening_mm={a.min_opening_mm}, {stroke_mm}] mm "
+                "(the gripper's stroke)")
+        require(a.min_opening_mm <= self.release.opening_mm <= stroke_mm, "release.opening_mm",
+                self.release.opening_mm, f"must be in [approach.min_opening_mm={a.min_opening_mm}, {stroke_mm}] mm "
+                "(the gripper's stroke)")
         reach_mm = a.start_opening_mm - a.min_opening_mm
         require(self.grip_depth <= reach_mm, "grip_depth", self.grip_depth,
                 f"cannot be reached: even with contact at approach.start_opening_mm={a.start_opening_mm} the jaws "
                 f"stop at approach.min_opening_mm={a.min_opening_mm} ({reach_mm:g} mm of closure at most)")
         require(a.threshold_counts > 0, "approach.threshold_counts", a.threshold_counts, "must be > 0 counts")
         require(a.consecutive_frames >= 1, "approach.consecutive_frames", a.consecutive_frames, "must be >= 1")
-        require(a.baseline_s >= 0, "approach.baseline_s", a.baseline_s, "must be >= 0 s")
         for key, value in (("approach.speed_mm_s", a.speed_mm_s), ("close.speed_mm_s", self.close.speed_mm_s),
                            ("release.speed_mm_s", self.release.speed_mm_s)):
             _check_speed(key, value, s.max_gripper_speed_mm_s, "safety.max_gripper_speed_mm_s")
         for key, value in (("approach.force_pct", a.force_pct), ("close.force_pct", self.close.force_pct)):
             require(0 <= value <= 100, key, value, "must be a percentage in [0, 100]")
-        t = self.trajectory
-        if t.motion == "translation":
-            _check_speed("trajectory.speed", t.speed, s.max_arm_speed_mm_s, "safety.max_arm_speed_mm_s")
-            require(max(abs(w) for w in t.waypoints) <= s.arm_max_offset_mm, "trajectory.waypoints", t.waypoints,
-                    f"must stay within safety.arm_max_offset_mm={s.arm_max_offset_mm}")
-        else:
-            _check_speed("trajectory.speed", t.speed, s.max_arm_angular_speed_deg_s,
-                         "safety.max_arm_angular_speed_deg_s")
-            require(max(abs(w) for w in t.waypoints) <= s.arm_max_rotation_deg, "trajectory.waypoints",
-                    t.waypoints, f"must stay within safety.arm_max_rotation_deg={s.arm_max_rotation_deg}")
-        require(self.hold_s >= 0, "hold_s", self.hold_s, "must be >= 0 s")
+        # Both motions are checked whichever runs: a sweep over the motion is refused as a whole.
+        tr, to = self.trajectory.translation, self.trajectory.torsion
+        _check_speed("trajectory.translation.speed_mm_s", tr.speed_mm_s, s.max_arm_speed_mm_s,
+                     "safety.max_arm_speed_mm_s")
+        require(max(abs(w) for w in tr.waypoints_mm) <= s.arm_max_offset_mm, "trajectory.translation.waypoints_mm",
+                tr.waypoints_mm, f"must stay within safety.arm_max_offset_mm={s.arm_max_offset_mm}")
+        _check_speed("trajectory.torsion.speed_deg_s", to.speed_deg_s, s.max_arm_angular_speed_deg_s,
+                     "safety.max_arm_angular_speed_deg_s")
+        require(max(abs(w) for w in to.waypoints_deg) <= s.arm_max_rotation_deg, "trajectory.torsion.waypoints_deg",
+                to.waypoints_deg, f"must stay within safety.arm_max_rotation_deg={s.arm_max_rotation_deg}")
+        # The arm driver refuses an acceleration above its own cap (sim.rig.arm / hardware.ur5e
+        # max_accel_m_s2); UR's speedL reads the same argument as rad/s^2 for a torsion.
+        cap_m_s2, cap_key = _arm_accel_cap(self)
+        require(0 < tr.accel_mm_s2 <= 1000.0 * cap_m_s2, "trajectory.translation.accel_mm_s2", tr.accel_mm_s2,
+                f"must be > 0 and at most the arm's {cap_key}={cap_m_s2} m/s^2 ({1000.0 * cap_m_s2:g} mm/s^2)")
+        require(0 < to.accel_rad_s2 <= cap_m_s2, "trajectory.torsion.accel_rad_s2", to.accel_rad_s2,
+                f"must be > 0 and at most {cap_m_s2} rad/s^2 (the arm's {cap_key}, which its driver applies to "
+                "angular moves too)")
         require(CONTROL_PERIOD_S[0] <= self.control_period_s <= CONTROL_PERIOD_S[1], "control_period_s",
                 self.control_period_s, f"must be in [{CONTROL_PERIOD_S[0]}, {CONTROL_PERIOD_S[1]}] s")
         require(TRIAL_TIMEOUT_S[0] <= self.trial_timeout_s <= TRIAL_TIMEOUT_S[1], "trial_timeout_s",
                 self.trial_timeout_s, f"must be in [{TRIAL_TIMEOUT_S[0]}, {TRIAL_TIMEOUT_S[1]}] s")
+        for key, value in (("hold_s", self.hold_s), ("close.settle_s", self.close.settle_s),
+                           ("approach.baseline_s", a.baseline_s)):
+            _check_duration(key, value, self.trial_timeout_s)
+        _check_finite(self)
+        _check_fault_devices(self.hardware, "gripper")
         _check_data_root(self.data_root)
 
 

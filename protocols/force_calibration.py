@@ -9,7 +9,7 @@ from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
 from layerskin_exp.config import CONF_DIR
-from protocols.app import preflight, run_app
+from protocols.app import preflight, refuse_shared_files, run_app
 from protocols.calibration import run_campaign
 
 
@@ -22,6 +22,7 @@ def main(cfg: DictConfig) -> dict:
 def cli() -> None:
     """Console script: refuse a bad command line as a whole, then let Hydra run it."""
     preflight("force_calibration", sys.argv[1:])
+    refuse_shared_files(sys.argv[1:])
     main()
 
 

@@ -20,10 +20,11 @@ from hardware.rig import Rig
 from layerskin_exp.config import ConfigError
 from layerskin_exp.types import SkinEstimate
 from protocols.config import GripDepthConfig, TrajectoryConfig
-from protocols.identity import design_id, trial_identity
+from protocols.identity import design_id, exact_number, trial_identity, write_manifest
 from protocols.loop import ControlLoop, DeviceTimeout
 from protocols.runner import ProtocolError, TrialLog, TrialResult, run_trial
 from protocols.safety import Safety
+from protocols.stops import NO_CONTACT, TARGET_REACHED
 
 PROTOCOL = "grip_depth"
 
@@ -34,7 +35,9 @@ def trial_labels(cfg: GripDepthConfig) -> dict:
 
 
 def trial_name(labels: dict) -> str:
-    return f"g{labels['grip_depth_mm']:g}_{labels['motion']}_t{labels['trial']}"
+    """g<depth>_<motion>_t<trial>; the depth is written in full (g9, g9.5, g9.0000001), so two
+    trials of one design never share a name."""
+    return f"g{exact_number(labels['grip_depth_mm'])}_{labels['motion']}_t{labels['trial']}"
 
 
 def trial_path(cfg: GripDepthConfig, config: dict) -> Path:
@@ -48,7 +51,7 @@ def trajectory_poses(start_pose6: np.ndarray, traj: TrajectoryConfig) -> list[np
     translation: the position moves waypoint mm along the (base-frame) axis.
     torsion: the orientation turns waypoint degrees about the (tool-frame) axis, about the TCP.
     """
-    axis = np.asarray(traj.axis, float)
+    axis = np.asarray(traj.axis, float)  # of the motion that runs
     axis /= np.linalg.norm(axis)
     start_rot = Rotation.from_rotvec(start_pose6[3:])
     poses = []
@@ -111,7 +114,7 @@ class GripControl:
         except DeviceTimeout:
             kind, frame = "end", None
         if kind == "end":
-            self.log.stop("no_contact", opening_mm=self.gripper_opening_mm())
+            self.log.stop(NO_CONTACT, opening_mm=self.gripper_opening_mm())
             raise ProtocolError(f"no contact before the jaws reached {self.gripper_opening_mm():.1f} mm "
                                 "(approach.min_opening_mm); check the rod position or approach.threshold_counts")
         self.rig.gripper.stop()
@@ -122,18 +125,20 @@ class GripControl:
         return opening
 
     def move_arm(self, pose6: np.ndarray, start_pose6: np.ndarray, traj: TrajectoryConfig) -> None:
-        if traj.motion == "translation":
-            speed_mm_s, angular_deg_s = traj.speed, None
-        else:
-            speed_mm_s, angular_deg_s = min(1.0, self.cfg.safety.max_arm_speed_mm_s), traj.speed
-        self.safety.check_arm_move(pose6, start_pose6, speed_mm_s, angular_deg_s)
         here = self.rig.arm.tcp_pose6()
         if traj.motion == "translation":
-            duration_s = 1000.0 * float(np.linalg.norm(pose6[:3] - here[:3])) / traj.speed
+            t = traj.translation
+            speed_mm_s, angular_deg_s, accel = t.speed_mm_s, None, t.accel_mm_s2 / 1000.0  # m/s^2
+            duration_s = 1000.0 * float(np.linalg.norm(pose6[:3] - here[:3])) / t.speed_mm_s
         else:
+            t = traj.torsion
+            # Arm.move_linear takes one acceleration; for a turn the drivers read it as rad/s^2.
+            speed_mm_s, angular_deg_s, accel = min(1.0, self.cfg.safety.max_arm_speed_mm_s), t.speed_deg_s, \
+                t.accel_rad_s2
             rel = Rotation.from_rotvec(pose6[3:]) * Rotation.from_rotvec(here[3:]).inv()
-            duration_s = float(np.degrees(rel.magnitude())) / traj.speed
-        self.rig.arm.move_linear(pose6, speed_mm_s / 1000.0, traj.accel_mm_s2 / 1000.0,
+            duration_s = float(np.degrees(rel.magnitude())) / t.speed_deg_s
+        self.safety.check_arm_move(pose6, start_pose6, speed_mm_s, angular_deg_s)
+        self.rig.arm.move_linear(pose6, speed_mm_s / 1000.0, accel,
                                  None if angular_deg_s is None else float(np.radians(angular_deg_s)))
         self.loop.tick()
         self.loop.wait(self.rig.arm.is_moving, 1.5 * duration_s + 5.0, "arm move")
@@ -189,17 +194,21 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) ->
         log.event("phase", "hold", opening_mm=ctl.gripper_opening_mm())
         ctl.loop.hold(max(cfg.close.settle_s, cfg.hold_s))
         start = np.asarray(rig.arm.tcp_pose6(), float)
-        log.event("phase", "motion", motion=cfg.trajectory.motion, waypoints=list(cfg.trajectory.waypoints),
-                  speed=cfg.trajectory.speed, start_pose6=start.tolist())
+        traj = cfg.trajectory
+        units = {"waypoints_mm": traj.waypoints, "speed_mm_s": traj.translation.speed_mm_s} \
+            if traj.motion == "translation" else {"waypoints_deg": traj.waypoints, "speed_deg_s": traj.torsion.speed_deg_s}
+        log.event("phase", "motion", motion=traj.motion, **units, start_pose6=start.tolist())
         for i, pose in enumerate(trajectory_poses(start, cfg.trajectory), start=1):
             log.event("waypoint", f"{cfg.trajectory.waypoints[i]:g}", index=i)
             ctl.move_arm(pose, start, cfg.trajectory)
-        log.stop("target_reached")
+        log.stop(TARGET_REACHED)
         log.event("phase", "hold")
         ctl.loop.hold(cfg.hold_s)
         log.event("phase", "release")
         ctl.move_gripper(cfg.release.opening_mm, cfg.release.speed_mm_s, a.force_pct, a.min_opening_mm)
 
     meta = {**metadata, "protocol": PROTOCOL, "plan": labels}
-    return run_trial(rig, trial_path(cfg, metadata["config"]), labels, meta, body,
+    path = trial_path(cfg, metadata["config"])
+    write_manifest(path.parent, metadata["config"])
+    return run_trial(rig, path, labels, meta, body,
                      identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live)

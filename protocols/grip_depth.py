@@ -9,7 +9,8 @@ from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
 from layerskin_exp.config import CONF_DIR
-from protocols.app import preflight, run_app
+from protocols.app import preflight, refuse_renamed, refuse_shared_files, run_app
+from protocols.config import RENAMED_KEYS
 from protocols.grip import run_grip_trial
 
 
@@ -22,7 +23,9 @@ def main(cfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console script: refuse a bad command line as a whole, then let Hydra run it."""
+    refuse_renamed(sys.argv[1:], RENAMED_KEYS)
     preflight("grip_depth", sys.argv[1:])
+    refuse_shared_files(sys.argv[1:])
     main()
 
 

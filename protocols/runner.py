@@ -1,10 +1,16 @@
 """The shared trial runner: file naming, resume, logging, safe abort, per-trial summary.
 
 A trial is one session file. It is written under a temporary name (`<name>.mcap.partial`) and
-renamed atomically once closed "complete", so a campaign stopped at any point leaves each trial
+renamed atomically once closed complete, so a campaign stopped at any point leaves each trial
 either complete under its final name or not there at all (an interrupted attempt stays as the
 `.partial` file, readable and marked aborted, until the rerun overwrites it). Whether a trial is
 complete is read back from the file itself.
+
+Outcomes: "complete" (the trial ran as planned); "complete (safety stop: <trip>)" (a safety
+limit stopped the motion, the protocol retracted and finished the trial: its data are kept and
+analysed, and a rerun does not repeat it); "aborted: <reason>" (kept as `.partial`, run again by
+a rerun). A complete file is never replaced: a rerun skips it when its identity matches and
+refuses (`TrialConflictError`) when the same path holds a trial of another identity.
 """
 
 from __future__ import annotations
@@ -29,8 +35,13 @@ from layerskin_exp.types import (
     TwoLayerFrame,
     Wrench,
 )
+from protocols.stops import is_safety_trip
 
 PARTIAL_SUFFIX = ".partial"
+COMPLETE = "complete"
+# Settings that add a view to a trial (camera images, live estimates) without changing its data:
+# not part of its identity, so a rerun with them skips a complete trial (and says what it lacks).
+VIEW_KEYS = ("save_images", "estimator")
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +55,15 @@ def trial_rng(seed: int, *keys: int | str) -> np.random.Generator:
 
 class ProtocolError(RuntimeError):
     """The protocol could not carry out a trial as planned (e.g. no contact found)."""
+
+
+class TrialConflictError(ProtocolError):
+    """The trial's file holds a complete trial of another identity; it is left untouched."""
+
+
+def outcome_after(safety_trip: str | None) -> str:
+    """The outcome of a trial that ran to its end: plain complete, or complete with the trip."""
+    return COMPLETE if safety_trip is None else f"{COMPLETE} (safety stop: {safety_trip})"
 
 
 class Terminated(BaseException):
@@ -71,18 +91,36 @@ def check_termination() -> None:
         raise Terminated(_termination[0])
 
 
-def trial_is_complete(path: Path, identity: str | None = None) -> bool:
-    """True when `path` is a readable, undamaged session whose outcome is "complete" and, when
-    `identity` is given, that was recorded with the same trial identity."""
+def complete_session(path: Path):
+    """The session at `path` when it is a readable, undamaged, complete trial, else None."""
     if not path.is_file():
-        return False
+        return None
     try:
-        session = load_session(path)
+        session = load_session(path, warn=False)
     except SessionFileError:
-        return False
-    if not session.complete:
-        return False
-    return identity is None or session.metadata.get("identity") == identity
+        return None
+    return session if session.complete else None
+
+
+def trial_is_complete(path: Path, identity: str | None = None) -> bool:
+    """True when `path` is a readable, undamaged, complete session recorded with `identity`;
+    raises TrialConflictError when it is a complete session of another identity (given one)."""
+    session = complete_session(path)
+    if session is not None:
+        check_no_conflict(path, identity, session)
+    return session is not None
+
+
+def check_no_conflict(path: Path, identity: str | None, session=None) -> None:
+    """Refuse (TrialConflictError) when `path` holds a complete trial of another identity.
+    session: the complete session already read from `path`, if it was."""
+    session = complete_session(path) if session is None else session
+    if identity is None or session is None or session.metadata.get("identity") == identity:
+        return
+    raise TrialConflictError(
+        f"{path} holds a complete trial recorded with another configuration (identity "
+        f"{str(session.metadata.get('identity'))[:12]}..., this run {identity[:12]}...); it is not replaced. "
+        "Record this one under another data_root, or move that file away first")
 
 
 @dataclass
@@ -102,7 +140,8 @@ class TrialResult:
 
     def summary(self) -> str:
         if self.skipped:
-            return f"{self.name}: already complete, skipped"
+            return f"{self.name}: already complete, skipped" + (f" ({self.extra['note']})" if "note" in self.extra
+                                                                 else "")
         parts = [self.name, f"{self.duration_s:.2f} s"]
         if self.peak_fz_n is not None:
             parts.append(f"Fz max {self.peak_fz_n:.2f} N")
@@ -135,6 +174,7 @@ class TrialLog:
         self.last_stage: StagePosition | None = None
         self.last_gripper: GripperState | None = None
         self.stop_reason: str | None = None
+        self.safety_trip: str | None = None  # the first safety limit that tripped in this trial
         self._last_image_seq: int | None = None
         self._noted_trip: str | None = None
         # What Foxglove draws besides the raw streams: the frame tree's fixed part, CoP overlays.
@@ -180,9 +220,13 @@ class TrialLog:
                 self.peak_shear_n = shear_max if self.peak_shear_n is None else max(self.peak_shear_n, shear_max)
         if rig.tripped is not None and rig.tripped is not self._noted_trip:  # whenever it happened
             self._noted_trip = rig.tripped
-            # A limit trip is a safety event; a per-sample stop condition (press target) is not.
-            self.event("safety" if rig.tripped.startswith(("force_limit", "skin_load_limit")) else "guard",
-                       rig.tripped)
+            # A limit trip is a safety event (warning); a per-sample stop condition (a press on
+            # its target, the slow zone) is a normal stop (info).
+            if is_safety_trip(rig.tripped):
+                self.safety_trip = self.safety_trip or rig.tripped
+                self.event("safety", rig.tripped)
+            else:
+                self.event("sample_stop", rig.tripped)
         for dev in (rig.platform, rig.arm, rig.gripper):
             if dev is None:
                 continue
@@ -235,8 +279,14 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     path = Path(path)
     name = path.stem
     check_termination()
-    if trial_is_complete(path, identity):
-        return TrialResult(name, labels, str(path), "complete", skipped=True)
+    existing = complete_session(path)
+    if existing is not None:
+        check_no_conflict(path, identity, existing)
+        note = _missing_views(existing.metadata.get("config") or {}, metadata.get("config") or {})
+        if note:
+            log.warning("trial %s is already complete (%s); it is not run again", name, note)
+        return TrialResult(name, labels, str(path), existing.outcome, skipped=True,
+                           extra={"note": note} if note else {})
     if identity is not None:
         metadata = {**metadata, "identity": identity}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -264,9 +314,16 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         writer.close(f"aborted: {reason}")
         log.warning("trial %s aborted: %s (kept as %s)", name, reason, tmp)
         raise
-    writer.close("complete", move_to=path)  # renamed under the writer's lock, fsynced
-    result = TrialResult(name, labels, str(path), "complete", duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
+    outcome = outcome_after(trial.safety_trip)
+    writer.close(outcome, move_to=path)  # renamed under the writer's lock, fsynced
+    result = TrialResult(name, labels, str(path), outcome, duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
                          peak_fz_n=trial.peak_fz_n, peak_shear_n=trial.peak_shear_n,
                          stop_reason=trial.stop_reason)
-    log.info("trial %s", result.summary())
+    log.log(logging.INFO if trial.safety_trip is None else logging.WARNING, "trial %s", result.summary())
     return result
+
+
+def _missing_views(recorded: dict, asked: dict) -> str:
+    """What this run asks for that the complete file was recorded without (VIEW_KEYS)."""
+    return ", ".join(f"recorded with {k}={recorded.get(k)!r}, asked {asked[k]!r}" for k in VIEW_KEYS
+                     if asked.get(k) and recorded.get(k) != asked.get(k))

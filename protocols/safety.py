@@ -15,10 +15,7 @@ from scipy.spatial.transform import Rotation
 from hardware.rig import Rig
 from layerskin_exp.types import Wrench
 from protocols.config import SafetyConfig
-
-FORCE_LIMIT = "force_limit"
-SKIN_LOAD_LIMIT = "skin_load_limit"
-SLOW_ZONE = "slow_zone"
+from protocols.stops import FORCE_LIMIT, SKIN_LOAD_LIMIT, SLOW_ZONE
 
 
 class SafetyError(RuntimeError):

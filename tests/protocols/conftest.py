@@ -17,7 +17,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 # Shortened study configs: a handful of trials, short holds and trajectories.
 TINY_CALIBRATION = ["positions.count=2", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05"]
-TINY_GRIP = ["trajectory.waypoints=[0.0,0.5,0.0]", "hold_s=0.1", "close.settle_s=0.1", "grip_depth=6"]
+TINY_GRIP = ["trajectory.translation.waypoints_mm=[0.0,0.5,0.0]", "hold_s=0.1", "close.settle_s=0.1", "grip_depth=6"]
 
 
 def compose_app(config_name: str, overrides: list[str]):

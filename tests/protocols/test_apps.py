@@ -30,8 +30,9 @@ def test_calibration_cli_writes_labelled_trials(tmp_path, hydra_dirs):
     cfg, typed = compose_app("force_calibration", [*TINY_CALIBRATION, f"data_root={data}"])
     plan = plan_trials(typed)
     folder = design_dir(data / "force_calibration")
-    files = sorted(folder.iterdir())
+    files = sorted(folder.glob("*.mcap*"))
     assert [f.name for f in files] == sorted(f"{t.name}.mcap" for t in plan)
+    assert (folder / "design.yaml").is_file()
     for f in files:
         assert load_session(f, warn=False).metadata["backend"] == "sim"
     for trial in plan:
@@ -84,7 +85,7 @@ def test_resume_after_sigkill_runs_each_trial_once(tmp_path, hydra_dirs):
     assert r.returncode == 0, r.stderr[-2000:]
     _, typed = compose_app("force_calibration", args[:-2])
     plan = plan_trials(typed)
-    names = sorted(p.name for p in folder.iterdir())
+    names = sorted(p.name for p in folder.glob("*.mcap*"))
     assert names == sorted(f"{t.name}.mcap" for t in plan)  # each once, no .partial left
     for name, stamp in done_before.items():  # complete trials were not run again
         p = folder / name
@@ -126,6 +127,11 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     ("protocols.grip_depth", "+grip_dept=15", "Key 'grip_dept' not in 'GripDepthConfig'"),
     ("protocols.grip_depth", "grip_dept=15", "Key 'grip_dept' not in 'GripDepthConfig'"),
     ("protocols.grip_depth", "grip_depth=abc", "could not be converted to Float"),
+    # issue 20: a Hydra traceback (exit 1), a JSON error mid-trial, a renamed key (issue 19)
+    ("protocols.grip_depth", "hardware=loopback +hardware.faults.skin_board.typo=1", "hardware.faults.skin_board.typo"),
+    ("protocols.grip_depth", "release.opening_mm=nan", "release.opening_mm=nan: must be in"),
+    ("protocols.grip_depth", "trajectory.speed=1", "use trajectory.translation.speed_mm_s (mm/s) or"),
+    ("protocols.grip_depth", "-m save_images=true,false", "would write the same session files"),
 ])
 def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
     r = run_cli(app, [*override.split(), f"data_root={tmp_path}/data", *hydra_dirs], tmp_path)
@@ -134,23 +140,32 @@ def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override,
     assert list(tmp_path.iterdir()) == []  # no session files, no Hydra output folders
 
 
-def test_grip_multirun_basic_launcher(tmp_path, hydra_dirs):
+def test_sweep_over_a_protocol_key_keeps_every_combination_and_resumes_once(tmp_path, hydra_dirs):
+    # Two jobs that differ only in a protocol key (not in the file name) must not share a file,
+    # and the same sweep run again, into the same sweep folder, runs nothing and counts each job once.
     data = tmp_path / "data"
-    r = run_cli("protocols.grip_depth", ["-m", "trial=0,1", *TINY_GRIP, f"data_root={data}", *hydra_dirs],
-                tmp_path)
+    args = ["-m", "trajectory.translation.speed_mm_s=1,2", "trial=5", *TINY_GRIP, f"data_root={data}", *hydra_dirs]
+    r = run_cli("protocols.grip_depth", args, tmp_path)
     assert r.returncode == 0, r.stderr[-3000:]
+    files = sorted((data / "grip_depth").glob("*/g6_translation_t5.mcap"))
+    assert len(files) == 2
     _, typed = compose_app("grip_depth", [*TINY_GRIP])
-    for trial in (0, 1):
-        s = load_session(design_dir(data / "grip_depth") / f"g6_translation_t{trial}.mcap", warn=False)
-        assert s.labels == {"protocol": "grip_depth", "grip_depth_mm": 6.0, "motion": "translation", "trial": trial}
-        check_grip_session(s, typed)
+    speeds = set()
+    for f in files:
+        s = load_session(f, warn=False)
+        assert s.labels == {"protocol": "grip_depth", "grip_depth_mm": 6.0, "motion": "translation", "trial": 5}
+        check_grip_session(s, typed)  # rates, phases, contact, the 0.5 mm excursion: not the speed
+        speeds.add(s.metadata["config"]["trajectory"]["translation"]["speed_mm_s"])
+        assert (f.parent / "design.yaml").is_file()
+    assert speeds == {1.0, 2.0}
     progress = [json.loads(ln) for ln in (tmp_path / "multirun" / "sweep_progress.jsonl").read_text().splitlines()]
     assert len(progress) == 2 and all(p["ok"] for p in progress)
-    assert "2/2" in r.stdout
-    # a second sweep finds both complete and runs nothing
-    r2 = run_cli("protocols.grip_depth", ["-m", "trial=0,1", *TINY_GRIP, f"data_root={data}",
-                                          f"hydra.sweep.dir={tmp_path}/multirun2"], tmp_path)
-    assert r2.returncode == 0 and "0 ran, 2 already complete, 0 failed" in r2.stdout
+    assert "2/2" in r.stdout and "2 ran, 0 already complete, 0 failed" in r.stdout
+    stamps = [f.stat().st_mtime_ns for f in files]
+    r2 = run_cli("protocols.grip_depth", args, tmp_path)
+    assert r2.returncode == 0 and "0 ran, 2 already complete, 0 failed" in r2.stdout, r2.stdout[-2000:]
+    assert "not reported" not in r2.stdout and "3/2" not in r2.stdout and "4/2" not in r2.stdout
+    assert [f.stat().st_mtime_ns for f in files] == stamps
 
 
 def test_design_sweep_writes_one_set_of_files_per_value(tmp_path, hydra_dirs):

@@ -3,6 +3,8 @@ checked before anything connects (all refused at validation, naming the key)."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from layerskin_exp.config import ConfigError
@@ -22,10 +24,66 @@ from tests.protocols.conftest import compose_app
     ("grip_depth", ["control_period_s=1e-7"], "control_period_s"),
     ("force_calibration", ["trial_timeout_s=0.01"], "trial_timeout_s"),
     ("grip_depth", ["+grip_dept=15"], "grip_dept"),
+    # issue 20: values that used to get past validation (each one line naming key, value, range)
+    ("grip_depth", ["release.opening_mm=1000"], r"release\.opening_mm=1000\.0: must be in \[.*, 50\.0\] mm"),
+    ("grip_depth", ["release.opening_mm=nan"], r"release\.opening_mm=nan: must be in"),
+    ("grip_depth", ["release.opening_mm=-10"], r"release\.opening_mm=-10\.0: must be in"),
+    ("grip_depth", ["hardware=loopback", "+hardware.faults.skin_board.p_bit_flip=2"],
+     r"hardware\.faults\.skin_board\.p_bit_flip=2: must be a probability in \[0, 1\]"),
+    ("grip_depth", ["hardware=loopback", "+hardware.faults.skin_board.typo=1"],
+     r"hardware\.faults\.skin_board\.typo=1: .*choose among \[.*'p_bit_flip'"),
+    ("grip_depth", ["hardware=loopback", "+hardware.faults.ur5e.stall_after_s=nan"],
+     r"hardware\.faults\.ur5e\.stall_after_s=nan: must be a number >= 0"),
+    ("grip_depth", ["hardware=loopback", "+hardware.faults.netft.drop_every=2"],
+     r"hardware\.faults\.netft=.*no netft emulator on the gripper setup"),
+    ("grip_depth", ["trajectory.translation.accel_mm_s2=1e12"],
+     r"trajectory\.translation\.accel_mm_s2=1000000000000\.0: must be > 0 and at most .*1500 mm/s\^2"),
+    ("grip_depth", ["trajectory=torsion", "trajectory.torsion.accel_rad_s2=1e12"], r"trajectory\.torsion\.accel_rad_s2"),
+    ("grip_depth", ["hold_s=inf"], r"hold_s=inf: must be in \[0, trial_timeout_s=300\.0\] s"),
+    ("grip_depth", ["close.settle_s=1e9"], r"close\.settle_s"),
+    ("grip_depth", ["approach.baseline_s=nan"], r"approach\.baseline_s"),
+    ("force_calibration", ["press.hold_s=inf"], r"press\.hold_s"),
+    ("force_calibration", ["slide.z_ramp_mm=inf"], r"slide\.z_ramp_mm=inf: must be a finite number"),
+    ("force_calibration", ["approach.contact_force_n=inf"], r"approach\.contact_force_n=inf"),
+    ("force_calibration", ["hardware=loopback", "+hardware.faults.skin_board.stalls=[[1.0,nan]]"],
+     r"hardware\.faults\.skin_board\.stalls"),
 ])
 def test_refused_at_validation(app, overrides, key):
-    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+    with pytest.raises(ConfigError, match=key if "\\" in key else key.replace(".", r"\.")):
         compose_app(app, overrides)
+
+
+@pytest.mark.parametrize("data_root", ["/proc/layerskin", "/proc/self/status/sub"])
+def test_data_root_where_nothing_can_be_written_is_refused(data_root):
+    with pytest.raises(ConfigError, match=r"data_root=.*(cannot write|not a folder)"):
+        compose_app("grip_depth", [f"data_root={data_root}"])
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder anyway")
+def test_read_only_data_root_is_refused(tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        with pytest.raises(ConfigError, match="data_root=.*cannot write"):
+            compose_app("force_calibration", [f"data_root={ro}/data"])
+    finally:
+        ro.chmod(0o755)
+
+
+def test_fault_settings_are_the_ones_the_emulators_declare():
+    from hardware.config import fault_parameters
+    from hardware.loopback import EMULATORS, emulator_class
+
+    for device in EMULATORS:
+        declared = fault_parameters(device)
+        assert "stall_after_s" in declared and not {"rt", "host", "port", "self"} & set(declared)
+        init = emulator_class(device).__init__.__code__.co_varnames
+        assert all(name in init or name == "stall_after_s" for name in declared)
+    cfg, typed = compose_app("grip_depth", ["hardware=loopback", "+hardware.faults.skin_board.p_bit_flip=0.01",
+                                            "+hardware.faults.skin_board.stalls=[[1.0,200]]",
+                                            "+hardware.faults.hande.stall_after_s=2.5"])
+    assert typed.hardware.faults["skin_board"]["p_bit_flip"] == 0.01
 
 
 def test_data_root_that_is_a_file_is_refused(tmp_path):

@@ -30,7 +30,7 @@ def test_grip_session_carries_the_estimates_of_its_own_frames(tmp_path):
     art = _artifact(tmp_path / "T-s5.pt")
     cfg = GripDepthConfig(hardware={}, skin={}, data_root=str(tmp_path / "data"), grip_depth=6.0, progress=False,
                           estimator=str(art))
-    cfg.trajectory.waypoints = [0.0, 1.0, 0.0]
+    cfg.trajectory.translation.waypoints_mm = [0.0, 1.0, 0.0]
     result = run_grip_trial(cfg, _connected(gripper_rig(rod_contact_mm=20.0)), META)
     s = load_session(result.path, warn=False)
     skin, est, slip = s.streams["skin"], s.streams["estimate_force"], s.streams["estimate_slip"]

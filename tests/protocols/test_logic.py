@@ -3,6 +3,7 @@ per-sample force guard, safe abort, planning from seed + labels, the safety chec
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,23 @@ def test_force_guard_stops_within_one_sample(tmp_path):
     assert "safety" in s.streams["events"]["kind"]
 
 
+def test_a_safety_trip_is_in_the_outcome_and_logged_as_a_warning(tmp_path, caplog):
+    # The press of test_force_guard_stops_within_one_sample trips the 6 N limit: the trial retracts
+    # and finishes, so it is complete (analysed, not run again) but its outcome says why it stopped.
+    cfg = _cal_cfg(tmp_path, **{"press.speed_mm_s": 10.0, "control_period_s": 0.1, "slide.repeats": 0,
+                                "press.stop_on_sample": False, "press.slow_above_n": 100.0})
+    with caplog.at_level(logging.INFO, logger="protocols.runner"):
+        (result,) = run_campaign(cfg, _connected(platform_rig(k_n_per_mm=40.0, ft_hz=1000.0)), META)
+    s = load_session(result.path, warn=False)
+    assert s.outcome.startswith("complete (safety stop: force_limit: Fz=") and s.complete
+    assert result.outcome == s.outcome
+    trip = [r for r in caplog.records if "safety: force_limit" in r.getMessage()]
+    assert trip and all(r.levelno == logging.WARNING for r in trip)
+    stamp = Path(result.path).stat().st_mtime_ns
+    assert run_campaign(cfg, _connected(platform_rig(k_n_per_mm=40.0, ft_hz=1000.0)), META) == []  # nothing to do
+    assert Path(result.path).stat().st_mtime_ns == stamp
+
+
 def test_device_error_stops_motion_then_closes_aborted(tmp_path):
     rig = _connected(platform_rig(fail_after_s=1.5))
     cfg = _cal_cfg(tmp_path)
@@ -150,7 +168,7 @@ def test_trajectory_poses_follow_the_waypoints():
     start = np.array([0.4, 0.1, 0.3, 0.0, np.pi / 2, 0.0])
     poses = trajectory_poses(start, cfg.trajectory)
     assert [1000 * (p[0] - start[0]) for p in poses] == pytest.approx([5.0, 0.0, -5.0, 0.0])
-    cfg.trajectory.motion, cfg.trajectory.waypoints, cfg.trajectory.axis = "torsion", [0, 25, 0, -25, 0], [0, 1, 0]
+    cfg.trajectory.motion = "torsion"  # its defaults: [0, 25, 0, -25, 0] deg about the tool's y axis
     from scipy.spatial.transform import Rotation as R
     rots = [R.from_rotvec(start[3:]).inv() * R.from_rotvec(p[3:]) for p in trajectory_poses(start, cfg.trajectory)]
     assert [np.degrees(r.as_rotvec()[1]) for r in rots] == pytest.approx([25, 0, -25, 0], abs=1e-9)
@@ -158,7 +176,7 @@ def test_trajectory_poses_follow_the_waypoints():
 
 def test_grip_trial_contact_then_depth(tmp_path):
     cfg = GripDepthConfig(hardware={}, skin={}, data_root=str(tmp_path), grip_depth=6.0, progress=False)
-    cfg.trajectory.waypoints = [0.0, 1.0, 0.0]
+    cfg.trajectory.translation.waypoints_mm = [0.0, 1.0, 0.0]
     rig = _connected(gripper_rig(rod_contact_mm=20.0))
     result = run_grip_trial(cfg, rig, META)
     s = load_session(result.path, warn=False)
@@ -187,7 +205,10 @@ def test_press_stops_on_the_sample_that_reaches_the_target(tmp_path):
     assert results[0].stop_reason == "target_reached"
     fz = s.streams["wrench"]["force_n"][:, 2]
     assert 4.0 <= fz.max() <= 4.0 + k * v / ft_hz + 1e-9
-    assert "safety" not in s.streams["events"]["kind"]
+    ev = s.streams["events"]
+    # a stop condition met on a sample is a normal stop: info level (no safety, guard or error event)
+    assert not {"safety", "guard", "error"} & set(ev["kind"]) and s.outcome == "complete"
+    assert ev["message"][ev["kind"].index("sample_stop")] == "target_reached"
 
 
 def test_grip_rig_skin_load_guard_aborts_a_crushing_grip(tmp_path):

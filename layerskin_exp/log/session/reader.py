@@ -54,7 +54,8 @@ class Session:
 
     streams: {name: {field: array}}; every stream has "t_ns" (N,) int64 on the common host
     timeline, "host_t_ns" and (except events) "device_t_ns" and "seq". See layerskin_exp.log.
-    complete: the writer finished the file, recorded outcome "complete", and nothing in the
+    complete: the writer finished the file, recorded outcome "complete" (or "complete (<note>)",
+        e.g. a safety stop the trial finished after), and nothing in the
         file is damaged (a damaged trial is never complete, whatever its outcome says).
     clock_sync: {stream: ClockMap} used for t_ns (from the file, or estimated on reading).
     lost: the data a damaged file did not give back (skipped chunks, records), see LostRange;
@@ -162,13 +163,14 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         clock_sync[name] = cmap
         arrays["t_ns"] = cmap.to_host(arrays["device_t_ns"])
     damaged = sc.damaged or bool(lost)
-    complete = sc.has_footer and outcome == "complete" and not damaged
+    finished = outcome is not None and (outcome == "complete" or outcome.startswith("complete ("))
+    complete = sc.has_footer and finished and not damaged
     if outcome is None:
         msgs.append("no outcome recorded: the writer did not close this session (crash or kill?)")
     if damaged:
         msgs.append(
             f"damaged: {len(lost)} lost range(s), {sc.chunks_skipped} chunk(s) skipped; everything else "
-            f"was read" + (" (the file says complete; this copy is not)" if outcome == "complete" else "")
+            f"was read" + (" (the file says complete; this copy is not)" if finished else "")
         )
     if msgs and warn:
         _warnings.warn(f"{path}: " + "; ".join(msgs), SessionWarning, stacklevel=2)

@@ -651,15 +651,16 @@ class SessionWriter:
 
     def close(self, outcome: str = "complete", *, move_to=None) -> None:
         """Record the clock sync, the Foxglove layout of what was written and the outcome
-        ("complete" or "aborted: <reason>"), write the MCAP summary and close the file. Closing twice is a no-op.
+        ("complete", "complete (<note>)", e.g. a safety stop the trial finished after, or
+        "aborted: <reason>"), write the MCAP summary and close the file. Closing twice is a no-op.
 
         move_to: rename the finished file to this path (atomically, fsynced) while the lock is
         still held, so no other writer can claim the old name between closing and renaming.
         """
         if self._closed:
             return
-        if not (outcome == "complete" or outcome.startswith("aborted")):
-            raise ValueError(f"outcome {outcome!r}: use 'complete' or 'aborted: <reason>'")
+        if not (outcome == "complete" or outcome.startswith(("complete (", "aborted"))):
+            raise ValueError(f"outcome {outcome!r}: use 'complete', 'complete (<note>)' or 'aborted: <reason>'")
         try:
             self.flush()
             try:
