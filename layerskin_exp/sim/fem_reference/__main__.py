@@ -22,10 +22,10 @@ import numpy as np
 from layerskin_exp.sim.fem_reference.model import Section, StackFE
 
 DATA = Path(__file__).resolve().parent / "data"
-DEPTHS_MM = tuple(np.round(np.arange(0.1, 2.01, 0.1), 3))
-SHEAR_FROM_MM = (0.8, 1.4, 2.0)
+DEPTHS_MM = tuple(np.round(np.arange(0.2, 1.81, 0.2), 3))
+SHEAR_FROM_MM = (0.6, 1.2, 1.8)
 SHEAR_RATIO = 2.0 / 6.0
-SHEAR_STEP_MM = 0.05
+SHEAR_STEP_MM = 0.1
 SHEAR_MAX_MM = 2.0
 SCALARS = ("phase", "cap_x_mm", "depth_mm", "fx_n_per_mm", "fz_n_per_mm", "contact_from_mm", "contact_to_mm",
            "stuck_fraction", "sheet_shift_mm", "sheet_x_under_cap_mm", "max_lattice_strain", "newton_iterations", "branch_depth_mm")
@@ -48,7 +48,7 @@ def run_bound(sim, interface: str, log=print) -> dict:
     saved = {}
     for depth in DEPTHS_MM:
         try:
-            it = fe.move_to(np.array([0.0, top - depth]), sticking=False, step_mm=0.05)
+            it = fe.move_to(np.array([0.0, top - depth]), sticking=False, step_mm=0.1)
         except (RuntimeError, FloatingPointError, np.linalg.LinAlgError) as err:
             log(f"  {interface}: no equilibrium beyond depth {states[-1]['depth_mm']:.2f} mm ({err})")
             break
