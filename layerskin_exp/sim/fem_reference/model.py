@@ -5,12 +5,13 @@ What is modelled, from the base up (lengths mm, stresses MPa = N/mm^2, forces N 
 section depth):
 - the base: rigid; the lattice is bonded to it (the deep FSR sheet lies on it and only reads
   the walls' pressure, so its own deformation is left out);
-- the lattice spacer as real cells: vertical silicone walls at the cell pitch, each as wide as
-  the honeycomb's solid fraction of the pitch (so the section keeps the plan's solid fraction;
-  a section through a hexagonal honeycomb crosses walls at varying widths, this is their mean),
-  the voids between them filled with a compressible medium of 1 % of the wall's stiffness
-  whose energy grows without bound as it is squeezed flat: it carries the walls' contact
-  when a cell closes (third-medium contact, Wriggers, Schroder & Auricchio 2013);
+- the lattice spacer as cells: the walls crossing the section (two thirds of a hexagonal
+  honeycomb's wall material) as vertical silicone walls at the cell pitch; the walls lying
+  along it (the other third) smeared over the voids as a compressible medium that carries the
+  honeycomb's transverse shear G rho / 2 and whose energy grows without bound as a cell is
+  squeezed flat (it carries the walls' contact when a cell closes, like a third medium:
+  Wriggers, Schroder & Auricchio 2013). Without it a plane-strain section shears only by
+  bending its crossing walls, some 25 times softer than a honeycomb;
 - the superficial FSR sheet as its three layers: the film whose copper strips run along the
   section (polyimide + copper, homogenised), the Velostat core, the film whose strips cross
   the section (strips and polyimide gaps in series); between films and core either the same
@@ -46,6 +47,11 @@ from scipy.sparse.linalg import spsolve
 from layerskin_exp.sim.config import SimConfig
 
 KPA = 1e-3  # MPa per kPa
+# A regular hexagonal honeycomb has its walls in three directions. Cut along one of them, two
+# thirds of the wall material crosses the section (the walls at +-60 deg, drawn as bands) and one
+# third lies along it (the walls parallel to the section, which carry shear along x by their
+# in-plane stiffness and which a plane-strain section can only smear over the voids).
+BAND_SHARE = 2.0 / 3.0
 
 
 @dataclass(frozen=True)
@@ -56,7 +62,8 @@ class Section:
     width_mm: float
     lattice_mm: float
     pitch_mm: float
-    wall_mm: float
+    wall_mm: float  # width of the section's walls (those crossing it)
+    solid_fraction: float  # the honeycomb's, in plan
     cover_mm: float
     film_mm: float
     core_mm: float
@@ -81,7 +88,7 @@ class Section:
         along = pi_a + sh.electrode_fill * cu_a
         across = 1.0 / (sh.electrode_fill / (pi_a + cu_a) + (1.0 - sh.electrode_fill) / pi_a)
         return cls(width_mm=sp_.width, lattice_mm=sp_.thickness, pitch_mm=sp_.cell,
-                   wall_mm=sp_.solid_fraction * sp_.cell, cover_mm=sim.cover.thickness, film_mm=t_film,
+                   wall_mm=BAND_SHARE * sp_.solid_fraction * sp_.cell, solid_fraction=sp_.solid_fraction, cover_mm=sim.cover.thickness, film_mm=t_film,
                    core_mm=sh.velostat_thickness_mm, slip_mm=0.005, silicone_e_mpa=sp_.modulus * KPA,
                    silicone_nu=sp_.poisson, cover_e_mpa=sim.cover.modulus * KPA,
                    film_along_e_mpa=along / t_film, film_across_e_mpa=across / t_film,
@@ -193,8 +200,16 @@ def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
     else:  # pressure passes, shear does not: the core's bulk modulus, a vanishing shear modulus
         k_core = sec.core_e_mpa / (3 * (1 - 2 * 0.4))
         slip = fem.NeoHooke(mu=1e-7 * sec.core_e_mpa, bulk=k_core)
-    e_void = 0.01 * sec.silicone_e_mpa
-    void = fem.NeoHookeCompressible(mu=e_void / (2 * 1.3), lmbda=e_void * 0.3 / (1.3 * 0.4))
+    # the walls along the section, smeared over the voids: their silicone share of the plan
+    # (1 - BAND_SHARE) rho over the voids' fraction of the section carries the honeycomb's
+    # transverse shear G rho / 2 (Gibson & Ashby) and its share of compression, with no lateral
+    # coupling (nu = 0: the voids let it bulge). Its -mu ln J term stiffens without bound as a
+    # cell is squeezed flat, which carries the walls' contact when it closes (as a third medium:
+    # Wriggers, Schroder & Auricchio 2013).
+    void_fraction = 1.0 - sec.wall_mm / sec.pitch_mm
+    g_s = sec.silicone_e_mpa / (2 * (1 + sec.silicone_nu))
+    mu_fill = 0.5 * sec.solid_fraction * g_s / void_fraction
+    void = fem.NeoHookeCompressible(mu=mu_fill, lmbda=0.0)
     out = [
         ((lay == idx["lattice"]) & mesh.wall, _neo_hooke(sec.silicone_e_mpa, sec.silicone_nu)),
         ((lay == idx["lattice"]) & ~mesh.wall, void),
