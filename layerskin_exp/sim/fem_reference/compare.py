@@ -102,19 +102,23 @@ class Side:
 
 def _fem_at_ratio(fem: dict, branch: float) -> dict:
     """The FEM branch's state at F_t / F_z = SHEAR_RATIO (linear between the two states around
-    it) and the press state it started from."""
+    it; the branch's last state, at the ratio it reached, where it stopped short of it) and the
+    press state it started from."""
     phase, bd = fem["phase"], fem["branch_depth_mm"]
     idx = np.flatnonzero((phase == 1) & np.isclose(bd, branch))
     start = int(np.flatnonzero((phase == 0) & np.isclose(fem["depth_mm"], branch))[0])
+    if len(idx) == 0:
+        raise ValueError(f"FEM branch from {branch} mm has no sheared state")
     ratio = fem["fx_n_per_mm"][idx] / fem["fz_n_per_mm"][idx]
-    if len(idx) == 0 or ratio.max() < SHEAR_RATIO:
-        raise ValueError(f"FEM branch from {branch} mm never reaches F_t/F_z = {SHEAR_RATIO:.3f}")
-    k = int(np.argmax(ratio >= SHEAR_RATIO))
+    if ratio.max() >= SHEAR_RATIO:
+        k = int(np.argmax(ratio >= SHEAR_RATIO))
+        r0 = 0.0 if k == 0 else ratio[k - 1]
+        t, target = (SHEAR_RATIO - r0) / (ratio[k] - r0), SHEAR_RATIO
+    else:
+        k, t, target = len(idx) - 1, 1.0, float(ratio[-1])
     i1 = idx[k]
     i0 = idx[k - 1] if k > 0 else start
-    r0 = 0.0 if k == 0 else ratio[k - 1]
-    t = (SHEAR_RATIO - r0) / (ratio[k] - r0)
-    out = {}
+    out = {"ratio": target}
     for key in ("cap_x_mm", "fx_n_per_mm", "fz_n_per_mm", "sheet_x_under_cap_mm", "superficial_kpa", "deep_kpa"):
         out[key] = (1 - t) * fem[key][i0].astype(float) + t * fem[key][i1].astype(float)
     out["start"] = start
@@ -135,7 +139,7 @@ def fem_side(fem: dict, reader: Reader, branches) -> list[dict]:
         dc = _cop_x(sheared[0]) - _cop_x(sheared[1])
         under = float(s["sheet_x_under_cap_mm"])
         rows.append({
-            "depth_mm": float(fem["depth_mm"][st]), "fz_n_per_mm": fz,
+            "depth_mm": float(fem["depth_mm"][st]), "fz_n_per_mm": fz, "shear_ratio": s["ratio"],
             "contact_width_mm": float(fem["contact_to_mm"][st] - fem["contact_from_mm"][st]),
             "peak_superficial_kpa": float(fem["superficial_kpa"][st].max()),
             "peak_deep_taxel_kpa": float(deep_map[1].max()),
@@ -150,15 +154,16 @@ def fem_side(fem: dict, reader: Reader, branches) -> list[dict]:
     return rows
 
 
-def fast_side(model: SkinModel, reader: Reader, loads_n_per_mm) -> list[dict]:
+def fast_side(model: SkinModel, reader: Reader, loads_n_per_mm, ratios=None) -> list[dict]:
     """The fast model (rod mode) at the FEM's normal line loads, sheared while sticking to
-    F_t / F_z = SHEAR_RATIO."""
+    F_t / F_z = the FEM's ratio at each (SHEAR_RATIO where it reached it)."""
     tab = model.tab
     half = model.sim.spacer.width / 2
     length = 2.0 * half  # the line along y crosses the whole pad
     rows = []
     fresh = model.mech_state()  # unloaded, nothing stuck
-    for load in loads_n_per_mm:
+    ratios = [SHEAR_RATIO] * len(loads_n_per_mm) if ratios is None else ratios
+    for load, target in zip(loads_n_per_mm, ratios, strict=True):
         delta = float(np.interp(load, tab.load, tab.delta_mm))
         model.restore_mech_state(fresh)
         rec0 = model.step_many(np.array([0.0]), np.array([[0.0, 0.0, -delta]]), np.array([np.pi / 2]))[0]
@@ -167,7 +172,7 @@ def fast_side(model: SkinModel, reader: Reader, loads_n_per_mm) -> list[dict]:
         recs = model.step_many(1e-3 * np.arange(1, len(xs) + 1), np.column_stack([xs, np.zeros_like(xs), -delta * np.ones_like(xs)]),
                                np.full(len(xs), np.pi / 2))
         ratio = recs[:, 1] / recs[:, 3]
-        k = int(np.argmax(ratio >= SHEAR_RATIO))
+        k = int(np.argmax(ratio >= target))
         rec = recs[k]
         st0, st = model.state_of(rec0), model.state_of(rec)
         maps0 = np.stack(model.pressure_maps([st0]))[:, 0]
@@ -177,7 +182,7 @@ def fast_side(model: SkinModel, reader: Reader, loads_n_per_mm) -> list[dict]:
         dc = _cop_x(sheared[0]) - _cop_x(sheared[1])
         under = float(rec[6])  # contact point in the superficial frame (x - u)
         rows.append({
-            "depth_mm": delta, "fz_n_per_mm": fz,
+            "depth_mm": delta, "fz_n_per_mm": fz, "shear_ratio": float(ratio[k]),
             "contact_width_mm": 2.0 * float(np.interp(delta, tab.delta_mm, tab.contact_halfwidth_mm)),
             "peak_superficial_kpa": float(np.interp(delta, tab.delta_mm, tab.superficial_kpa.max(axis=1))),
             "peak_deep_taxel_kpa": float(maps0[1].max()),
@@ -230,7 +235,7 @@ def compare(sim: SimConfig, data: Path = DATA, tolerances: dict | None = None,
         reader = Reader(model)
         f_rows = fem_side(fem, reader, branches)
         loads = [r["fz_n_per_mm"] for r in f_rows]
-        s_rows = fast_side(model, reader, loads)
+        s_rows = fast_side(model, reader, loads, [r["shear_ratio"] for r in f_rows])
         record[bound] = {"fem": f_rows, "fast": s_rows}
         # vertical stiffness at the FEM's own depths
         press = np.flatnonzero(fem["phase"] == 0)
@@ -259,7 +264,8 @@ def compare(sim: SimConfig, data: Path = DATA, tolerances: dict | None = None,
     # the default design (films held by friction) beside both bounds, for the record
     model = SkinModel(line_sim(sim, sim.sheet.interface), SKIN, "rod", np.random.default_rng(0))
     record["default_" + sim.sheet.interface] = fast_side(model, Reader(model),
-                                                         [r["fz_n_per_mm"] for r in record["bonded"]["fem"]])
+                                                         [r["fz_n_per_mm"] for r in record["bonded"]["fem"]],
+                                                         [r["shear_ratio"] for r in record["bonded"]["fem"]])
     return rows, record
 
 
