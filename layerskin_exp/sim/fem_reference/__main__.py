@@ -1,4 +1,4 @@
-"""Regenerate the finite-element reference data (layerskin_exp/sim/fem_reference/data/).
+"""Regenerate the finite-element reference data (layerskin_exp/sim/fem_reference/reference/).
 
     python -m layerskin_exp.sim.fem_reference            # both film-interface bounds (~30 min on 2 free cores)
     python -m layerskin_exp.sim.fem_reference --interface bonded
@@ -6,7 +6,7 @@
 Per bound: the cap pressed in to DEPTHS_MM (frictionless), then, from SHEAR_FROM_MM,
 sheared along +x with the contact sticking until the tangential force reaches SHEAR_RATIO of
 the normal force (2 N at 6 N, the protocol's slide). Each equilibrium's forces, contact and
-per-layer pressure profiles are written to data/<bound>.npz; data/summary.json lists the
+per-layer pressure profiles are written to reference/<bound>.npz; reference/summary.json lists the
 scalars. The sim configuration is conf/sim/default.yaml's (`layerskin_exp.sim.validate.load_sim`).
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from layerskin_exp.sim.fem_reference.model import Section, StackFE
 
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parent / "reference"
 DEPTHS_MM = (0.3, 0.6, 0.9, 1.2)
 SHEAR_FROM_MM = (0.6, 1.2)
 SHEAR_RATIO = 2.0 / 6.0

@@ -17,14 +17,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from layerskin_exp.cli import CONF_DIR
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.features import centre_of_pressure
 from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.fsr import conductance_layers
 from layerskin_exp.sim.skin import SkinModel
 
-DATA = Path(__file__).resolve().parent / "data"
-TOLERANCES = Path(__file__).resolve().parents[3] / "conf" / "sim" / "fem_tolerances.yaml"
+DATA = Path(__file__).resolve().parent / "reference"
+TOLERANCES = CONF_DIR / "sim" / "fem_tolerances.yaml"
 SKIN = SkinConfig()
 BOUNDS = ("bonded", "unbonded")
 SHEAR_RATIO = 1.0 / 3.0
