@@ -23,10 +23,11 @@ from layerskin_exp.sim.fem_reference.model import Section, StackFE
 
 DATA = Path(__file__).resolve().parent / "reference"
 DEPTHS_MM = (0.3, 0.6, 0.9, 1.2)
-SHEAR_FROM_MM = (0.6, 1.2)
+SHEAR_FROM_MM = (0.6, 0.9, 1.2)
 SHEAR_RATIO = 2.0 / 6.0
 SHEAR_STEP_MM = 0.1
-SHEAR_MAX_MM = 1.0  # largest single advance of the cap
+SHEAR_MAX_MM = 1.0  # largest advance of the cap planned from one secant
+SHEAR_INCREMENT_MM = 0.15
 SCALARS = ("phase", "cap_x_mm", "depth_mm", "fx_n_per_mm", "fz_n_per_mm", "contact_from_mm", "contact_to_mm",
            "stuck_fraction", "sheet_shift_mm", "sheet_x_under_cap_mm", "max_lattice_strain", "newton_iterations", "branch_depth_mm")
 
@@ -67,14 +68,22 @@ def run_bound(sim, interface: str, log=print) -> dict:
                 k = st["fx_n_per_mm"] / x
                 x_next = x + float(np.clip(1.05 * (SHEAR_RATIO * st["fz_n_per_mm"] - st["fx_n_per_mm"]) / k,
                                            SHEAR_STEP_MM, SHEAR_MAX_MM))
-            try:
-                it = fe.move_to(np.array([x_next, c0[1]]), sticking=True, step_mm=0.15)
-            except (RuntimeError, FloatingPointError, np.linalg.LinAlgError) as err:
-                log(f"  {interface}: shear from {depth} mm stopped at x {x_next:.2f} ({err})")
-                break
-            x = x_next
-            st = record(1.0, it, depth)
-            if st["fx_n_per_mm"] >= SHEAR_RATIO * st["fz_n_per_mm"]:
+            # in increments of at most SHEAR_INCREMENT_MM, each recorded: where the section loses
+            # equilibrium on the way, the states before it are kept
+            n_inc = max(1, int(np.ceil((x_next - x - 1e-9) / SHEAR_INCREMENT_MM)))
+            failed = False
+            for x_inc in np.linspace(x, x_next, n_inc + 1)[1:]:
+                try:
+                    it = fe.move_to(np.array([x_inc, c0[1]]), sticking=True, step_mm=SHEAR_INCREMENT_MM)
+                except (RuntimeError, FloatingPointError, np.linalg.LinAlgError) as err:
+                    log(f"  {interface}: shear from {depth} mm stopped at x {x_inc:.2f} ({err})")
+                    failed = True
+                    break
+                x = float(x_inc)
+                st = record(1.0, it, depth)
+                if st["fx_n_per_mm"] >= SHEAR_RATIO * st["fz_n_per_mm"]:
+                    break
+            if failed or st["fx_n_per_mm"] >= SHEAR_RATIO * st["fz_n_per_mm"]:
                 break
     out = {k: np.array([s[k] for s in states], dtype=float) for k in SCALARS}
     out["superficial_x_mm"] = states[0]["superficial_x_mm"]
