@@ -13,6 +13,7 @@ setup(
     package_data={
         "layerskin_exp.conf": ["*.yaml", "*/*.yaml", "*/*/*.yaml"],
         "layerskin_exp": ["py.typed"],
+        "layerskin_exp.sim.fem_reference": ["reference/*.npz", "reference/*.json"],
         "": ["*.yaml", "*.md"],
     },
 )

@@ -1,0 +1,302 @@
+"""The fast model beside the finite-element reference, metric by metric (see
+conf/sim/fem_tolerances.yaml for what is compared, how and within what).
+
+Both sides are brought to the same geometry class: the FEM section is a line contact, so the
+fast model runs in its line-contact (rod) mode with the rod's diameter set to the hemisphere's.
+Pressure fields become per-layer taxel maps (the electrode's Gauss points, as the fast model
+integrates them) and then counts through the simulator's own FSR law and column readout, with
+uniform gains and no noise, tared by the unloaded counts: what a researcher reads.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from layerskin_exp.cli import CONF_DIR
+from layerskin_exp.config import SkinConfig
+from layerskin_exp.features import centre_of_pressure
+from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim.fsr import conductance_layers
+from layerskin_exp.sim.skin import SkinModel
+
+DATA = Path(__file__).resolve().parent / "reference"
+TOLERANCES = CONF_DIR / "sim" / "fem_tolerances.yaml"
+SKIN = SkinConfig()
+BOUNDS = ("bonded", "unbonded")
+SHEAR_RATIO = 1.0 / 3.0
+# A branch that lost equilibrium before F_t / F_z reached this carries too little shear for its
+# CoP signals to mean anything against the taxel pitch: its shear metrics are left out (and said).
+MIN_SHEAR_RATIO = 0.1
+
+
+def load_fem(bound: str, data: Path = DATA) -> dict:
+    path = data / f"{bound}.npz"
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no FEM reference data; run `python -m layerskin_exp.sim.fem_reference`")
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def load_tolerances(path: Path = TOLERANCES) -> dict:
+    return yaml.safe_load(path.read_text())
+
+
+def line_sim(sim: SimConfig, bound: str) -> SimConfig:
+    """The design at one film-interface bound, in the section's geometry (a rod of the
+    hemisphere's diameter), noise-free with uniform gains."""
+    return replace(sim, sheet=replace(sim.sheet, interface=bound),
+                   contact=replace(sim.contact, rod_diameter_mm=2.0 * sim.contact.hemisphere_radius_mm),
+                   readout=replace(sim.readout, noise_counts=0.0, scan_jitter_ms=0.0),
+                   fsr=replace(sim.fsr, gain_cv=0.0, sheet_gain_cv=0.0))
+
+
+class Reader:
+    """Pressure (kPa) -> per-layer tared counts through one skin model's FSR law and readout."""
+
+    def __init__(self, model: SkinModel):
+        self.m = model
+        g, w = np.polynomial.legendre.leggauss(model.sim.contact.quad_points)
+        self.q = SKIN.taxel_centres_mm()[:, None] + 0.5 * SKIN.electrode_mm * g[None, :]
+        self.w = 0.5 * w
+        self.floor = self.counts(np.zeros((2, SKIN.n_taxels, SKIN.n_taxels)), tare=False)
+
+    def taxel_profile(self, x_mm: np.ndarray, p_kpa: np.ndarray) -> np.ndarray:
+        """(16,) electrode-mean pressure of each column from a profile p(x) (zero outside it)."""
+        order = np.argsort(x_mm)
+        vals = np.interp(self.q, x_mm[order], np.clip(p_kpa[order], 0.0, None), left=0.0, right=0.0)
+        return vals @ self.w
+
+    def maps(self, sup_x, sup_kpa, deep_x, deep_kpa) -> np.ndarray:
+        """(2, 16, 16) maps of a line contact along y: every row the same column profile."""
+        n = SKIN.n_taxels
+        out = np.empty((2, n, n))
+        out[0] = self.taxel_profile(sup_x, sup_kpa)[None, :]
+        out[1] = self.taxel_profile(deep_x, deep_kpa)[None, :]
+        return out
+
+    def counts(self, maps: np.ndarray, tare: bool = True) -> np.ndarray:
+        n = SKIN.n_taxels
+        m = self.m
+        g = conductance_layers(m.fsr, np.asarray(maps, float)[None], m._gains)
+        volts = m.readout.column_volts(g.reshape(-1, n, n)).reshape(-1, 2, n, n)
+        c = m.readout.counts(volts)[0]
+        return np.clip(c - self.floor, 0.0, None) if tare else c
+
+
+def _cop_x(layer_counts: np.ndarray) -> float:
+    return float(centre_of_pressure(layer_counts, SKIN)[0])
+
+
+def _asymmetry(layer_counts: np.ndarray, about_mm: float) -> float:
+    col = layer_counts.sum(axis=0)
+    return float((np.sign(SKIN.taxel_centres_mm() - about_mm) * col).sum() / max(col.sum(), 1e-12))
+
+
+@dataclass
+class Side:
+    """One side's values at one load: scalars by metric name."""
+
+    values: dict
+
+
+def _fem_at_ratio(fem: dict, branch: float) -> dict:
+    """The FEM branch's state at F_t / F_z = SHEAR_RATIO (linear between the two states around
+    it; the branch's last state, at the ratio it reached, where it stopped short of it) and the
+    press state it started from."""
+    phase, bd = fem["phase"], fem["branch_depth_mm"]
+    idx = np.flatnonzero((phase == 1) & np.isclose(bd, branch))
+    start = int(np.flatnonzero((phase == 0) & np.isclose(fem["depth_mm"], branch))[0])
+    if len(idx) == 0:
+        raise ValueError(f"FEM branch from {branch} mm has no sheared state")
+    ratio = fem["fx_n_per_mm"][idx] / fem["fz_n_per_mm"][idx]
+    if ratio.max() >= SHEAR_RATIO:
+        k = int(np.argmax(ratio >= SHEAR_RATIO))
+        r0 = 0.0 if k == 0 else ratio[k - 1]
+        t, target = (SHEAR_RATIO - r0) / (ratio[k] - r0), SHEAR_RATIO
+    else:
+        k, t, target = len(idx) - 1, 1.0, float(ratio[-1])
+    i1 = idx[k]
+    i0 = idx[k - 1] if k > 0 else start
+    out = {"ratio": target}
+    for key in ("cap_x_mm", "fx_n_per_mm", "fz_n_per_mm", "sheet_x_under_cap_mm", "superficial_kpa", "deep_kpa"):
+        out[key] = (1 - t) * fem[key][i0].astype(float) + t * fem[key][i1].astype(float)
+    out["start"] = start
+    return out
+
+
+def fem_side(fem: dict, reader: Reader, branches) -> list[dict]:
+    rows = []
+    for b in branches:
+        s = _fem_at_ratio(fem, b)
+        st = s["start"]
+        press = reader.counts(reader.maps(fem["superficial_x_mm"], fem["superficial_kpa"][st],
+                                          fem["deep_x_mm"], fem["deep_kpa"][st]))
+        sheared = reader.counts(reader.maps(fem["superficial_x_mm"], s["superficial_kpa"],
+                                            fem["deep_x_mm"], s["deep_kpa"]))
+        deep_map = reader.maps(fem["superficial_x_mm"], fem["superficial_kpa"][st], fem["deep_x_mm"], fem["deep_kpa"][st])
+        fz, fx = float(fem["fz_n_per_mm"][st]), float(s["fx_n_per_mm"])
+        dc = _cop_x(sheared[0]) - _cop_x(sheared[1])
+        under = float(s["sheet_x_under_cap_mm"])
+        rows.append({
+            "depth_mm": float(fem["depth_mm"][st]), "fz_n_per_mm": fz, "shear_ratio": s["ratio"],
+            "contact_width_mm": float(fem["contact_to_mm"][st] - fem["contact_from_mm"][st]),
+            "peak_superficial_kpa": float(fem["superficial_kpa"][st].max()),
+            "peak_deep_taxel_kpa": float(deep_map[1].max()),
+            "tangential_stiffness": fx / float(s["cap_x_mm"]),
+            "sheet_share_of_travel": (float(s["cap_x_mm"]) - under) / float(s["cap_x_mm"]),
+            "interlayer_shift_counts_mm": dc,
+            "effective_height_counts": -float(s["fz_n_per_mm"]) * dc / fx,
+            "deep_cop_counts_mm": _cop_x(sheared[1]) - _cop_x(press[1]),
+            "superficial_offset_counts_mm": _cop_x(sheared[0]) - under,
+            "superficial_asymmetry_counts": _asymmetry(sheared[0], under),
+        })
+    return rows
+
+
+def fast_side(model: SkinModel, reader: Reader, loads_n_per_mm, ratios=None) -> list[dict]:
+    """The fast model (rod mode) at the FEM's normal line loads, sheared while sticking to
+    F_t / F_z = the FEM's ratio at each (SHEAR_RATIO where it reached it)."""
+    tab = model.tab
+    half = model.sim.spacer.width / 2
+    length = 2.0 * half  # the line along y crosses the whole pad
+    rows = []
+    fresh = model.mech_state()  # unloaded, nothing stuck
+    ratios = [SHEAR_RATIO] * len(loads_n_per_mm) if ratios is None else ratios
+    for load, target in zip(loads_n_per_mm, ratios, strict=True):
+        delta = float(np.interp(load, tab.load, tab.delta_mm))
+        model.restore_mech_state(fresh)
+        rec0 = model.step_many(np.array([0.0]), np.array([[0.0, 0.0, -delta]]), np.array([np.pi / 2]))[0]
+        # stick: F_t = k_t u with u = the cap's travel; step to the travel that gives the ratio
+        xs = np.linspace(0.0, 3.0, 601)[1:]
+        recs = model.step_many(1e-3 * np.arange(1, len(xs) + 1), np.column_stack([xs, np.zeros_like(xs), -delta * np.ones_like(xs)]),
+                               np.full(len(xs), np.pi / 2))
+        ratio = recs[:, 1] / recs[:, 3]
+        k = int(np.argmax(ratio >= target))
+        rec = recs[k]
+        st0, st = model.state_of(rec0), model.state_of(rec)
+        maps0 = np.stack(model.pressure_maps([st0]))[:, 0]
+        maps1 = np.stack(model.pressure_maps([st]))[:, 0]
+        press, sheared = reader.counts(maps0), reader.counts(maps1)
+        fz, fx = float(rec[3]) / length, float(rec[1]) / length
+        dc = _cop_x(sheared[0]) - _cop_x(sheared[1])
+        under = float(rec[6])  # contact point in the superficial frame (x - u)
+        rows.append({
+            "depth_mm": delta, "fz_n_per_mm": fz, "shear_ratio": float(ratio[k]),
+            "contact_width_mm": 2.0 * float(np.interp(delta, tab.delta_mm, tab.contact_halfwidth_mm)),
+            "peak_superficial_kpa": float(np.interp(delta, tab.delta_mm, tab.superficial_kpa.max(axis=1))),
+            "peak_deep_taxel_kpa": float(maps0[1].max()),
+            "tangential_stiffness": fx / float(xs[k]),
+            "sheet_share_of_travel": float(rec[9]) / float(xs[k]),
+            "interlayer_shift_counts_mm": dc,
+            "effective_height_counts": -float(rec[3]) * dc / float(rec[1]),
+            "deep_cop_counts_mm": _cop_x(sheared[1]) - _cop_x(press[1]),
+            "superficial_offset_counts_mm": _cop_x(sheared[0]) - under,
+            "superficial_asymmetry_counts": _asymmetry(sheared[0], under),
+        })
+    return rows
+
+
+@dataclass
+class Comparison:
+    bound: str
+    metric: str
+    load: str
+    fem: float
+    fast: float
+    kind: str  # "ratio" | "difference"
+    lo: float
+    hi: float
+
+    @property
+    def value(self) -> float:
+        return self.fast / self.fem if self.kind == "ratio" else self.fast - self.fem
+
+    @property
+    def passed(self) -> bool:
+        v = self.value
+        return bool(np.isfinite(v) and self.lo <= v <= self.hi)
+
+
+def compare(sim: SimConfig, data: Path = DATA, tolerances: dict | None = None,
+            model_hook=None, bounds=None) -> tuple[list[Comparison], dict]:
+    """All comparisons, both bounds. model_hook(sim) -> sim may alter the fast model's design
+    (the tests inject errors through it). Returns the rows and, for the record, each side's
+    values at each load, and the default (friction-held) fast model's beside them."""
+    tol = tolerances or load_tolerances()
+    rows, record = [], {}
+    for bound in bounds or BOUNDS:
+        fem = load_fem(bound, data)
+        branches = sorted(set(np.round(fem["branch_depth_mm"][fem["phase"] == 1], 6)))
+        fsim = line_sim(sim, bound)
+        if model_hook is not None:
+            fsim = model_hook(fsim)
+        model = SkinModel(fsim, SKIN, "rod", np.random.default_rng(0))
+        reader = Reader(model)
+        f_rows = fem_side(fem, reader, branches)
+        loads = [r["fz_n_per_mm"] for r in f_rows]
+        s_rows = fast_side(model, reader, loads, [r["shear_ratio"] for r in f_rows])
+        record[bound] = {"fem": f_rows, "fast": s_rows}
+        # vertical stiffness at the FEM's own depths
+        press = np.flatnonzero(fem["phase"] == 0)
+        lo, hi = tol["ratio"]["line_load_at_depth"]
+        for j in press:
+            d = float(fem["depth_mm"][j])
+            rows.append(Comparison(bound, "line_load_at_depth", f"depth {d:.2f} mm", float(fem["fz_n_per_mm"][j]),
+                                   float(np.interp(d, model.tab.delta_mm, model.tab.load)), "ratio", lo, hi))
+        sheared = [(fr, sr) for fr, sr in zip(f_rows, s_rows, strict=True) if fr["shear_ratio"] >= MIN_SHEAR_RATIO]
+        record[bound]["shear_left_out"] = [{"fz_n_per_mm": fr["fz_n_per_mm"], "shear_ratio": fr["shear_ratio"]}
+                                           for fr in f_rows if fr["shear_ratio"] < MIN_SHEAR_RATIO]
+
+        def at(fr):
+            return f"{fr['fz_n_per_mm']:.3f} N/mm" + ("" if fr["shear_ratio"] >= SHEAR_RATIO - 1e-9
+                                                       else f", Ft/Fz {fr['shear_ratio']:.2f}")
+
+        for metric in ("contact_width", "peak_superficial_kpa", "peak_deep_taxel_kpa"):
+            lo, hi = tol["ratio"][metric]
+            key = metric if metric in f_rows[0] else metric + "_mm"
+            for fr, sr in zip(f_rows, s_rows, strict=True):
+                rows.append(Comparison(bound, metric, f"{fr['fz_n_per_mm']:.3f} N/mm", fr[key], sr[key], "ratio", lo, hi))
+        for metric in ("tangential_stiffness", "effective_height_counts"):
+            lo, hi = tol["ratio"][metric]
+            for fr, sr in sheared:
+                rows.append(Comparison(bound, metric, at(fr), fr[metric], sr[metric], "ratio", lo, hi))
+        if len(sheared) >= 2:
+            lo, hi = tol["ratio"]["effective_height_rise"]
+            (f0, s0), (f1, s1) = sheared[0], sheared[-1]
+            rows.append(Comparison(bound, "effective_height_rise", "highest / lowest load",
+                                   f1["effective_height_counts"] / f0["effective_height_counts"],
+                                   s1["effective_height_counts"] / s0["effective_height_counts"], "ratio", lo, hi))
+        for metric, limit in tol["difference"].items():
+            for fr, sr in sheared:
+                rows.append(Comparison(bound, metric, at(fr), fr[metric], sr[metric], "difference", -limit, limit))
+    if bounds is not None:
+        return rows, record
+    # the default design (films held by friction) beside both bounds, for the record
+    model = SkinModel(line_sim(sim, sim.sheet.interface), SKIN, "rod", np.random.default_rng(0))
+    record["default_" + sim.sheet.interface] = fast_side(model, Reader(model),
+                                                         [r["fz_n_per_mm"] for r in record["bonded"]["fem"]],
+                                                         [r["shear_ratio"] for r in record["bonded"]["fem"]])
+    return rows, record
+
+
+def table(rows: list[Comparison]) -> str:
+    out = [f"{'bound':<9} {'metric':<30} {'at':<22} {'FEM':>9} {'fast':>9} {'fast vs FEM':>12} {'allowed':>16}  ok"]
+    for r in rows:
+        rel = f"{r.value:.3g}" + (" x" if r.kind == "ratio" else " d")
+        out.append(f"{r.bound:<9} {r.metric:<30} {r.load:<22} {r.fem:>9.4g} {r.fast:>9.4g} {rel:>12} "
+                   f"{'[' + f'{r.lo:.3g}, {r.hi:.3g}' + ']':>16}  {'yes' if r.passed else 'NO'}")
+    return "\n".join(out)
+
+
+def main() -> int:
+    from layerskin_exp.sim.validate import load_sim
+
+    rows, record = compare(load_sim([]))
+    print(table(rows))
+    print(json.dumps(record, indent=1, default=float))
+    return 0

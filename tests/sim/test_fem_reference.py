@@ -1,0 +1,91 @@
+"""The finite-element reference (layerskin_exp.sim.fem_reference) on a narrow section: what must
+come out of the continuum solution (the walls carry the deep layer's load, the cover shears,
+the film interface matters) does, and its comparison with the fast model can fail."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from layerskin_exp.sim import skin
+from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim.fem_reference import compare as fc
+from layerskin_exp.sim.fem_reference.model import Section, StackFE
+
+SIM = SimConfig()
+
+
+def _narrow(interface: str) -> StackFE:
+    sec = replace(Section.from_sim(SIM, interface), width_mm=6.0)
+    return StackFE(sec, wall_elems=2, void_elems=2, lattice_rows=3)
+
+
+@pytest.fixture(scope="module")
+def pressed():
+    out = {}
+    for bound in ("bonded", "unbonded"):
+        fe = _narrow(bound)
+        top = fe.height_mm + fe.sec.radius_mm
+        fe.move_to(np.array([0.0, top - 0.3]), sticking=False, step_mm=0.1)
+        out[bound] = (fe, fe.state())
+    return out
+
+
+def test_a_centred_press_is_symmetric_and_the_walls_carry_the_deep_load(pressed):
+    fe, st = pressed["bonded"]
+    assert st["fz_n_per_mm"] > 0 and abs(st["fx_n_per_mm"]) < 1e-6 * st["fz_n_per_mm"]
+    assert st["contact_from_mm"] == pytest.approx(-st["contact_to_mm"], abs=1e-6)
+    inner = np.abs(st["deep_x_mm"]) < 0.5 * fe.sec.width_mm - fe.sec.pitch_mm  # the rim is solid
+    x, p = st["deep_x_mm"][inner], st["deep_kpa"][inner]
+    wall = np.abs(x - np.round(x / fe.sec.pitch_mm) * fe.sec.pitch_mm) < 0.5 * fe.sec.wall_mm
+    # the crossing walls carry the load; over the voids only the smeared walls along the section
+    assert p[wall].mean() > 2 * abs(p[~wall]).mean()
+
+
+def test_glued_films_make_a_stiffer_stack_than_free_ones(pressed):
+    assert pressed["bonded"][1]["fz_n_per_mm"] > 1.2 * pressed["unbonded"][1]["fz_n_per_mm"]
+
+
+def test_sticking_shear_loads_the_cap_and_the_cover_shears(pressed):
+    fe, st0 = pressed["unbonded"]
+    fe.stick_all_in_contact()
+    fe.move_to(np.array([0.05, fe.centre[1]]), sticking=True, step_mm=0.05)
+    st = fe.state()
+    assert st["fx_n_per_mm"] > 0
+    share = (st["cap_x_mm"] - st["sheet_x_under_cap_mm"]) / st["cap_x_mm"]
+    assert 0.0 < share < 1.0  # the sheet follows the cap only partly: the cover is not rigid in shear
+
+
+@pytest.fixture
+def fresh_tables(monkeypatch):
+    monkeypatch.setattr(skin, "_TABLE_CACHE", {})
+
+
+def test_the_comparison_fails_on_a_lattice_three_times_too_soft(fresh_tables):
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    assert any(r.passed for r in rows if r.metric == "line_load_at_depth")
+
+    def soft(fsim):
+        return replace(fsim, spacer=replace(fsim.spacer, modulus=fsim.spacer.modulus / 3.0))
+
+    rows, _ = fc.compare(SIM, bounds=("bonded",), model_hook=soft)
+    load = [r for r in rows if r.metric == "line_load_at_depth"]
+    assert load and not any(r.passed for r in load)
+
+
+def test_the_count_comparison_follows_the_spacers_shear_compliance(monkeypatch, fresh_tables):
+    """The effective height read from counts is the fast model's shear coupling as the sensor
+    sees it: a spacer ten times too stiff in shear moves it by more than the tolerance's width
+    (so from anywhere inside the band to outside it)."""
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    base = {(r.metric, r.load): r for r in rows if r.metric == "effective_height_counts"}
+    law = skin.SpacerLaw.shear_stiffness_kpa_per_mm
+    monkeypatch.setattr(skin.SpacerLaw, "shear_stiffness_kpa_per_mm", lambda self, c: 10.0 * law(self, c))
+    monkeypatch.setattr(skin, "_TABLE_CACHE", {})
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    heights = [r for r in rows if r.metric == "effective_height_counts"]
+    lo, _ = fc.load_tolerances()["ratio"]["effective_height_counts"]
+    assert heights and all(r.fast / base[(r.metric, r.load)].fast < lo for r in heights)
+    assert not any(r.passed for r in heights)
