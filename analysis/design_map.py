@@ -8,7 +8,8 @@ design_map.md and design_map.png to `out` (default `<sweep_dir>/design_map`).
 Per design and bracket (definitions; every number is measured on the campaign's sessions):
 - shift per newton (mm/N): slope of the inter-layer CoP shift along the applied shear,
   d = -Δc·ŝ (Δc = c_s - c_d points against the shear, see characterization._height_fit), against
-  |F_xy| over slide frames with |F_xy| <= `sensitivity_max_shear_n`, within each normal-load bin.
+  |F_xy| over slide frames with |F_xy| <= `sensitivity_max_shear_n`, within each normal-load bin;
+  the headline value is the bin holding the slides' preload (where they apply their shear).
 - shear range (N): low = the smallest shear distinguishable from zero-shear noise,
   `noise_sigmas` x the rms inter-layer shift of press frames (no shear, F_z >= 1 N) / the shift
   per newton; high = the smallest of (a) where the shift saturates (the local slope of the
@@ -17,8 +18,8 @@ Per design and bracket (definitions; every number is measured on the campaign's 
   the edge, the normal-force limit where the guard trips, the protocol's stop otherwise);
   `limited_by` says which.
 - normal range before densification (N): the press's normal load when the indenter has travelled
-  e_d x h past first contact (e_d = 1 - solid fraction, h the spacer height, from the session's
-  config): the spacer's cells have closed under the tip.
+  e_d x h + t_cover past first contact (e_d = 1 - solid fraction, h the spacer height, t_cover the
+  cover's thickness, from the session's config): the spacer's cells have closed under the tip.
 - linear shear R²: the study's linear model (estimation.linear), leave-one-position-out over the
   campaign, R² of the pooled out-of-position predictions (not the report's 70/15/15 split: the
   campaigns of a sweep are small). The T-s5 CNN-GRU is not trained per design (minutes each on
@@ -54,7 +55,7 @@ from layerskin_exp.features import two_layer_features
 BRACKETS_FILE = CONF_DIR / "sim" / "brackets.yaml"
 STUDY_DESIGN = "study"
 # The headline outcomes a designer ranks by: key in the outcome dict, label, larger is better.
-RANKED = (("shift_per_n_mm", "shift per newton (mm/N)", True), ("shear_high_n", "shear range top (N)", True),
+RANKED = (("shift_per_n_mm", "shift per newton at the slides' preload (mm/N)", True), ("shear_high_n", "shear range top (N)", True),
           ("dynamic_range", "shear dynamic range (high/low)", True), ("linear_r2_shear", "linear shear R²", True),
           ("densification_n", "normal range before densification (N)", True))
 
@@ -90,7 +91,7 @@ def _extras(path: Path, kind: str) -> TrialExtras:
     s = load_session(path, streams={"stage", "wrench", "events"}, warn=False)
     ev = s.streams.get("events") or {"kind": [], "message": []}
     stops = [m for k, m in zip(ev["kind"], ev["message"], strict=True) if k == "stop"]
-    out = TrialExtras(stops[0] if stops else None)
+    out = TrialExtras(stops[-1] if stops else None)  # a slide whose preload stopped short logs that stop first
     stage, w = s.streams.get("stage"), s.streams.get("wrench")
     if kind != "press" or stage is None or w is None or len(stage["t_ns"]) < 2:
         return out
@@ -203,22 +204,31 @@ def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -
     for lo, hi in zip(e[:-1], e[1:], strict=True):
         m = small & (fz >= lo) & (fz < hi)
         by_bin[f"{lo:g}-{hi:g}"] = {"slope_mm_per_n": _slope(shear[m], d_par[m], cfg.min_frames), "frames": int(m.sum())}
-    k_all = _slope(shear[small], d_par[small], cfg.min_frames)
+    # The headline: the bin holding the slide's preload, where the slides apply their shear. Pooled
+    # over loads, low-load frames dominate a stiff stack's fit (there the moment balance alone moves
+    # the deep CoP by F_xy h / F_z), so a pooled slope mixes loads a designer would compare apart.
+    preload = float(config.get("slide", {}).get("preload_n", 3.0))
+    lo_op, hi_op = next(((lo, hi) for lo, hi in zip(e[:-1], e[1:], strict=True) if lo <= preload < hi), (e[0], e[-1]))
+    op = (fz >= lo_op) & (fz < hi_op)
+    k_all = _slope(shear[small & op], d_par[small & op], cfg.min_frames)
     out["shift_per_n_by_fz"] = by_bin
     out["shift_per_n_mm"] = k_all
+    out["shift_per_n_fz_n"] = [lo_op, hi_op]
+    out["shift_per_n_pooled_mm"] = _slope(shear[small], d_par[small], cfg.min_frames)
     out["cop_shift_at_2n"] = cop_shift_at_shear([np.linalg.norm(cal[i].force_n[:, :2], axis=1) for i, _ in slides],
                                                 [f["dc"][sl] for _, sl in slides], cfg.characterization)
     # -- shear range
     press_dc = np.concatenate([f["dc"][sl][cal[i].force_n[:, 2] >= 1.0] for i, sl in presses]) if presses else np.zeros((0, 2))
     sigma = float(np.sqrt(np.mean(np.sum((press_dc - press_dc.mean(0)) ** 2, axis=1) / 2))) if len(press_dc) else None
     low = cfg.noise_sigmas * sigma / k_all if (sigma is not None and k_all and k_all > 0) else None
-    sat = _saturation(shear[fz >= e[0]], d_par[fz >= e[0]], k_all, cfg) if slides else None
+    sat = _saturation(shear[op], d_par[op], k_all, cfg) if slides else None
     reached, reasons = [], Counter()
     for i, _ in slides:
         reached.append(float(np.linalg.norm(cal[i].force_n[:, :2], axis=1).max()))
         reasons[extras[cal[i].name].stop or "unknown"] += 1
     applied = float(np.median(reached)) if reached else None
-    why = {"shear_reached": "protocol stop", "skin_edge": "slip (friction)", "force_limit": "normal-force limit"}
+    why = {"shear_reached": "protocol stop", "skin_edge": "slip (friction)", "force_limit": "normal-force limit",
+           "depth_limit": "preload not reached (platform travel)"}
     limit = why.get(reasons.most_common(1)[0][0], "unknown") if reasons else None
     high, limited_by = applied, limit
     if sat is not None and (applied is None or sat < applied):
@@ -231,7 +241,11 @@ def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -
                 "shear_limited_by": limited_by,
                 "dynamic_range": (high / low) if (high is not None and low) else None})
     # -- normal range before densification
-    onset_mm = spacer.densification_strain * spacer.thickness
+    # The tip's travel is the spacer's compression plus the cover's (at most its thickness): past
+    # e_d h + t_cover the cells under the tip have closed whatever the cover took (the load is an
+    # upper bound on the onset; for a solid spacer, e_d ~ 0.05, the cover dominates it).
+    cover_mm = float(config.get("sim", {}).get("cover", {}).get("thickness", 0.2))
+    onset_mm = spacer.densification_strain * spacer.thickness + cover_mm
     dens, unreached = [], []
     for i, _ in presses:
         ex = extras[cal[i].name]
@@ -350,7 +364,7 @@ def write_markdown(path: Path, result: dict, brackets_doc: dict, figures: list[s
              f"Sweep: `{result['sweep_dir']}`; {len(m['designs'])} designs x brackets {', '.join(m['brackets'])}. "
              "Each cell: the nominal bracket's value [min–max over the brackets]. Definitions: "
              "analysis/design_map.py.", "",
-             "| design | E (kPa) | h / cell / wall (mm) | shift/N (mm/N) | shear range low–high (N), limited by | "
+             "| design | E (kPa) | h / cell / wall (mm) | shift/N at the preload (mm/N) | shear range low–high (N), limited by | "
              "normal range before densification (N) | linear shear R² | superficial shear R² | position CV |",
              "|---|---|---|---|---|---|---|---|---|"]
     for name, e in sorted(m["designs"].items(), key=lambda kv: kv[0] != STUDY_DESIGN):
@@ -426,7 +440,7 @@ def plot_map(path: Path, result: dict) -> None:
                         ms=14 if study else 6, capsize=3, color="C3" if study else None, label=name)
             ax.annotate(name, (x, y), textcoords="offset points", xytext=(5, 5), fontsize=8)
         ax.set_xlabel(xlabel)
-        ax.set_ylabel("inter-layer shift per newton of shear (mm/N)")
+        ax.set_ylabel("inter-layer shift per newton of shear\nat the slides' preload (mm/N)")
         ax.grid(alpha=0.3)
     axes[0].set_title("sensitivity vs shear range (bars: min–max over brackets)")
     axes[1].set_title("sensitivity vs normal range")
@@ -495,7 +509,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = parse(sys.argv[1:] if argv is None else argv)
     except Exception as e:  # noqa: BLE001 - OmegaConf's key/type errors: one line, exit 2
-        print(f"configuration error: {str(e).splitlines()[0]}", file=sys.stderr)
+        key = getattr(e, "full_key", None)  # OmegaConf's errors carry the key on a later line
+        head = str(e).splitlines()[0]
+        print(f"configuration error: {key}: {head}" if key else f"configuration error: {head}", file=sys.stderr)
         return 2
     if not Path(cfg.sweep_dir).is_dir():
         print(f"configuration error: sweep_dir={cfg.sweep_dir}: no such folder", file=sys.stderr)

@@ -227,7 +227,9 @@ def main(argv: list[str] | None = None) -> int:
         cfg = parse(sys.argv[1:] if argv is None else argv)
         prob = problem(load_brackets(cfg.brackets), cfg.params)
     except Exception as e:  # noqa: BLE001 - one line naming the key, exit 2
-        print(f"configuration error: {str(e).splitlines()[0]}", file=sys.stderr)
+        key = getattr(e, "full_key", None)  # OmegaConf's errors carry the key on a later line
+        head = str(e).splitlines()[0]
+        print(f"configuration error: {key}: {head}" if key else f"configuration error: {head}", file=sys.stderr)
         return 2
     n = cfg.trajectories * (prob["num_vars"] + 1)
     print(f"Morris screen: {prob['num_vars']} parameters, {n} short campaigns ({cfg.size} size)", flush=True)
