@@ -484,7 +484,7 @@ def run(cfg: DesignMapConfig) -> dict:
         if "error" not in o:
             outcomes.append(o)
     brackets_doc = OmegaConf.to_container(OmegaConf.load(BRACKETS_FILE)) if BRACKETS_FILE.is_file() else {}
-    result = {"sweep_dir": str(sweep), "map": build_map(outcomes), "brackets_file": str(BRACKETS_FILE)}
+    result = {"sweep_dir": str(sweep), "map": build_map(outcomes), "brackets_file": "conf/sim/brackets.yaml"}
     figures = []
     if cfg.figures:
         plot_map(out / "design_map.png", result)

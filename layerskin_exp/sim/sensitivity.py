@@ -186,7 +186,7 @@ def screen(cfg: SensitivityConfig, progress=print) -> dict:
             progress(f"sample {i + 1}/{len(X)} ({time.perf_counter() - t0:.0f} s): {' '.join(ov)}")
     return {"size": cfg.size, "campaign": SIZES[cfg.size], "trajectories": cfg.trajectories,
             "num_levels": cfg.num_levels, "seed": cfg.seed, "problem": prob,
-            "brackets_file": str(Path(cfg.brackets)), "wall_s": time.perf_counter() - t0,
+            "brackets_file": "conf/sim/brackets.yaml" if Path(cfg.brackets) == BRACKETS_FILE else str(cfg.brackets), "wall_s": time.perf_counter() - t0,
             "outcomes": {k: {"label": lab, "unit": u} for k, (lab, u) in OUTCOMES.items()},
             "morris": analyse(prob, X, Y, cfg.num_levels, cfg.seed), "samples": samples}
 
