@@ -94,21 +94,14 @@ def test_design_groups_compose():
     assert r.returncode == 2 and "nonesuch" in r.stderr
 
 
-def test_design_search_sweeper_composes():
-    """The Optuna search config: NSGA-II, two maximised objectives, the spacer's four keys."""
+def test_design_search_sweeper_composes(tmp_path):
+    """The Optuna search config as the app resolves it: NSGA-II, two maximised objectives, the
+    spacer's four keys (in a subprocess: under pytest `protocols` can name the tests' package)."""
     pytest.importorskip("hydra_plugins.hydra_optuna_sweeper")
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-
-    from layerskin_exp.config import register_all
-
-    register_all()
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
-        cfg = compose(config_name="force_calibration", overrides=["hydra/sweeper=design_search"],
-                      return_hydra_config=True)
-    GlobalHydra.instance().clear()
-    sw = cfg.hydra.sweeper
-    assert sw.sampler._target_ == "optuna.samplers.NSGAIISampler"
-    assert list(sw.direction) == ["maximize", "maximize"]
-    assert set(sw.params) == {"sim.spacer.modulus", "sim.spacer.thickness", "sim.spacer.cell", "sim.spacer.wall"}
+    r = run_cli("analysis.design_search", ["--cfg", "hydra", "hydra/sweeper=design_search"], tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    sweeper = r.stdout[r.stdout.index("sweeper:"):]
+    assert "_target_: optuna.samplers.NSGAIISampler" in sweeper
+    assert "direction:\n    - maximize\n    - maximize" in sweeper
+    for key in ("sim.spacer.modulus", "sim.spacer.thickness", "sim.spacer.cell", "sim.spacer.wall"):
+        assert f"{key}:" in sweeper

@@ -3,6 +3,8 @@ bracket, and a real (tiny) screen in which a parameter moves only the outcome it
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -44,11 +46,16 @@ def test_morris_effect_is_the_change_per_bracket():
 
 
 def test_tiny_screen_moves_only_what_the_parameter_reaches(tmp_path):
-    cfg = sens.SensitivityConfig(size="tiny", trajectories=2,
-                                 params=["sim.rig.gripper.support_stiffness_n_per_mm"], out=str(tmp_path / "s.json"))
-    res = sens.screen(cfg, progress=lambda s: None)
-    m = res["morris"]
+    # through the command line (a subprocess: under pytest `protocols` can name the tests' package)
+    from tests.protocols.conftest import run_cli
+
     key = "sim.rig.gripper.support_stiffness_n_per_mm"
+    out = tmp_path / "s.json"
+    r = run_cli("layerskin_exp.sim.sensitivity", ["size=tiny", "trajectories=2", f"params=[{key}]", f"out={out}"],
+                tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    res = json.loads(out.read_text())
+    m = res["morris"]
     # The gripper's support is in series with the skin on the grip rig only: it moves the grip preload
     # (softer support, less preload) and nothing the platform campaign measures.
     assert m["grip_preload_n"]["mu_star"][key] > 1.0
@@ -56,3 +63,4 @@ def test_tiny_screen_moves_only_what_the_parameter_reaches(tmp_path):
     assert m["slide_max_shear_n"]["mu_star"][key] == pytest.approx(0.0, abs=1e-9)
     table = sens.markdown_table(res)
     assert "grip preload" in table and "support_stiffness_n_per_mm" in table
+    assert "grip preload" in r.stdout  # the table is printed
