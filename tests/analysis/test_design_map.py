@@ -1,0 +1,107 @@
+"""The design map: a tiny design sweep through the submitit_local launcher (the cluster path run by a
+real engine), its resume, and the map measured from it; the ranking logic on synthetic outcomes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from analysis.design_map import DesignMapConfig, build_map, main, run
+from tests.protocols.conftest import REPO, run_cli
+
+TINY = ["positions.count=2", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05", "progress=false"]
+
+
+def test_sweep_through_submitit_local_resumes_and_maps(tmp_path, hydra_dirs):
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    data = tmp_path / "data"
+    args = ["-m", "+design=study,stiff_interlayer", "+bracket=nominal", *TINY, f"data_root={data}",
+            "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=10", *hydra_dirs]
+    r = run_cli("protocols.force_calibration", args, tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    files = sorted((data / "force_calibration").glob("*/*.mcap"))
+    assert len(files) == 2 * 2 * 2  # two designs, each its own folder of 2 positions x (1 press + 1 slide)
+    assert len({f.parent for f in files}) == 2
+    stamps = {f: f.stat().st_mtime_ns for f in files}
+    r = run_cli("protocols.force_calibration", args, tmp_path)  # resume: nothing left to run
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert {f: f.stat().st_mtime_ns for f in files} == stamps
+
+    out = tmp_path / "map"
+    res = run(DesignMapConfig(sweep_dir=str(data), out=str(out), min_frames=10))
+    designs = res["map"]["designs"]
+    assert set(designs) == {"study", "stiff_interlayer"}
+    study = designs["study"]["brackets"]["nominal"]
+    stiff = designs["stiff_interlayer"]["brackets"]["nominal"]
+    # At the slides' preload a solid spacer 17x stiffer shears less: its shift per newton is the smaller.
+    assert study["shift_per_n_mm"] > stiff["shift_per_n_mm"]  # 0.81 vs 0.68 mm/N here; 0.78 vs 0.37 at 4 positions
+    assert study["densification_n"] is not None and study["densification_n"] < 6.0
+    saved = json.loads((out / "design_map.json").read_text())
+    assert set(saved["map"]["designs"]) == {"study", "stiff_interlayer"}
+    md = (out / "design_map.md").read_text()
+    assert "| study ★ |" in md and "| stiff_interlayer |" in md and "settle" in md
+    assert (out / "design_map.png").stat().st_size > 10_000
+
+
+def _outcome(design: str, bracket: str, shift: float, high: float) -> dict:
+    return {"overrides": [f"+design={design}", f"+bracket={bracket}"], "config": {"sim": {"spacer": {"modulus": 1}}},
+            "shift_per_n_mm": shift, "shear_high_n": high}
+
+
+def test_rankings_only_where_they_hold_in_every_bracket():
+    outs = [_outcome("a", "nominal", 2.0, 1.0), _outcome("b", "nominal", 1.0, 2.0),
+            _outcome("a", "bonded", 1.5, 1.0), _outcome("b", "bonded", 1.6, 1.9)]
+    r = build_map(outs)["rankings"]
+    # shift: a wins nominally, b when bonded -> no robust winner, no pair holds
+    assert r["shift_per_n_mm"]["best_in_every_bracket"] is None
+    assert r["shift_per_n_mm"]["pairs_that_hold"] == []
+    assert r["shift_per_n_mm"]["best_by_bracket"] == {"nominal": "a", "bonded": "b"}
+    # range: b wins in both
+    assert r["shear_high_n"]["best_in_every_bracket"] == "b"
+    assert r["shear_high_n"]["pairs_that_hold"] == [["b", "a"]]
+    bands = build_map(outs)["designs"]["a"]["bands"]
+    assert bands["shift_per_n_mm"] == [1.5, 2.0]
+
+
+def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
+    assert main([f"sweep_dir={tmp_path}/nowhere"]) == 2
+    assert "sweep_dir=" in capsys.readouterr().err
+    assert main([f"sweep_dir={tmp_path}", "noise_sigmas=abc"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "noise_sigmas" in err[0]
+    assert main([f"sweep_dir={tmp_path}"]) == 2  # an empty folder: nothing to map
+    assert "no force_calibration sessions" in capsys.readouterr().err
+
+
+def test_design_groups_compose():
+    """Every design and bracket composes into a valid calibration config (preflight's check)."""
+    designs = sorted(p.stem for p in (REPO / "conf" / "design").glob("*.yaml"))
+    brackets = sorted(p.stem for p in (REPO / "conf" / "bracket").glob("*.yaml"))
+    assert len(designs) >= 8 and {"study", "stiff_interlayer"} <= set(designs)
+    # each design with the nominal bracket, each bracket with the study's design (not the product: slow)
+    code = ("import sys; import protocols.config; "
+            "from layerskin_exp.cli import preflight; d, b = sys.argv[1:]; "
+            "preflight('force_calibration', ['-m', '+design=' + d, '+bracket=nominal']); "
+            "preflight('force_calibration', ['-m', '+design=study', '+bracket=' + b]); print('ok')")
+    r = subprocess.run([sys.executable, "-c", code, ",".join(designs), ",".join(brackets)], cwd=REPO,
+                       capture_output=True, text=True, timeout=240)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-2000:]
+    r = subprocess.run([sys.executable, "-c", code, "nonesuch", "nominal"], cwd=REPO, capture_output=True,
+                       text=True, timeout=240)
+    assert r.returncode == 2 and "nonesuch" in r.stderr
+
+
+def test_design_search_sweeper_composes(tmp_path):
+    """The Optuna search config as the app resolves it: NSGA-II, two maximised objectives, the
+    spacer's four keys (in a subprocess: under pytest `protocols` can name the tests' package)."""
+    pytest.importorskip("hydra_plugins.hydra_optuna_sweeper")
+    r = run_cli("analysis.design_search", ["--cfg", "hydra", "hydra/sweeper=design_search"], tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    sweeper = r.stdout[r.stdout.index("sweeper:"):]
+    assert "_target_: optuna.samplers.NSGAIISampler" in sweeper
+    assert "direction:\n    - maximize\n    - maximize" in sweeper
+    for key in ("sim.spacer.modulus", "sim.spacer.thickness", "sim.spacer.cell", "sim.spacer.wall"):
+        assert f"{key}:" in sweeper
