@@ -27,6 +27,9 @@ FORBIDDEN = {
     "protocols": ("analysis",),
     "analysis": ("hardware", "protocols"),
 }
+# Studies that run campaigns and analyse them (the design search's objective, the sensitivity
+# screen) sit above both protocols and analysis: they may import both, and nothing imports them.
+STUDIES = ("analysis.design_search", "analysis.sensitivity")
 
 
 def _modules(repo: Path) -> dict[str, tuple[Path, bool]]:
@@ -83,7 +86,7 @@ def import_graph(repo: Path) -> dict[str, set[str]]:
 
 def upward_imports(graph: dict[str, set[str]]) -> list[str]:
     return sorted(f"{m} -> {t}" for m, ts in graph.items() for t in ts
-                  if t.split(".")[0] in FORBIDDEN[m.split(".")[0]])
+                  if (t.split(".")[0] in FORBIDDEN[m.split(".")[0]] and m not in STUDIES) or t in STUDIES)
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -190,7 +193,7 @@ def test_loading_a_layer_and_its_configs_loads_nothing_above_it(layer):
         "import importlib, pkgutil, sys\n"
         f"import {layer} as pkg\n"
         f"for m in pkgutil.walk_packages(pkg.__path__, '{layer}.'):\n"
-        "    if not m.name.endswith('__main__'):\n"
+        f"    if not m.name.endswith('__main__') and m.name not in {STUDIES!r}:\n"
         "        importlib.import_module(m.name)\n"
         + LOADS[layer]
         + f"above = {FORBIDDEN[layer]!r}\n"

@@ -9,6 +9,7 @@ is `-m sim.spacer.modulus=20,35,60`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -291,3 +292,10 @@ def _store() -> None:
 
 
 _store()
+
+
+def load_sim(overrides: Sequence[str] = ()) -> SimConfig:
+    """conf/sim/default.yaml with `sim.key=value` (or `key=value`) overrides, validated."""
+    from layerskin_exp.config import compose
+
+    return compose("world", [o if o.startswith("sim.") else f"sim.{o}" for o in overrides]).sim

@@ -83,10 +83,16 @@ def _line_gauss_matrix(d_out: np.ndarray, d_in: np.ndarray, dd_in: float, sigma:
     return np.exp(-((d_out[:, None] - d_in[None, :]) ** 2) / (2 * sigma**2)) / (math.sqrt(2 * math.pi) * sigma) * dd_in
 
 
-def _solver(sim: SimConfig, kind: str) -> PlateOnFoundation:
-    """The laminate-on-lattice model of one design (see `laminate`)."""
+def contact_radius_mm(kind: str) -> float:
+    """The rig's indenter radius (hemisphere) or rod radius (rod), mm."""
+    return rig.INDENTER_RADIUS_MM if kind == "hemisphere" else rig.ROD_DIAMETER_MM / 2
+
+
+def _solver(sim: SimConfig, kind: str, radius_mm: float | None = None) -> PlateOnFoundation:
+    """The laminate-on-lattice model of one design (see `laminate`). `radius_mm` replaces the
+    rig's indenter/rod radius only for reference comparisons (e.g. a 2-D section's cylinder)."""
     law = SpacerLaw(sim.spacer)
-    radius = rig.INDENTER_RADIUS_MM if kind == "hemisphere" else rig.ROD_DIAMETER_MM / 2
+    radius = contact_radius_mm(kind) if radius_mm is None else radius_mm
     g_p = sim.spacer.shear_modulus_kpa * KPA_MM2_TO_N * sim.spacer.thickness / 3.0  # Vlasov: G h / 3
     k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, sim.cover.thickness, sim.spacer.confinement_length)
     sheet = sim.sheet
@@ -98,12 +104,12 @@ def _solver(sim: SimConfig, kind: str) -> PlateOnFoundation:
                              pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM, interface=interface)
 
 
-def build_tables(sim: SimConfig, kind: str) -> ContactTables:
+def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> ContactTables:
     """Solve the laminate on its lattice for a grid of indentation depths (see `laminate`)."""
     if kind not in ("hemisphere", "rod"):
         raise ValueError(f"indenter={kind!r}: must be 'hemisphere' or 'rod'")
     law = SpacerLaw(sim.spacer)
-    plate = _solver(sim, kind)
+    plate = _solver(sim, kind, radius_mm)
     radius = plate.radius
     h = sim.spacer.thickness
     delta_max = min(0.99 * radius, 0.97 * h)

@@ -103,13 +103,13 @@ _MODEL_IDS = itertools.count()
 _KERNELS_LOADED = False  # the frame kernels are loaded once per process (SkinModel._load_kernels)
 
 
-def tables_for(sim: SimConfig, kind: str) -> ContactTables:
+def tables_for(sim: SimConfig, kind: str, radius_mm: float | None = None) -> ContactTables:
     """Contact tables for a design, computed once per distinct (spacer, cover, contact) config."""
-    key = repr((sim.spacer, sim.cover, sim.sheet, sim.fsr.layer_thickness_mm, sim.contact, kind))
+    key = repr((sim.spacer, sim.cover, sim.sheet, sim.fsr.layer_thickness_mm, sim.contact, kind, radius_mm))
     if key not in _TABLE_CACHE:
         if len(_TABLE_CACHE) > 16:
             _TABLE_CACHE.clear()
-        _TABLE_CACHE[key] = build_tables(sim, kind)
+        _TABLE_CACHE[key] = build_tables(sim, kind, radius_mm)
     return _TABLE_CACHE[key]
 
 
@@ -126,14 +126,16 @@ class SkinModel:
     """Two-layer FSR skin under one rigid indenter ("hemisphere" or "rod")."""
 
     def __init__(self, sim: SimConfig, skin: SkinConfig, indenter: str, rng: np.random.Generator,
-                 support_stiffness_n_per_mm: float | None = None):
+                 support_stiffness_n_per_mm: float | None = None, contact_radius_mm: float | None = None):
         if indenter not in INDENTERS:
             raise ValueError(f"indenter={indenter!r}: must be one of {INDENTERS}")
         if support_stiffness_n_per_mm is not None and not support_stiffness_n_per_mm > 0:
             raise ValueError(f"support_stiffness_n_per_mm={support_stiffness_n_per_mm!r}: must be > 0 or None (rigid)")
         self.sim, self.skin, self.kind, self.rng = sim, skin, indenter, rng
         self.k_support = support_stiffness_n_per_mm
-        self.tab = tables_for(sim, indenter)
+        # contact_radius_mm: only for comparisons with a reference of another geometry (the
+        # FEM section's cylinder); the rig's indenter and rod are layerskin_exp.rig's
+        self.tab = tables_for(sim, indenter, contact_radius_mm)
         self.law = SpacerLaw(sim.spacer)
         n = skin.n_taxels
         # --- mechanics (mechanics.contact_steps): tables on the indentation grid, geometry, state

@@ -25,7 +25,7 @@ import scipy.sparse.linalg as sparse_linalg
 
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.features import centre_of_pressure
-from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim.config import SimConfig, load_sim
 from layerskin_exp.sim.contact import _solver
 from layerskin_exp.sim.laminate import PlateOnFoundation
 from layerskin_exp.sim.skin import SkinModel
@@ -373,13 +373,6 @@ def table(checks: list[Check]) -> str:
         rows.append(f"{c.name:<62} {c.value:>9.3g} {rng:>15}  {'yes' if c.passed else 'NO ':<3} {c.expectation}"
                     + (f" ({c.unit})" if c.unit else "") + (f"; catches: {c.catches}" if c.catches else ""))
     return "\n".join(rows)
-
-
-def load_sim(overrides: list[str]) -> SimConfig:
-    """conf/sim/default.yaml with `sim.key=value` overrides, validated by SimConfig."""
-    from layerskin_exp.config import compose
-
-    return compose("world", [o if o.startswith("sim.") else f"sim.{o}" for o in overrides]).sim
 
 
 def main(argv=None) -> int:

@@ -7,7 +7,7 @@ Per bound: the cap pressed in to DEPTHS_MM (frictionless), then, from SHEAR_FROM
 sheared along +x with the contact sticking until the tangential force reaches SHEAR_RATIO of
 the normal force (2 N at 6 N, the protocol's slide). Each equilibrium's forces, contact and
 per-layer pressure profiles are written to reference/<bound>.npz; reference/summary.json lists the
-scalars. The sim configuration is conf/sim/default.yaml's (`layerskin_exp.sim.validate.load_sim`).
+scalars. The sim configuration is conf/sim/default.yaml's (`layerskin_exp.sim.config.load_sim`).
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ def run_bound(sim, interface: str, log=print) -> dict:
 
 
 def main(argv=None) -> int:
-    from layerskin_exp.sim.validate import load_sim
+    from layerskin_exp.sim.config import load_sim
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--interface", choices=("bonded", "unbonded", "both"), default="both")

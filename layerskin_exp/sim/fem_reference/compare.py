@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from layerskin_exp import rig
 from layerskin_exp.cli import CONF_DIR
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.features import centre_of_pressure
@@ -47,12 +48,16 @@ def load_tolerances(path: Path = TOLERANCES) -> dict:
 
 
 def line_sim(sim: SimConfig, bound: str) -> SimConfig:
-    """The design at one film-interface bound, in the section's geometry (a rod of the
-    hemisphere's diameter), noise-free with uniform gains."""
+    """The design at one film-interface bound, noise-free with uniform gains (the section's
+    geometry, a rod of the hemisphere's radius, is set on the model: `line_model`)."""
     return replace(sim, sheet=replace(sim.sheet, interface=bound),
-                   contact=replace(sim.contact, rod_diameter_mm=2.0 * sim.contact.hemisphere_radius_mm),
                    readout=replace(sim.readout, noise_counts=0.0, scan_jitter_ms=0.0),
                    fsr=replace(sim.fsr, gain_cv=0.0, sheet_gain_cv=0.0))
+
+
+def line_model(sim: SimConfig) -> SkinModel:
+    """The fast model in the section's geometry: a rod of the hemispherical indenter's radius."""
+    return SkinModel(sim, SKIN, "rod", np.random.default_rng(0), contact_radius_mm=rig.INDENTER_RADIUS_MM)
 
 
 class Reader:
@@ -235,7 +240,7 @@ def compare(sim: SimConfig, data: Path = DATA, tolerances: dict | None = None,
         fsim = line_sim(sim, bound)
         if model_hook is not None:
             fsim = model_hook(fsim)
-        model = SkinModel(fsim, SKIN, "rod", np.random.default_rng(0))
+        model = line_model(fsim)
         reader = Reader(model)
         f_rows = fem_side(fem, reader, branches)
         loads = [r["fz_n_per_mm"] for r in f_rows]
@@ -277,7 +282,7 @@ def compare(sim: SimConfig, data: Path = DATA, tolerances: dict | None = None,
     if bounds is not None:
         return rows, record
     # the default design (films held by friction) beside both bounds, for the record
-    model = SkinModel(line_sim(sim, sim.sheet.interface), SKIN, "rod", np.random.default_rng(0))
+    model = line_model(line_sim(sim, sim.sheet.interface))
     record["default_" + sim.sheet.interface] = fast_side(model, Reader(model),
                                                          [r["fz_n_per_mm"] for r in record["bonded"]["fem"]],
                                                          [r["shear_ratio"] for r in record["bonded"]["fem"]])
@@ -294,7 +299,7 @@ def table(rows: list[Comparison]) -> str:
 
 
 def main() -> int:
-    from layerskin_exp.sim.validate import load_sim
+    from layerskin_exp.sim.config import load_sim
 
     rows, record = compare(load_sim([]))
     print(table(rows))

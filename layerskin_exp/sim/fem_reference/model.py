@@ -44,6 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
+from layerskin_exp import rig
 from layerskin_exp.sim.config import SimConfig
 
 KPA = 1e-3  # MPa per kPa
@@ -92,7 +93,7 @@ class Section:
                    core_mm=sh.velostat_thickness_mm, slip_mm=0.005, silicone_e_mpa=sp_.modulus * KPA,
                    silicone_nu=sp_.poisson, cover_e_mpa=sim.cover.modulus * KPA,
                    film_along_e_mpa=along / t_film, film_across_e_mpa=across / t_film,
-                   core_e_mpa=sh.velostat_modulus_mpa, radius_mm=sim.contact.hemisphere_radius_mm,
+                   core_e_mpa=sh.velostat_modulus_mpa, radius_mm=rig.INDENTER_RADIUS_MM,
                    interface=interface)
 
 
