@@ -230,7 +230,7 @@ def test_malformed_rtde_packages_are_refused_and_the_connection_lives(controller
     # An output set-up without its frequency, a data package of the wrong length, an unknown type.
     kind, payload = _rtde_exchange(s, wire.pack(wire.RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS, b"\x01\x02"))
     assert kind == ord("O") and payload[0] == 0
-    kind, payload = _rtde_exchange(s, wire.encode_setup_inputs_request(["input_int_register_30"]))
+    kind, payload = _rtde_exchange(s, wire.pack(wire.RTDE_CONTROL_PACKAGE_SETUP_INPUTS, b"input_int_register_30"))
     assert kind == ord("I") and payload[0] == 1
     kind, payload = _rtde_exchange(s, wire.pack(wire.RTDE_DATA_PACKAGE, b"\x01\x00\x00"))
     assert kind == ord("M")
