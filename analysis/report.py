@@ -121,7 +121,7 @@ class Analysis:
         if not src:
             self.pre.layer_scale_ = self.scale = np.ones(2, np.float32)
             return
-        self.scale = self.pre.fit(src).layer_scale_
+        self.scale = self.pre.fit_unscaled(src).layer_scale_
         for t in [*camp.calibration, *camp.grip]:
             self.pre.scale(t.maps)
         self.results["inputs"]["layer_scale_counts"] = self.scale

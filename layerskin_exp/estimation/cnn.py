@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
 from torch import nn
 from tqdm.auto import tqdm
 
@@ -174,7 +176,7 @@ def _to(a: np.ndarray, dev: torch.device) -> torch.Tensor:
     return t
 
 
-class CnnGruForceModel:
+class CnnGruForceModel(BaseEstimator):
     """Three-axis force from windows of skin maps.
 
     X: (N, 2, 16, 16) preprocessed maps [superficial, deep] of consecutive frames;
@@ -186,10 +188,18 @@ class CnnGruForceModel:
     """
 
     def __init__(self, configuration: str = "T-s5", config: CnnConfig | None = None, progress: bool = False) -> None:
+        parse_configuration(configuration)  # a bad name fails here, not at fit
         self.configuration = configuration
-        self.layers, self.seq_len = parse_configuration(configuration)
         self.config = config or CnnConfig()
         self.progress = progress
+
+    @property
+    def layers(self) -> str:
+        return parse_configuration(self.configuration)[0]
+
+    @property
+    def seq_len(self) -> int:
+        return parse_configuration(self.configuration)[1]
 
     @property
     def history(self) -> list[dict]:
@@ -204,8 +214,7 @@ class CnnGruForceModel:
         return resolve_device(self.config.device)
 
     def _check_fitted(self) -> None:
-        if getattr(self, "model_", None) is None:
-            raise RuntimeError("CnnGruForceModel.predict before fit or load: call fit(X, y) first")
+        check_is_fitted(self, "model_", msg="This %(name)s is not fitted yet: call fit(X, y) or load an artifact.")
 
     # -- training ----------------------------------------------------------------------------
     def fit(self, X, y, trials=None, X_val=None, y_val=None, trials_val=None) -> CnnGruForceModel:

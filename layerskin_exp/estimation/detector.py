@@ -16,6 +16,7 @@ numbers (tested).
 from __future__ import annotations
 
 import numpy as np
+from sklearn.exceptions import NotFittedError
 from scipy.signal import butter, find_peaks, sosfilt, sosfilt_zi
 
 from layerskin_exp.estimation.config import SlipConfig
@@ -107,7 +108,8 @@ class SlipDetector:
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "median_"):
-            raise RuntimeError("SlipDetector used before fit: call fit(signals, t_s, truths) or load an artifact")
+            raise NotFittedError("This SlipDetector is not fitted yet: call fit(signals, t_s, truths) or load an "
+                                 "artifact.")
 
     # -- using it ----------------------------------------------------------------------------
     def events(self, signal, t_s, threshold: float | None = None) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from sklearn.exceptions import NotFittedError
 import torch
 
 from layerskin_exp.estimation.cnn import (
@@ -148,5 +149,5 @@ def test_epoch_plan_slices_are_each_batch_shared_plan():
 
 
 def test_predict_before_fit_names_the_fix():
-    with pytest.raises(RuntimeError, match="fit"):
+    with pytest.raises(NotFittedError, match="fit"):
         CnnGruForceModel("S-s1").predict(np.zeros((2, 2, 16, 16)))
