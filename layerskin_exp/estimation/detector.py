@@ -16,8 +16,8 @@ numbers (tested).
 from __future__ import annotations
 
 import numpy as np
-from sklearn.exceptions import NotFittedError
 from scipy.signal import butter, find_peaks, sosfilt, sosfilt_zi
+from sklearn.exceptions import NotFittedError
 
 from layerskin_exp.estimation.config import SlipConfig
 from layerskin_exp.estimation.slip import CueTrial, _best, f1_score, f1_table, match_events

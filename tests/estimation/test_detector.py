@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from sklearn.exceptions import NotFittedError
 from scipy.signal import butter, lfilter, lfilter_zi
+from sklearn.exceptions import NotFittedError
 
 from layerskin_exp.estimation import SlipDetector
 

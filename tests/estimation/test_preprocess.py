@@ -7,7 +7,12 @@ from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
 from layerskin_exp.config import SkinConfig
-from layerskin_exp.estimation.preprocess import Preprocessor, layer_scale, preprocess_counts, smooth_downsample
+from layerskin_exp.estimation.preprocess import (
+    Preprocessor,
+    layer_scale,
+    preprocess_counts,
+    smooth_downsample,
+)
 from layerskin_exp.features import layer_features, two_layer_features
 
 
