@@ -171,7 +171,7 @@ def default_torch_threads(device: str = "auto") -> int:
 
 def _channels_last(x: torch.Tensor) -> torch.Tensor:
     """(N, C, H, W) maps stored channels-last: the layout oneDNN's CPU convolutions run fastest on
-    (about 1.2x per training step here, benchmarks/train_epoch); the values are the same."""
+    (about 1.1x training windows per CPU second, benchmarks/train_epoch); the values are the same."""
     return x.contiguous(memory_format=torch.channels_last)
 
 
