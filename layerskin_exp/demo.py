@@ -13,6 +13,7 @@ also shows how to run them. Re-running resumes: complete trials are not simulate
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
 import subprocess
 import sys
@@ -32,10 +33,32 @@ def _run(title: str, args: list[str]) -> float:
     return dt
 
 
+def force_summary(results_path: Path) -> str:
+    """The force table (R² per axis, ours and the study's) and each CNN's training verdict, from
+    the report's results.json."""
+    r = json.loads(results_path.read_text())
+    force, study, training = r.get("force") or {}, r["study"]["force"], r.get("force_training") or {}
+    if not force:
+        return "force estimation skipped: " + str(r.get("skipped", {}).get("force", "no result"))
+    models = list(force)
+    lines = ["R² (study's in brackets)".ljust(26) + "".join(m.rjust(18) for m in models)]
+    for ax in ("Fx", "Fy", "Fz"):
+        cells = []
+        for m in models:
+            ours, theirs = force[m][ax]["r2"], study.get(m, {}).get(ax, {}).get("r2")
+            cells.append((("–" if ours is None else f"{ours:.3f}") + (f" ({theirs:.3f})" if theirs else "")).rjust(18))
+        lines.append(f"  {ax}".ljust(26) + "".join(cells))
+    for m, t in training.items():
+        verdict = ("converged" if t.get("converged") else "NOT CONVERGED: " + "; ".join(t.get("caveats", [])))
+        lines.append(f"{m}: {t['epochs']}/{t['max_epochs']} epochs, best at {t['best_epoch']}, "
+                     f"early stopping {'triggered' if t['early_stopped'] else 'not triggered'}: {verdict}")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="demo_out", help="folder for session files and the report")
-    ap.add_argument("--positions", type=int, default=12, help="contact positions of the calibration campaign")
+    ap.add_argument("--positions", type=int, default=32, help="contact positions of the calibration campaign")
     ap.add_argument("--grip-trials", type=int, default=3, help="trials per grip depth and motion")
     ap.add_argument("--jobs", type=int, default=2, help="parallel grip trials (joblib launcher)")
     a = ap.parse_args(argv)
@@ -59,6 +82,8 @@ def main(argv: list[str] | None = None) -> None:
         "analysis report (analysis=demo preset)",
         ["-m", "analysis.report", f"sessions={data}", f"out={report}", "analysis=demo"],
     )
+    print("\n== force estimation on the held-out calibration trials (report.md has every table)")
+    print(force_summary(report / "results.json"))
     print("\n== done")
     print(f"session files: {data}  (inspect one: python -m layerskin_exp.log inspect FILE)")
     print(f"report:        {report / 'report.md'}")

@@ -16,6 +16,7 @@ from hardware.sim.platform import SimPlatform
 from hardware.sim.skin import SimSkinReader
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.rig import R_TCP_SKIN
+from layerskin_exp.sim import compile_notice
 from layerskin_exp.sim.clocks import device_rng
 from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.platform_scene import PlatformScene
@@ -57,6 +58,7 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     """
     if setup not in SETUPS:
         raise DeviceError(f"sim: unknown setup {setup!r}; choose one of {SETUPS}")
+    notice = compile_notice.install()  # before the first kernel compiles (the skin model's)
     rc = sim_cfg.rig
     scene = PlatformScene(rc.platform) if setup == "platform" else GripScene(rc.arm, rc.gripper)
     factory = skin_model_factory or _default_skin_model
@@ -70,6 +72,7 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     # guards act on the very sample, rewinding the world to it (see SimForceTorque).
     skin.on_frames = rig.check_frames
     rig.trial_hooks.append(world.begin_trial)
+    rig.trial_hooks.append(notice.report)
     if setup == "platform":
         rig.ft = SimForceTorque(world, rc.ft, device_rng(sim_cfg.seed, "ft"), on_sample=rig.check_guards,
                                  probe=rig.guard_reason)

@@ -40,6 +40,11 @@ class CnnConfig:
     patience: int = 20  # epochs without validation improvement before stopping
     batch_size: int = 256
     lr: float = 3e-4
+    # "constant" (the study's Adam at lr) or "plateau": lr times lr_plateau_factor whenever the
+    # validation loss has not improved for lr_plateau_patience epochs (torch ReduceLROnPlateau).
+    lr_schedule: str = "constant"
+    lr_plateau_factor: float = 0.5
+    lr_plateau_patience: int = 2
     dropout: float = 0.1
     axis_weights: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])  # Fx, Fy, Fz loss weights
     smooth_l1_beta: float = 1.0
@@ -57,6 +62,12 @@ class CnnConfig:
         require(self.patience >= 1, "analysis.cnn.patience", self.patience, "must be >= 1")
         require(self.batch_size >= 1, "analysis.cnn.batch_size", self.batch_size, "must be >= 1")
         require(self.lr > 0, "analysis.cnn.lr", self.lr, "must be > 0")
+        require(self.lr_schedule in ("constant", "plateau"), "analysis.cnn.lr_schedule", self.lr_schedule,
+                "must be constant or plateau")
+        require(0 < self.lr_plateau_factor < 1, "analysis.cnn.lr_plateau_factor", self.lr_plateau_factor,
+                "must be in (0, 1)")
+        require(self.lr_plateau_patience >= 0, "analysis.cnn.lr_plateau_patience", self.lr_plateau_patience,
+                "must be >= 0 epochs")
         require(0 <= self.dropout < 1, "analysis.cnn.dropout", self.dropout, "must be in [0, 1)")
         require(len(self.axis_weights) == 3 and min(self.axis_weights) >= 0, "analysis.cnn.axis_weights",
                 self.axis_weights, "needs three non-negative weights (Fx, Fy, Fz)")

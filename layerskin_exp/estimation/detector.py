@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.signal import butter, find_peaks, sosfilt, sosfilt_zi
+from sklearn.exceptions import NotFittedError
 
 from layerskin_exp.estimation.config import SlipConfig
 from layerskin_exp.estimation.slip import CueTrial, _best, f1_score, f1_table, match_events
@@ -107,7 +108,8 @@ class SlipDetector:
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "median_"):
-            raise RuntimeError("SlipDetector used before fit: call fit(signals, t_s, truths) or load an artifact")
+            raise NotFittedError("This SlipDetector is not fitted yet: call fit(signals, t_s, truths) or load an "
+                                 "artifact.")
 
     # -- using it ----------------------------------------------------------------------------
     def events(self, signal, t_s, threshold: float | None = None) -> np.ndarray:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils.validation import check_is_fitted
 
 
 def linear_features(dc_mm: np.ndarray, p_s: np.ndarray, p_d: np.ndarray) -> np.ndarray:
@@ -14,14 +16,11 @@ def linear_features(dc_mm: np.ndarray, p_s: np.ndarray, p_d: np.ndarray) -> np.n
     return np.column_stack([dc_mm[:, 0], dc_mm[:, 1], p_s, p_d, dc_mm[:, 0] * pbar, dc_mm[:, 1] * pbar])
 
 
-class LinearForceModel:
+class LinearForceModel(RegressorMixin, BaseEstimator):
     """Per-axis least squares with an intercept on the six features (numpy.linalg.lstsq).
 
     fit(X (N, 6), y (N, 3) N) / predict(X (N, 6)) -> (N, 3) N. coef_: (7, 3), last row intercept.
     """
-
-    def __init__(self) -> None:
-        self.coef_: np.ndarray | None = None
 
     @staticmethod
     def _design(X: np.ndarray) -> np.ndarray:
@@ -36,6 +35,5 @@ class LinearForceModel:
         return self
 
     def predict(self, X: np.ndarray) -> np.ndarray:
-        if self.coef_ is None:
-            raise RuntimeError("LinearForceModel.predict before fit: call fit(X, y) first")
+        check_is_fitted(self, "coef_", msg="This %(name)s is not fitted yet: call fit(X, y) first.")
         return self._design(X) @ self.coef_

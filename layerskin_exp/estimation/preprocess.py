@@ -12,6 +12,8 @@ subtraction commutes with them and is done on the (5x fewer) downsampled frames.
 from __future__ import annotations
 
 import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils.validation import check_is_fitted
 
 
 def _tap_weights(window: int, factor: int) -> np.ndarray:
@@ -104,14 +106,20 @@ def preprocess_counts(counts: np.ndarray, window: int = 5, factor: int = 5,
     return subtract_baseline(smooth_downsample(counts, window, factor), base)
 
 
-class Preprocessor:
-    """Raw counts of one trial -> maps the models take: the study's preprocessing, fitted.
+class Preprocessor(TransformerMixin, BaseEstimator):
+    """Raw counts -> maps the models take: the study's preprocessing, fitted (scikit-learn manners).
 
-    Hyperparameters (constructor): ma_window, downsample (samples), baseline_frames (raw frames
-    at the trial start whose per-taxel median is the baseline), scale_percentile. Fitted:
-    layer_scale_ (L,) counts, from baseline-free maps of the training campaign (`fit`).
-    transform: (N, L, 16, 16) uint16 counts -> (N // downsample, L, 16, 16) float32, >= 0, about 1
-    for a strongly loaded frame's total.
+    Hyperparameters (constructor; get_params / set_params): ma_window, downsample (samples),
+    baseline_frames (raw frames at a trial's start whose per-taxel median is its baseline),
+    scale_percentile. Fitted: layer_scale_ (L,) counts, the scale_percentile-th percentile of the
+    training frames' per-layer totals above baseline; dividing by it puts a strongly loaded frame
+    near 1 in every layer.
+
+    `fit` and `transform` take the same input, raw counts: one trial (N, L, 16, 16) uint16, or a
+    list of trials (each trial has its own baseline, so trials are never concatenated before this
+    step). transform returns the same form: (N // downsample, L, 16, 16) float32 >= 0 per trial.
+    A model trained on these maps is tied to this layer_scale_: a new skin (other gains, other
+    spacer) means fitting the Preprocessor and the model again on its own campaign.
     """
 
     def __init__(self, ma_window: int = 5, downsample: int = 5, baseline_frames: int = 20,
@@ -126,16 +134,19 @@ class Preprocessor:
         """From a PreprocessConfig (or anything with its fields)."""
         return cls(pp.ma_window, pp.downsample, pp.baseline_frames, pp.scale_percentile)
 
-    def get_params(self) -> dict:
-        return {"ma_window": int(self.ma_window), "downsample": int(self.downsample),
-                "baseline_frames": int(self.baseline_frames), "scale_percentile": float(self.scale_percentile)}
-
     def unscaled(self, counts: np.ndarray) -> np.ndarray:
-        """Smoothed, downsampled, baseline-free maps in counts (not yet divided by the layer scale)."""
-        return preprocess_counts(counts, self.ma_window, self.downsample, self.baseline_frames)
+        """One trial's raw counts -> smoothed, downsampled, baseline-free maps in counts (not yet
+        divided by the layer scale; needs no fit)."""
+        return preprocess_counts(np.asarray(counts), self.ma_window, self.downsample, self.baseline_frames)
 
-    def fit(self, maps) -> Preprocessor:
-        """Layer scale from unscaled maps: (K, L, 16, 16) or a list of per-trial arrays."""
+    def fit(self, X, y=None) -> Preprocessor:
+        """Layer scale from raw counts: one trial (N, L, 16, 16) or a list of trials. y is ignored."""
+        del y
+        return self.fit_unscaled([self.unscaled(c) for c in _trials(X)])
+
+    def fit_unscaled(self, maps) -> Preprocessor:
+        """Layer scale from maps already through `unscaled` ((K, L, 16, 16) or a list of trials):
+        the same fit as `fit` on their raw counts, for callers that keep only the reduced maps."""
         self.layer_scale_ = layer_scale(maps, self.scale_percentile)
         return self
 
@@ -144,18 +155,22 @@ class Preprocessor:
         maps *= (1.0 / self._scale())[None, :, None, None]
         return maps
 
-    def transform(self, counts: np.ndarray) -> np.ndarray:
-        """(N, L, 16, 16) raw counts of one trial -> (N // downsample, L, 16, 16) scaled maps."""
-        return self.scale(self.unscaled(counts))
+    def transform(self, X):
+        """Raw counts, one trial (N, L, 16, 16) or a list of trials -> scaled maps in the same form."""
+        self._scale()  # not fitted: fail before any work
+        if isinstance(X, np.ndarray):
+            return self.scale(self.unscaled(X))
+        return [self.scale(self.unscaled(c)) for c in X]
 
     def _scale(self) -> np.ndarray:
-        s = getattr(self, "layer_scale_", None)
-        if s is None:
-            raise RuntimeError("Preprocessor.transform before fit: call fit(maps) or load a fitted artifact")
-        return np.asarray(s, np.float32)
+        check_is_fitted(self, "layer_scale_",
+                        msg="This %(name)s has no layer scale yet: call fit(raw_counts) or load a fitted artifact.")
+        return np.asarray(self.layer_scale_, np.float32)
 
     def to_dict(self) -> dict:
-        return {**self.get_params(), "layer_scale": [float(v) for v in self._scale()],
+        return {"ma_window": int(self.ma_window), "downsample": int(self.downsample),
+                "baseline_frames": int(self.baseline_frames), "scale_percentile": float(self.scale_percentile),
+                "layer_scale": [float(v) for v in self._scale()],
                 "smoothing": "centred moving average of ma_window (edge values repeated), then means of "
                              "downsample samples: one triangular filter of ma_window+downsample-1 taps",
                 "baseline": "per taxel, median of the first baseline_frames raw frames; maps = "
@@ -163,9 +178,27 @@ class Preprocessor:
 
     @classmethod
     def from_dict(cls, d: dict) -> Preprocessor:
+        keys = ("ma_window", "downsample", "baseline_frames", "scale_percentile", "layer_scale")
+        missing = [k for k in keys if k not in d]
+        if missing:
+            raise ValueError(f"preprocess record lacks {', '.join(missing)}: not written by Preprocessor.to_dict; "
+                             "re-run the report to write a new artifact")
         obj = cls(d["ma_window"], d["downsample"], d["baseline_frames"], d["scale_percentile"])
         obj.layer_scale_ = np.asarray(d["layer_scale"], np.float32)
         return obj
+
+
+def _trials(X) -> list[np.ndarray]:
+    """One trial (N, L, 16, 16) or a sequence of them -> a list of trials."""
+    if isinstance(X, np.ndarray):
+        if X.ndim != 4:
+            raise ValueError(f"raw counts of shape {X.shape}: expected one trial (N, layers, rows, cols) "
+                             "or a list of such trials")
+        return [X]
+    trials = [np.asarray(c) for c in X]
+    if not trials:
+        raise ValueError("no trials to fit the layer scale on")
+    return trials
 
 
 class DownsampleStream:

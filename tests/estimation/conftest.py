@@ -27,10 +27,9 @@ def raw_trial(rng, n=230, amp=600.0):
 def fitted_estimator():
     rng = np.random.default_rng(7)
     raw = [raw_trial(rng) for _ in range(8)]
-    pre = Preprocessor()
-    maps = [pre.unscaled(c) for c, _ in raw]
-    pre.fit(maps)
-    X = np.concatenate([pre.scale(m) for m in maps])
+    pre = Preprocessor().fit([c for c, _ in raw])
+    maps = pre.transform([c for c, _ in raw])
+    X = np.concatenate(maps)
     y = np.concatenate([f[: len(f) // 5 * 5].reshape(-1, 5, 3).mean(axis=1) for _, f in raw]).astype(np.float32)
     trials = np.concatenate([np.full(len(m), i) for i, m in enumerate(maps)])
     model = CnnGruForceModel("T-s5", CnnConfig(max_epochs=2, patience=2, batch_size=64, segment_windows=16,

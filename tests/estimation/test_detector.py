@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from scipy.signal import butter, lfilter, lfilter_zi
+from sklearn.exceptions import NotFittedError
 
 from layerskin_exp.estimation import SlipDetector
 
@@ -90,5 +91,5 @@ def test_fit_finds_the_slips_and_learns_the_latency_and_round_trips():
 
 
 def test_unfitted_detector_says_to_fit():
-    with pytest.raises(RuntimeError, match="fit"):
+    with pytest.raises(NotFittedError, match="fit"):
         SlipDetector(FS).score_samples(np.zeros(10))

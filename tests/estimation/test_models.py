@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import torch
+from sklearn.exceptions import NotFittedError
 
 from layerskin_exp.estimation.cnn import (
     CnnGru,
@@ -148,5 +149,27 @@ def test_epoch_plan_slices_are_each_batch_shared_plan():
 
 
 def test_predict_before_fit_names_the_fix():
-    with pytest.raises(RuntimeError, match="fit"):
+    with pytest.raises(NotFittedError, match="fit"):
         CnnGruForceModel("S-s1").predict(np.zeros((2, 2, 16, 16)))
+
+
+@pytest.mark.parametrize("schedule,expected", [("constant", [1e-9] * 4), ("plateau", [1e-9, 1e-9, 5e-10, 2.5e-10])])
+def test_plateau_schedule_halves_lr_after_epochs_without_improvement(schedule, expected):
+    # lr so small that the validation loss cannot improve by the 1e-6 that counts as better
+    X, y, trials = _toy_data(n_trials=6, n=20)
+    cfg = CnnConfig(max_epochs=4, patience=10, batch_size=32, segment_windows=8, lr=1e-9, lr_schedule=schedule,
+                    lr_plateau_patience=0)
+    m = CnnGruForceModel("T-s1", cfg).fit(X, y, trials)
+    np.testing.assert_allclose([h["lr"] for h in m.history], expected)
+
+
+def test_bad_schedule_names_the_key():
+    with pytest.raises(ValueError, match="analysis.cnn.lr_schedule"):
+        CnnConfig(lr_schedule="cosine")
+
+
+def test_cnn_params_come_from_the_constructor():
+    m = CnnGruForceModel("T-s5", CnnConfig(max_epochs=2))
+    assert set(m.get_params()) == {"configuration", "config", "progress"}
+    m.set_params(configuration="S-s1")
+    assert (m.layers, m.seq_len) == ("S", 1)

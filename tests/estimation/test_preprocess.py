@@ -3,9 +3,16 @@
 import numpy as np
 import pytest
 from scipy.ndimage import uniform_filter1d
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
 
 from layerskin_exp.config import SkinConfig
-from layerskin_exp.estimation.preprocess import layer_scale, preprocess_counts, smooth_downsample
+from layerskin_exp.estimation.preprocess import (
+    Preprocessor,
+    layer_scale,
+    preprocess_counts,
+    smooth_downsample,
+)
 from layerskin_exp.features import layer_features, two_layer_features
 
 
@@ -63,3 +70,51 @@ def test_layer_scale_of_trial_list_equals_that_of_their_concatenation():
         np.testing.assert_array_equal(layer_scale(trials, q), layer_scale(np.concatenate(trials), q))
     totals = np.concatenate(trials).sum(axis=(-2, -1))
     np.testing.assert_allclose(layer_scale(trials, 99.0), np.percentile(totals, 99.0, axis=0), rtol=1e-6)
+
+
+def _raw_trials(seed=3, n=(120, 87, 200)):
+    """Raw counts of a few trials: a flat baseline per trial, then a load on a few taxels."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in n:
+        c = np.repeat(rng.integers(80, 300, (1, 2, 16, 16)), k, axis=0)
+        c[40:, 0, 3:6, 4:8] += rng.integers(200, 1500)
+        c[40:, 1, 4:7, 5:8] += rng.integers(50, 400)
+        out.append((c + rng.integers(0, 5, c.shape)).astype(np.uint16))
+    return out
+
+
+def test_preprocessor_fit_and_transform_take_raw_counts():
+    raw = _raw_trials()
+    pre = Preprocessor(scale_percentile=99.0).fit(raw)
+    # independent of the class: per trial, the documented rule; the scale from those maps' totals
+    unscaled = [preprocess_counts(c, 5, 5, 20) for c in raw]
+    totals = np.concatenate([m.sum(axis=(-2, -1)) for m in unscaled])
+    np.testing.assert_allclose(pre.layer_scale_, np.percentile(totals, 99.0, axis=0), rtol=1e-6)
+    maps = pre.transform(raw)
+    assert isinstance(maps, list) and len(maps) == len(raw)
+    for m, u in zip(maps, unscaled, strict=True):
+        np.testing.assert_allclose(m, u / pre.layer_scale_[None, :, None, None], rtol=1e-6)
+    np.testing.assert_array_equal(pre.transform(raw[1]), maps[1])  # one trial in, one trial out
+    np.testing.assert_array_equal(pre.fit_transform(raw)[0], maps[0])
+    # the same fit from maps already reduced (the report keeps only those)
+    np.testing.assert_array_equal(Preprocessor().fit_unscaled(unscaled).layer_scale_, pre.layer_scale_)
+
+
+def test_preprocessor_params_come_from_the_constructor():
+    pre = Preprocessor(ma_window=3, baseline_frames=10)
+    assert pre.get_params() == {"ma_window": 3, "downsample": 5, "baseline_frames": 10, "scale_percentile": 99.0}
+    pre.set_params(downsample=2)
+    assert pre.downsample == 2
+    c = clone(pre)
+    assert c.get_params() == pre.get_params() and not hasattr(c, "layer_scale_")
+    assert pre.fit(_raw_trials()).transform(_raw_trials()[0]).shape == (120 // 2, 2, 16, 16)
+
+
+def test_preprocessor_not_fitted_and_bad_input_say_what_to_do():
+    with pytest.raises(NotFittedError, match="call fit"):
+        Preprocessor().transform(_raw_trials()[0])
+    with pytest.raises(ValueError, match=r"shape \(16, 16\)"):
+        Preprocessor().fit(np.zeros((16, 16), np.uint16))
+    with pytest.raises(ValueError, match="lacks layer_scale"):
+        Preprocessor.from_dict({"ma_window": 5, "downsample": 5, "baseline_frames": 20, "scale_percentile": 99.0})

@@ -1,0 +1,65 @@
+"""Characterisation of the calibration campaign: uniformity, repeatability, CoP shift, heights."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from analysis import study
+from analysis.characterization import (
+    PressTrial,
+    cop_shift_at_shear,
+    effective_heights,
+    repeatability,
+    uniformity,
+)
+from layerskin_exp.features import two_layer_features
+
+if TYPE_CHECKING:
+    from analysis.report import Analysis
+
+
+def characterization(run: Analysis) -> None:
+    c = run.camp.calibration
+    if not c:
+        run.skip("characterization", "no complete force_calibration sessions")
+        run.skip("heights", "no complete force_calibration sessions")
+        return
+    cc = run.a.characterization
+    if run.calib_feats is None:
+        run.calib_feats = two_layer_features(np.concatenate([t.maps for t in c]), run.skin, run.a.preprocess.eps)
+    f = run.calib_feats
+    bounds = np.cumsum([0] + [len(t.t_s) for t in c])
+    response = f["p_s"] * run.scale[0] + f["p_d"] * run.scale[1]  # counts above baseline, both layers
+    presses, shear = [], []
+    for i, t in enumerate(c):
+        sl = slice(bounds[i], bounds[i + 1])
+        if t.labels.get("kind") == "press":
+            presses.append(PressTrial(int(t.labels.get("position_index", i)), t.force_n[:, 2], response[sl]))
+        elif t.labels.get("kind") == "slide":
+            shear.append((i, sl))
+    res = {}
+    if presses:
+        res["uniformity"] = uniformity(presses, cc)
+        res["repeatability"] = repeatability(presses, cc)
+    else:
+        run.skip("characterization.uniformity", "no press trials")
+    s_n = [np.linalg.norm(c[i].force_n[:, :2], axis=1) for i, _ in shear]
+    dcs = [f["dc"][sl] for _, sl in shear]
+    if shear:
+        res["cop_shift"] = cop_shift_at_shear(s_n, dcs, cc)
+        fz = np.concatenate([c[i].force_n[:, 2] for i, _ in shear])
+        fs = np.concatenate([c[i].force_n[:, :2] for i, _ in shear])
+        run.results["heights"] = effective_heights(fz, np.concatenate(dcs), fs, cc)
+    if run.a.figures and (presses or shear):
+        from analysis.figures import characterization_plot
+
+        characterization_plot(run.out / "characterization.png", presses, s_n, dcs, run.results.get("heights"),
+                              cc.matched_load_n, tuple(cc.shear_band_n),
+                              {**study.CHARACTERIZATION, "heights": study.HEIGHTS}, res)
+        run.figures.append("characterization.png")
+    if not shear:
+        run.skip("characterization.cop_shift", "no slide (shear) trials")
+        run.skip("heights", "no slide (shear) trials")
+    run.results["characterization"] = res

@@ -1,0 +1,99 @@
+"""Force estimation: the linear baseline and the CNN-GRU configurations on a trial split."""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from analysis import study
+from analysis.metrics import mae, r2_score
+from analysis.run_info import convergence_caveats, force_ranges, training_state
+from layerskin_exp.estimation.artifact import Estimator
+from layerskin_exp.estimation.cnn import CnnGruForceModel
+from layerskin_exp.estimation.linear import LinearForceModel, linear_features
+from layerskin_exp.estimation.splits import split_trials
+from layerskin_exp.features import two_layer_features
+
+if TYPE_CHECKING:
+    from analysis.report import Analysis
+
+log = logging.getLogger("analysis.report")
+
+AXES = ("Fx", "Fy", "Fz")
+
+
+def calibration_arrays(run: Analysis):
+    """The calibration trials as one array: X (N, 2, 16, 16), y (N, 3) N, trial (N,), progress (N,)."""
+    c = run.camp.calibration
+    X = np.concatenate([t.maps for t in c])
+    y = np.concatenate([t.force_n for t in c])
+    trial = np.concatenate([np.full(len(t.t_s), i) for i, t in enumerate(c)])
+    progress = np.concatenate([np.linspace(0, 1, len(t.t_s)) for t in c])
+    return X, y, trial, progress
+
+
+def force(run: Analysis) -> None:
+    if not run.camp.calibration:
+        run.skip("force", "no complete force_calibration sessions")
+        return
+    a, results = run.a, run.results
+    X, y, trial, progress = calibration_arrays(run)
+    f = two_layer_features(X, run.skin, a.preprocess.eps)
+    run.calib_feats = f
+    sp = a.split
+    tr, va, te = split_trials(trial, (sp.train, sp.val, sp.test), sp.seed)
+    if len(te) == 0 or len(tr) == 0:
+        run.skip("force", f"{len(np.unique(trial))} calibration trial(s): too few for a 70/15/15 split")
+        return
+    m_tr, m_va, m_te = np.isin(trial, tr), np.isin(trial, va), np.isin(trial, te)
+    phi = linear_features(f["dc"], f["p_s"], f["p_d"])
+    preds = {"linear": LinearForceModel().fit(phi[m_tr], y[m_tr]).predict(phi[m_te])}
+    models_dir = run.out / "models"
+    models_dir.mkdir(parents=True, exist_ok=True)
+    history = {}
+    results["data"]["split"] = {
+        part: {"trials": len(ids), "frames": int(m.sum())}
+        for part, ids, m in (("train", tr, m_tr), ("val", va, m_va), ("test", te, m_te))}
+    results["data"]["force_range_n"] = force_ranges(y, m_te)
+    for name in tqdm(a.cnn.configurations, desc="CNN-GRU models", leave=False, disable=not a.progress):
+        model = CnnGruForceModel(name, a.cnn, progress=a.progress)
+        t0 = time.perf_counter()
+        log.info("training %s on %d frames", name, int(m_tr.sum()))
+        model.fit(X[m_tr], y[m_tr], trial[m_tr], X[m_va], y[m_va], trial[m_va])
+        results["timing_s"][f"train_{name}"] = time.perf_counter() - t0
+        preds[name] = model.predict(X[m_te], trial[m_te])
+        Estimator(run.pre, model).save(models_dir / f"{name}.pt")
+        history[name] = model.history
+        if name == "T-s5":
+            run.ts5 = model
+    for name, p in preds.items():
+        r2, err = r2_score(y[m_te], p), mae(y[m_te], p)
+        results["force"][name] = {ax: {"r2": r2[i], "mae": err[i]} for i, ax in enumerate(AXES)}
+    results["force_split"] = {"train_trials": len(tr), "val_trials": len(va), "test_trials": len(te),
+                              "test_frames": int(m_te.sum()), "seed": sp.seed}
+    linear_r2 = {ax: v["r2"] for ax, v in results["force"]["linear"].items()}
+    training = {}
+    for k, h in history.items():
+        st = training_state(h, a.cnn.max_epochs, a.cnn.patience)
+        st["caveats"] = convergence_caveats(
+            st, {ax: v["r2"] for ax, v in results["force"][k].items()}, linear_r2)
+        st["converged"] = not st["caveats"]
+        training[k] = st
+        log.info("%s: %d/%d epochs, early stopping %s%s", k, st["epochs"], st["max_epochs"],
+                 "triggered" if st["early_stopped"] else "not triggered",
+                 "; NOT CONVERGED: " + "; ".join(st["caveats"]) if st["caveats"] else "")
+    results["force_training"] = training
+    np.savez_compressed(run.out / "predictions.npz", reference=y[m_te], trial=trial[m_te],
+                        progress=progress[m_te], axes=np.array(AXES),
+                        **{f"pred_{k}": v for k, v in preds.items()})
+    if a.figures:
+        from analysis.figures import force_scatter
+
+        force_scatter(run.out / "force_pred_vs_ref.png", y[m_te], preds, progress[m_te], results["force"],
+                      study.FORCE_RANGE_N, study.FORCE,
+                      {k: "; ".join(st["caveats"]) for k, st in training.items() if not st["converged"]})
+        run.figures.append("force_pred_vs_ref.png")
