@@ -46,6 +46,7 @@ from scipy.stats import linregress
 
 from analysis.characterization import PressTrial, cop_shift_at_shear, uniformity
 from analysis.config import CharacterizationConfig
+from analysis.markdown import json_safe
 from analysis.metrics import r2_score
 from layerskin_exp.cli import CONF_DIR
 from layerskin_exp.estimation.config import PreprocessConfig
@@ -450,18 +451,6 @@ def plot_map(path: Path, result: dict) -> None:
     plt.close(fig)
 
 
-def _clean(x):
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 def design_folders(sweep_dir: Path) -> list[Path]:
@@ -489,8 +478,8 @@ def run(cfg: DesignMapConfig) -> dict:
     if cfg.figures:
         plot_map(out / "design_map.png", result)
         figures.append("design_map.png")
-    (out / "design_map.json").write_text(json.dumps(_clean(result), indent=1))
-    write_markdown(out / "design_map.md", _clean(result), brackets_doc, figures)
+    (out / "design_map.json").write_text(json.dumps(json_safe(result), indent=1))
+    write_markdown(out / "design_map.md", json_safe(result), brackets_doc, figures)
     return result
 
 

@@ -4,6 +4,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+
+def json_safe(x):
+    """Results as plain Python for JSON and the tables: numpy scalars/arrays to Python, NaN/inf to None."""
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_safe(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if np.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
 
 def _f(x, nd=3) -> str:
     return "–" if x is None else f"{x:.{nd}f}"

@@ -28,7 +28,7 @@ from tqdm.auto import tqdm
 
 from analysis import study
 from analysis.config import AnalysisConfig, ReportConfig
-from analysis.markdown import write_markdown
+from analysis.markdown import json_safe, write_markdown
 from analysis.sections import characterisation as characterisation_section
 from analysis.sections import force as force_section
 from analysis.sections import slip as slip_section
@@ -47,19 +47,6 @@ log = logging.getLogger(__name__)
 CONF_DIR = str(_CONF_DIR)  # conf/ in a checkout, layerskin_exp/conf when installed
 
 
-def _clean(x):
-    """JSON-safe: numpy scalars/arrays to Python, NaN/inf to None."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 class Analysis:
@@ -143,8 +130,8 @@ class Analysis:
     def write(self) -> None:
         self.results["figures"] = self.figures
         (self.out / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.structured(self.cfg)))
-        (self.out / "results.json").write_text(json.dumps(_clean(self.results), indent=1))
-        write_markdown(self.out / "report.md", _clean(self.results), self.figures)
+        (self.out / "results.json").write_text(json.dumps(json_safe(self.results), indent=1))
+        write_markdown(self.out / "report.md", json_safe(self.results), self.figures)
         skipped = self.results["inputs"].get("skipped_files")
         if skipped:
             with open(self.out / "report.md", "a") as fh:
