@@ -83,6 +83,7 @@ def preflight(config_name: str, argv: list[str]) -> None:
 def _check_launcher(argv: list[str]) -> None:
     """hydra/launcher=slurm without the optional extra: say what to install, before Hydra fails."""
     import importlib.util
+    import shutil
 
     for a in argv:
         key, _, value = a.partition("=")
@@ -96,6 +97,9 @@ def _check_launcher(argv: list[str]) -> None:
         if not found:
             refuse(ConfigError(f"hydra/launcher={value} needs the optional extra: "
                                f"pip install 'layerskin-exp[{extra}]' (from a checkout: pip install -e '.[{extra}]')"))
+        if value != "submitit_local" and shutil.which("sbatch") is None:
+            refuse(ConfigError(f"hydra/launcher={value}: no `sbatch` on this machine's PATH; submit from a "
+                               "SLURM login node, or run here with hydra/launcher=joblib (or submitit_local)"))
 
 
 def _refuse_schema_options(argv: list[str]) -> None:

@@ -63,3 +63,18 @@ def test_a_value_that_would_contradict_the_rig_is_refused(override, where):
     with pytest.raises(ConfigError, match=rf"^{override.split('=')[0]}: no longer a setting.*{where}"):
         compose("world", [override])
     assert compose("world", ["sim.seed=2"]).sim.seed == 2  # the same call composes a good override
+
+
+def test_slurm_launcher_without_sbatch_is_refused_before_hydra(monkeypatch, capsys):
+    """With the submitit plugin installed but no SLURM client here, the run is refused in one line
+    saying where to run (Hydra's own error is a traceback from the launcher)."""
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    from layerskin_exp import cli
+
+    monkeypatch.setenv("PATH", "/nonexistent")
+    with pytest.raises(SystemExit) as e:
+        cli._check_launcher(["-m", "hydra/launcher=slurm"])
+    assert e.value.code == cli.EXIT_CONFIG
+    err = capsys.readouterr().err
+    assert "hydra/launcher=slurm" in err and "sbatch" in err
+    cli._check_launcher(["-m", "hydra/launcher=submitit_local"])  # runs here: not refused
