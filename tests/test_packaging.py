@@ -90,10 +90,10 @@ def test_module_entry_and_install_hint(installed):
     assert r.returncode == 2 and ("pip install 'layerskin-exp[slurm]'" in r.stderr or "sbatch" in r.stderr), r.stderr
     r = _run([str(venv / "bin" / "lsx-grip"), "hardware=sim_schema"], cwd=root, env=env)
     assert r.returncode == 2 and "not an option" in r.stderr
-    r = _run([str(venv / "bin" / "lsx-log"), "layout"], cwd=root, env=env)
-    assert r.returncode == 0 and '"maxValue":4095' in r.stdout
+    r = _run([str(venv / "bin" / "lsx-log"), "layout", "platform"], cwd=root, env=env)
+    assert r.returncode == 0 and '"configById"' in r.stdout and '"maxValue": 4095' in r.stdout
     r = _run([str(venv / "bin" / "lsx-report"), "analysis=nope"], cwd=root, env=env)
-    assert r.returncode == 2 and "analysis=nope" in r.stderr and "paper" in r.stderr  # the report's own glue
+    assert r.returncode == 2 and "analysis/nope" in r.stderr and "paper" in r.stderr  # the report's own glue
 
 
 def test_commands_without_a_protocol_compose_from_the_wheel(installed):
