@@ -68,7 +68,9 @@ def test_connect_streams_poses_and_moves_the_world(bench):
     assert info["dashboard_requests"][:2] == ["PolyscopeVersion", "get serial number"]
     # The Hand-E's TCP offset and payload, from the config, in the running control script.
     cfg = UR5eConfig()
-    info = emu.wait_info(lambda i: i["tcp_offset"] == list(cfg.tcp_offset_m_rad))
+    # the driver sets the offset, then the payload: wait for both, not for the first alone
+    info = emu.wait_info(lambda i: i["tcp_offset"] == list(cfg.tcp_offset_m_rad) and i["payload_kg"] != 0.0)
+    assert info["tcp_offset"] == list(cfg.tcp_offset_m_rad)
     assert info["payload_kg"] == cfg.payload_kg and info["payload_cog_m"] == list(cfg.payload_cog_m)
     assert arm.fault(time.monotonic_ns()) is None
     np.testing.assert_allclose(arm.tcp_pose6(), twin_pose(rt), atol=1e-9)
