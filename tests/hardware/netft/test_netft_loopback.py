@@ -109,7 +109,9 @@ def test_dropped_records_are_counted_as_lost(emulator):
         w = collect(ft, 200)
     seq = [x.seq for x in w]
     assert ft.health.lost == pytest.approx(len(w) / 4, abs=2)
-    assert ft.health.lost == seq[-1] - seq[0] + 1 - len(w)  # every gap between the first and last sample
+    gaps = seq[-1] - seq[0] + 1 - len(w)  # every gap between the first and last collected sample
+    late = ft.health.received - len(w)  # samples that arrived after collecting, before the close
+    assert gaps <= ft.health.lost <= gaps + late + 1  # at most one dropped record beside each late one
 
 
 def test_scheduled_drops_and_corrupt_datagrams_are_counted(emulator):
