@@ -44,6 +44,12 @@ def test_preload_rises_with_grip_depth_through_the_series_compliance():
     assert fz[1] > fz[0] > 0.5
 
 
+# Travels several times the contact's elastic reach (mu F_z over its tangential or torsional
+# stiffness), so that stick-slip repeats whatever share of that reach the cover takes.
+TRAVEL_MM = 6.0
+TWIST_DEG = 32.0
+
+
 def _run(rig, world, target6, speed, angular=None):
     """Run one arm move; returns the number of slip events (control ticks in which the cumulative
     slip of the cover on the rod grew; a slip itself lasts only milliseconds)."""
@@ -66,15 +72,15 @@ def test_translation_slips_and_the_camera_sees_the_superficial_layer_move():
     rig.clock.sleep(0.2)
     m0 = {d.marker_id: d.pose.position_m for d in rig.camera.read_available()}
     target = p0.copy()
-    target[0] += 3e-3  # +3 mm along X0 at 2 mm/s
+    target[0] += TRAVEL_MM * 1e-3  # along X0 at 2 mm/s
     onsets = _run(rig, world, target, 0.002)
-    assert onsets >= 2  # stick-slip: the contact cannot hold 3 mm of shear at this preload
-    # Deep layer follows the arm; rod moves along skin x by -3 mm.
-    assert world.scene.indenter_pose()[0][0] == pytest.approx(-3.0, abs=1e-6)
+    assert onsets >= 2  # stick-slip: the contact cannot hold this much shear travel at this preload
+    # Deep layer follows the arm; rod moves along skin x by -TRAVEL_MM.
+    assert world.scene.indenter_pose()[0][0] == pytest.approx(-TRAVEL_MM, abs=1e-6)
     rig.clock.sleep(0.3)  # let the camera pipeline deliver the frames of the hold
     dets = rig.camera.read_available()
     m1 = {d.marker_id: d.pose.position_m for d in dets[-2:]}
-    expected_dx_mm = 3.0 + world.state.surface_shift_mm[0] - s0[0]  # finger motion + superficial shift
+    expected_dx_mm = TRAVEL_MM + world.state.surface_shift_mm[0] - s0[0]  # finger motion + superficial shift
     for mid in m0:
         assert (m1[mid][0] - m0[mid][0]) * 1e3 == pytest.approx(expected_dx_mm, abs=0.1)
     # Camera timing: each detection reaches the host the pipeline latency after its exposure.
@@ -88,15 +94,15 @@ def test_translation_slips_and_the_camera_sees_the_superficial_layer_move():
 
 def test_torsion_slips_and_rotates_the_rod_in_the_skin_frame():
     """At g = 6 mm the cover sticks until the spacer's torsion reaches mu Fz r (about 6 deg of
-    twist here), then slips and sticks again: 16 deg of rotation give several slips."""
+    twist here), then slips and sticks again: TWIST_DEG of rotation give several slips."""
     rig, world, _ = _grip(6.0)
     p0 = rig.arm.tcp_pose6()
     yaw0 = world.state.indenter_yaw_rad
     target = p0.copy()
-    target[3:] = (Rotation.from_rotvec(p0[3:]) * Rotation.from_rotvec([0.0, np.radians(16.0), 0.0])).as_rotvec()
+    target[3:] = (Rotation.from_rotvec(p0[3:]) * Rotation.from_rotvec([0.0, np.radians(TWIST_DEG), 0.0])).as_rotvec()
     onsets = _run(rig, world, target, 0.01, np.radians(4.0))
     assert onsets >= 2
-    assert abs(world.state.indenter_yaw_rad - yaw0) == pytest.approx(np.radians(16.0), abs=1e-6)
+    assert abs(world.state.indenter_yaw_rad - yaw0) == pytest.approx(np.radians(TWIST_DEG), abs=1e-6)
     assert np.allclose(world.scene.indenter_pose()[0][:2], 0.0, atol=1e-6)  # turning about the skin normal
 
 
