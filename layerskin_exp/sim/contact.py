@@ -32,6 +32,7 @@ from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.laminate import (
     FrictionInterface,
     PlateOnFoundation,
+    cover_shear_stiffness_n_per_mm3,
     cover_stiffness_n_per_mm3,
     pad_radius_mm,
 )
@@ -64,6 +65,13 @@ class ContactTables:
     deep_couple_kpa: np.ndarray  # (n_delta, n_dist) lattice-pressure change per unit couple
     height_mm: np.ndarray  # (n_delta,) height of the cover surface above the deep sensing plane
     lattice_compression_mm: np.ndarray  # (n_delta,) the lattice's compression under the contact
+    # the cover between cap and sheet (laminate.PlateOnFoundation.flank): its tangential
+    # stiffness, traction over the contact plus the flank pressure on the sunk cap's slope, N/mm
+    # (rod: per mm); its torsional stiffness, traction only: hemisphere N mm/rad, rod the
+    # traction's N/mm per mm^2 of contact, to be taken with the line's second moment
+    cover_shear: np.ndarray  # (n_delta,)
+    cover_torsion: np.ndarray  # (n_delta,)
+    cover_n_per_mm3: np.ndarray  # (n_delta,) the cover's compression stiffness each row was solved with
 
     @property
     def d_delta(self) -> float:
@@ -94,18 +102,41 @@ def _solver(sim: SimConfig, kind: str, radius_mm: float | None = None) -> PlateO
     law = SpacerLaw(sim.spacer)
     radius = contact_radius_mm(kind) if radius_mm is None else radius_mm
     g_p = sim.spacer.shear_modulus_kpa * KPA_MM2_TO_N * sim.spacer.thickness / 3.0  # Vlasov: G h / 3
-    k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, sim.cover.thickness, sim.spacer.confinement_length)
+    # the cover's stiffness at a first contact of the cap's own scale; build_tables sets it per
+    # indentation from the contact's size (contact_confinement_mm)
+    k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, sim.cover.thickness, radius)
     sheet = sim.sheet
     interface = None
     if sheet.interface == "friction":
         interface = FrictionInterface(sheet.rigidity_n_mm, sheet.sandwich_rigidity_n_mm, sheet.film_separation_mm,
                                       sheet.interface_friction)
+    # the cover's silicone is taken as the spacer's (conf/sim/default.yaml), its Poisson ratio too
+    g_c = cover_shear_stiffness_n_per_mm3(sim.cover.modulus, sim.spacer.poisson, sim.cover.thickness)
     return PlateOnFoundation(kind, law, sheet.rigidity_n_mm, g_p, k_c, radius,
-                             pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM, interface=interface)
+                             pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM, interface=interface,
+                             cover_shear_n_per_mm3=g_c)
+
+
+def contact_confinement_mm(kind: str, x_mm: np.ndarray, weight: np.ndarray, contact_kpa: np.ndarray) -> float:
+    """Half-width of the region over which the cap squeezes the cover (its Gent & Lindley
+    shape factor's L), from the contact pressure's spread: a disc of radius a under a
+    Hertz-like p ~ sqrt(1 - r^2/a^2) has <r^2> = 2 a^2 / 5, a strip of half-width a has
+    <x^2> = a^2 / 4. A pressure moment, not the last touching grid point, so that it changes
+    smoothly with the indentation."""
+    total = float(contact_kpa @ weight)
+    if total <= 0.0:
+        return 0.0
+    m2 = float((contact_kpa * x_mm**2) @ weight) / total
+    return math.sqrt(2.5 * m2) if kind == "hemisphere" else 2.0 * math.sqrt(m2)
 
 
 def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> ContactTables:
-    """Solve the laminate on its lattice for a grid of indentation depths (see `laminate`)."""
+    """Solve the laminate on its lattice for a grid of indentation depths (see `laminate`).
+
+    The cover is squeezed only under the contact, so its compression stiffness (an
+    incompressible bonded layer: 1 + 2 S^2, S = L / 2t) takes L from the contact's size. Each
+    row uses the size found at the row before (rows are a small step of indentation apart; the
+    first starts from the cap's chord at that depth)."""
     if kind not in ("hemisphere", "rod"):
         raise ValueError(f"indenter={kind!r}: must be 'hemisphere' or 'rod'")
     law = SpacerLaw(sim.spacer)
@@ -123,16 +154,36 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     found1 = np.zeros((n_delta, n_x))
     comp = np.zeros((n_delta, n_x))
     load = np.zeros(n_delta)
+    cover_shear = np.zeros(n_delta)
+    cover_kc = np.zeros(n_delta)
+    cover_torsion = np.zeros(n_delta)
+    contact_f = np.zeros((n_delta, n_x))
+    found_f = np.zeros((n_delta, n_x))
     w = eta = None
+    cover_e, cover_t = sim.cover.modulus, sim.cover.thickness
+    reach_mm = None
     for k, dl in enumerate(delta):
         if dl <= 0.0:
             continue
+        if reach_mm is None:  # the cap's chord at this depth
+            reach_mm = math.sqrt(max(2.0 * radius * dl - dl * dl, 0.0))
+        plate.k_cover = cover_kc[k] = cover_stiffness_n_per_mm3(cover_e, cover_t, reach_mm)
         sol = plate.solve(float(dl), w, eta_start=eta)
         w, eta = sol.w_mm, sol.composite
         contact[k], found[k], comp[k] = sol.contact_kpa, sol.foundation_kpa, np.maximum(w, 0.0)
+        reach_mm = max(contact_confinement_mm(kind, x, plate.area, sol.contact_kpa), 0.5 * plate.step)
         load[k] = plate.load(sol)
         resp = plate.couple(sol)
         contact1[k], found1[k] = resp.contact_kpa, resp.foundation_kpa
+        flank, k_cv = plate.flank(sol)
+        if k_cv > 0.0:
+            # per N of tangential load the cap moves 1 / k_cv relative to the sheet
+            contact_f[k], found_f[k] = flank.contact_kpa / k_cv, flank.foundation_kpa / k_cv
+        cover_shear[k] = k_cv
+        touching = sol.contact_kpa > 0.0
+        g_c = plate.cover_shear_n_per_mm3
+        cover_torsion[k] = g_c * float((x**2 * touching) @ plate.area) if kind == "hemisphere" \
+            else g_c * float(touching @ plate.area)
     # what each layer's Velostat feels: the contact pressure under the cover, the lattice's
     # (compressive) pressure under the deep sheet's top film; each spread over its layer's thickness
     sigma_s = sim.cover.thickness
@@ -151,8 +202,11 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         weight = plate.area
     superficial = contact @ blur_s.T
     deep = found @ blur_d.T  # signed: where the sheet lifts, the bonded lattice pulls (the FSR reads 0)
-    superficial1 = contact1 @ blur_s.T
-    deep1 = found1 @ blur_d.T
+    # the flank's response joins the couple's: both are proportional to the tangential load, the
+    # couple's tables are per unit couple F_t H (H the row's height), so the flank's per N is / H
+    h_row = np.maximum(sim.cover.thickness + sim.fsr.layer_thickness_mm + h - comp[:, int(np.argmin(np.abs(x)))], 1e-6)
+    superficial1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
+    deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
     k_extra = np.where(comp > 0, k_extra, 0.0)
     shear_extra = k_extra @ weight * KPA_MM2_TO_N
@@ -164,4 +218,5 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     centre = int(np.argmin(np.abs(x)))
     height = sim.cover.thickness + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
-                         halfwidth, superficial1, deep1, height, comp[:, centre].copy())
+                         halfwidth, superficial1, deep1, height, comp[:, centre].copy(), cover_shear, cover_torsion,
+                         cover_kc)

@@ -139,17 +139,19 @@ class PlateOnFoundation:
     """Plate (the cover + superficial sheet) on the lattice foundation under a rigid indenter.
 
     kind: "hemisphere" (axisymmetric) or "rod" (line contact). `rigidity_n_mm` D, `pasternak_n_per_mm`
-    G_p, `cover_n_per_mm3` k_c; `law` the lattice's compression law; `pad_radius_mm` where the
+    G_p, `cover_n_per_mm3` k_c (compression) and `cover_shear_n_per_mm3` G_c / t_c (shear); `law` the lattice's compression law; `pad_radius_mm` where the
     plate ends (hemisphere: radius of the disc of the pad's area; rod: half the pad width).
     """
 
     def __init__(self, kind: str, law: SpacerLaw, rigidity_n_mm: float, pasternak_n_per_mm: float,
                  cover_n_per_mm3: float, indenter_radius_mm: float, pad_radius_mm: float,
-                 step_mm: float = 0.05, interface: FrictionInterface | None = None):
+                 step_mm: float = 0.05, interface: FrictionInterface | None = None,
+                 cover_shear_n_per_mm3: float = 0.0):
         if kind not in ("hemisphere", "rod"):
             raise ValueError(f"kind={kind!r}: must be 'hemisphere' or 'rod'")
         self.kind, self.law = kind, law
         self.rigidity, self.pasternak, self.k_cover = rigidity_n_mm, pasternak_n_per_mm, cover_n_per_mm3
+        self.cover_shear_n_per_mm3 = cover_shear_n_per_mm3
         self.interface = interface
         self.radius = indenter_radius_mm
         self.step = step_mm
@@ -311,6 +313,48 @@ class PlateOnFoundation:
             w1[0] = 0.0
         return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, slope * w1 / KPA)
 
+    def flank(self, sol: LaminateSolution) -> tuple[CoupleResponse, float]:
+        """Response to the cap moving tangentially by a unit distance v relative to the sheet
+        under it, and the cover's stiffness against that motion (N/mm; rod: per mm of length).
+
+        The cover is a thin soft layer between the rigid cap and the sheet. Moving the cap by v
+        along x (the sheet held) shears the cover over the contact (traction G_c v / t_c) and,
+        because the cap is curved and sunk into the stack, squeezes the cover more on the
+        leading flank and less on the trailing one: the cover's compression changes by
+        v dz_ind/dx = v x / R, its pressure by k_c v x / R (first angular mode). That flank
+        pressure pushes on the cap's slope, so it carries tangential load too (k_c v / R^2
+        times the contact's second moment), and it loads the sheet like a couple, which the
+        sheet hands to the lattice and the cap as `couple` does. Returns the response per unit
+        v (contact and lattice pressure changes, including the flank pressure itself) and the
+        traction + flank stiffness."""
+        pc = sol.contact_kpa * KPA
+        n = len(self.x)
+        touching = pc > 0.0
+        if not touching.any():
+            zero = np.zeros(n)
+            return CoupleResponse(zero, zero.copy(), zero.copy()), 0.0
+        _, slope = self.foundation(sol.w_mm)
+        kc = self.k_cover
+        dp = kc * self.x / self.radius * touching  # N/mm^2 per mm of v (cos(phi) amplitude: x = r)
+        lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
+        jac = lin1 + sp.diags(slope + kc * touching)
+        load = dp.copy()
+        if self.kind == "hemisphere":
+            load[0] = 0.0
+            jac = jac.tolil()
+            jac[0, :] = 0.0
+            jac[0, 0] = 1.0
+        w1 = spla.spsolve(jac.tocsc(), load)
+        if self.kind == "hemisphere":
+            w1[0] = 0.0
+        # second moment of the contact about the axis across the motion: 1/2 int r^2 dA (disc)
+        # or int d^2 dd (rod, per unit length)
+        half = 0.5 if self.kind == "hemisphere" else 1.0
+        second = half * float((self.x**2 * touching) @ self.area)
+        area = float(touching @ self.area)
+        stiffness = self.cover_shear_n_per_mm3 * area + kc * second / self.radius**2
+        return CoupleResponse(w1, (dp - kc * touching * w1) / KPA, slope * w1 / KPA), stiffness
+
     def first_moment(self, amplitude_kpa: np.ndarray) -> float:
         """Moment (N mm, about the axis through the contact, per unit couple) of an amplitude:
         pi int p r^2 dr (cos(phi) mode) or int p d dd (rod, per unit length)."""
@@ -361,6 +405,11 @@ def cover_stiffness_n_per_mm3(modulus_kpa: float, thickness_mm: float, confineme
     over a half-width L stiffens by 1 + 2 S^2, S = L / 2t (Gent & Lindley)."""
     s = confinement_mm / (2.0 * thickness_mm)
     return modulus_kpa * KPA * (1.0 + 2.0 * s * s) / thickness_mm
+
+
+def cover_shear_stiffness_n_per_mm3(modulus_kpa: float, poisson: float, thickness_mm: float) -> float:
+    """Simple-shear stiffness per area of the thin cover, G / t with G = E / 2 (1 + nu)."""
+    return modulus_kpa * KPA / (2.0 * (1.0 + poisson)) / thickness_mm
 
 
 def pad_radius_mm(kind: str, pad_width_mm: float) -> float:

@@ -218,12 +218,23 @@ def _realised_indentation(tab, d_cmd, length, k_support):
 
 
 @njit(cache=True, nogil=True)
+def _series(k_sheet, k_cover):
+    """Stiffness of the lattice path (sheet to base) and the cover path (cap to sheet) in series,
+    and the share of the cap's elastic travel the sheet makes. A cover with no contact stiffness
+    (no table, unloaded) leaves the lattice alone."""
+    if k_cover <= 0.0:
+        return k_sheet, 1.0
+    k = k_sheet * k_cover / (k_sheet + k_cover)
+    return k, k / k_sheet
+
+
+@njit(cache=True, nogil=True)
 def contact_steps(rod, tab, geo, fp, cs, fs, t, xyz, yaw, out):
     """Advance the contact through m commanded indenter poses.
 
     rod: 1 for the rod (line contact), 0 for the hemisphere.
-    tab: (5, L) contact tables on one indentation grid: delta, load, shear_extra, torsion_extra,
-         friction_radius (see contact.ContactTables).
+    tab: (7, L) contact tables on one indentation grid: delta, load, shear_extra, torsion_extra,
+         friction_radius, cover_shear, cover_torsion (see contact.ContactTables).
     geo: [d_delta, k_support (<= 0 rigid), half width, width^2, k0 * width^2, k0, width^4 / 6].
     fp: friction parameters [mu_s, mu_k, aging_s, overshoot]; cs, fs: contact and friction
     state (updated). t (m,), xyz (m, 3) mm, yaw (m,) rad. out (m, STEP_FIELDS) gets each step.
@@ -246,14 +257,23 @@ def contact_steps(rod, tab, geo, fp, cs, fs, t, xyz, yaw, out):
         shear = _interp(tab, 2, dd, i, tg, delta, last)
         fz = max(length * load, 0.0) if delta > 0 else 0.0
         j_pad = j_pad0 + width2 * (x * x + y * y)
+        cover = _interp(tab, 5, dd, i, tg, delta, last)
+        cover_rot = _interp(tab, 6, dd, i, tg, delta, last)
         if rod:
-            k_t = k0_area + length * shear
-            k_r = k0 * j_pad + shear * (s2 ** 3 - s1 ** 3) / 3.0
+            i_line = (s2 ** 3 - s1 ** 3) / 3.0
+            k_sheet = k0_area + length * shear
+            k_sheet_r = k0 * j_pad + shear * i_line
+            k_cover, k_cover_r = length * cover, cover_rot * i_line
             radius = (s1 * s1 + s2 * s2) / (2.0 * length) if length > 0 else 0.0
         else:
-            k_t = k0_area + shear
-            k_r = k0 * j_pad + _interp(tab, 3, dd, i, tg, delta, last)
+            k_sheet = k0_area + shear
+            k_sheet_r = k0 * j_pad + _interp(tab, 3, dd, i, tg, delta, last)
+            k_cover, k_cover_r = cover, cover_rot
             radius = _interp(tab, 4, dd, i, tg, delta, last)
+        # the cover (cap -> sheet) in series with the lattice (sheet -> base): the friction state
+        # holds the cap's whole elastic travel, the sheet moves by its lattice's share of it
+        k_t, share = _series(k_sheet, k_cover)
+        k_r, share_r = _series(k_sheet_r, k_cover_r)
         if cs[C_HAS_PREV] == 0.0:
             dt = dx = dy = dw = 0.0
         else:
@@ -271,8 +291,9 @@ def contact_steps(rod, tab, geo, fp, cs, fs, t, xyz, yaw, out):
             cs[C_SERIAL] += 1.0
         o = out[k]
         o[S_T], o[S_FX], o[S_FY], o[S_FZ], o[S_TORQUE], o[S_DELTA] = t[k], fx, fy, fz, tq, delta
-        o[S_CX], o[S_CY], o[S_YAW] = x - fs[F_UX], y - fs[F_UY], w
-        o[S_UX], o[S_UY], o[S_THETA], o[S_SLIPPING] = fs[F_UX], fs[F_UY], fs[F_THETA], fs[F_SLIPPING]
+        ux, uy, th = share * fs[F_UX], share * fs[F_UY], share_r * fs[F_THETA]
+        o[S_CX], o[S_CY], o[S_YAW] = x - ux, y - uy, w
+        o[S_UX], o[S_UY], o[S_THETA], o[S_SLIPPING] = ux, uy, th, fs[F_SLIPPING]
         o[S_SLIP_X], o[S_SLIP_Y], o[S_SLIP_RAD], o[S_SERIAL] = fs[F_SLIP_X], fs[F_SLIP_Y], fs[F_SLIP_RAD], cs[C_SERIAL]
 
 

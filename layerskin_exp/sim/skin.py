@@ -141,7 +141,8 @@ class SkinModel:
         # --- mechanics (mechanics.contact_steps): tables on the indentation grid, geometry, state
         t = self.tab
         self._mech_tab = np.ascontiguousarray(np.stack([t.delta_mm, t.load, t.shear_extra, t.torsion_extra,
-                                                        t.friction_radius_mm]), dtype=float)
+                                                        t.friction_radius_mm, t.cover_shear, t.cover_torsion]),
+                                              dtype=float)
         half = sim.spacer.width / 2
         self._half = half
         k0 = float(self.law.shear_stiffness_kpa_per_mm(0.0)) * 1e-3  # N/mm per mm^2

@@ -3,7 +3,8 @@
 The spacer is the nonlinear foundation under the superficial laminate (`laminate`): each column
 carries the pressure of its own compression, the walls bulge into the voids and touch at the
 densification strain e_d = 1 - solid fraction; beyond that the column is squeezed solid silicone.
-Its transverse shear modulus rises from the open lattice's to the solid's as the walls close.
+Its transverse shear modulus stays the open lattice's while the walls buckle and rises to the
+solid's once they touch.
 Lengths mm, pressures kPa, stiffness per area kPa/mm.
 """
 
@@ -64,10 +65,13 @@ class SpacerLaw:
     def shear_stiffness_kpa_per_mm(self, compression_mm):
         """Tangential stiffness per unit area G(e) / (h (1 - e)), kPa/mm.
 
-        G rises from the open lattice's to the solid's as the walls touch: (e/e_d)^2 blend.
+        Before densification the compressed lattice's walls have buckled (the plateau of a
+        honeycomb crushed out of plane, Gibson & Ashby ch. 4): they bend, they carry no more
+        shear than the open cells. G rises from the open lattice's towards the solid's only as
+        the walls come into contact, with the squeezed solid's strain beyond e_d.
         """
         e = np.clip(np.asarray(compression_mm, dtype=float) / self.h_mm, 0.0, 0.95)
-        closure = np.clip(e / self.e_d, 0.0, 1.0) ** 2
+        closure = np.clip(self._solid_strain(e) - self._solid_strain(0.0), 0.0, 1.0)
         g = self.g_open_kpa + (self.g_solid_kpa - self.g_open_kpa) * closure
         return g / (self.h_mm * (1.0 - e))
 
