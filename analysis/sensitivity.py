@@ -15,7 +15,8 @@ numbers), so an elementary effect is the parameter's, not the noise's.
 
 Writes a JSON (`out`, default outputs/sensitivity.json): per outcome and parameter Morris mu*
 (mean |elementary effect|, in the outcome's unit per full bracket) and sigma, and the outcome's
-range over all samples (the band over the brackets). `markdown_table(result)` renders it.
+range over all samples (the band over the brackets). `markdown_table(result)` renders it;
+analysis.sensitivity_result reads it back for the report (`sensitivity=FILE`).
 """
 
 from __future__ import annotations
