@@ -10,6 +10,9 @@
   |(Fx, Fy)| lies in the band; median and 10th–90th percentiles over trials.
 - Effective heights: the moment balance F_shear·h ≈ F_z·Δc fitted as F_shear = k·(F_z·Δc) + b,
   h = 1/k (mm), with the fit's R², over all slide frames in contact and within normal-load bins.
+- Slide loads: the median normal load over slide frames with |(Fx, Fy)| >= 1.5 N (the normal load
+  while the shear is applied), and the median over slides of the largest shear each reached
+  (the definitions of the design map and the sensitivity screen).
 """
 
 from __future__ import annotations
@@ -101,6 +104,20 @@ def cop_shift_at_shear(shear_n: list[np.ndarray], dc_mm: list[np.ndarray], cfg: 
     v = np.array(per_trial)
     return {"median_mm": float(np.median(v)), "p10_mm": float(np.percentile(v, 10)),
             "p90_mm": float(np.percentile(v, 90)), "n_trials": int(v.size)}
+
+
+def slide_loads(shear_n: list[np.ndarray], fz_n: list[np.ndarray], shear_at_n: float = 1.5) -> dict:
+    """Normal load while the shear is applied and the shear the slides reached, per slide trial
+    arrays of |F_xy| and F_z (N)."""
+    if not shear_n:
+        return {"fz_at_shear_n": None, "median_max_shear_n": None, "n_trials": 0, "reason": "no slide trials"}
+    s, fz = np.concatenate(shear_n), np.concatenate(fz_n)
+    at = s >= shear_at_n
+    reached = [float(np.max(x)) for x in shear_n if x.size]
+    return {"shear_at_n": shear_at_n, "fz_at_shear_n": float(np.median(fz[at])) if at.any() else None,
+            "n_frames_at_shear": int(at.sum()),
+            "median_max_shear_n": float(np.median(reached)) if reached else None,
+            "n_trials": len(shear_n)}
 
 
 def _height_fit(fz, dc, f_shear) -> dict:

@@ -71,8 +71,17 @@ class AnalysisConfig:
 class ReportConfig:
     sessions: str = "data/sessions"
     out: str = "outputs/report"
+    # A sensitivity screening result (`python -m analysis.sensitivity out=FILE`): the characterisation
+    # section shows its bands over the simulator's brackets beside the study. None: no bands.
+    sensitivity: str | None = None
     skin: SkinConfig = field(default_factory=SkinConfig)
     analysis: AnalysisConfig = field(default_factory=AnalysisConfig)
+
+    def __post_init__(self) -> None:
+        if self.sensitivity is not None:  # read before any analysis runs: a bad file ends the run up front
+            from analysis.sensitivity_result import load_result
+
+            load_result(self.sensitivity)
 
 
 def _store() -> None:

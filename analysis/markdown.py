@@ -125,7 +125,9 @@ def _characterization(r, s) -> list[str]:
     h, sh = r.get("heights") or {}, s["heights"]
     if not c and not h:
         return []
-    lines = ["## Characterisation", "", "| quantity | ours | study |", "|---|---|---|"]
+    lines = ["## Characterisation", ""]
+    if set(c) - {"sensitivity_bands"} or h:
+        lines += ["| quantity | ours | study |", "|---|---|---|"]
     u = c.get("uniformity") or {}
     if u:
         lines.append(f"| CV across positions at {u.get('matched_load_n')} N | {_f(u.get('cv'))} "
@@ -140,6 +142,12 @@ def _characterization(r, s) -> list[str]:
         lines.append(f"| CoP shift at 1.9–2.1 N shear (mm) | {_f(cs.get('median_mm'), 2)} "
                      f"[{_f(cs.get('p10_mm'), 2)}–{_f(cs.get('p90_mm'), 2)}], {cs.get('n_trials')} trials | "
                      f"{sc['cop_shift']['median_mm']} [{sc['cop_shift']['p10_mm']}–{sc['cop_shift']['p90_mm']}] |")
+    sl = c.get("slide_loads") or {}
+    if sl:
+        lines.append(f"| normal load while \\|F_xy\\| >= {sl.get('shear_at_n', 1.5):g} N, median (N); largest shear "
+                     f"per slide, median (N) | {_f(sl.get('fz_at_shear_n'), 2)}; {_f(sl.get('median_max_shear_n'), 2)}, "
+                     f"{sl.get('n_trials')} slides | about 6 (\"±2 N shear force at approximately 6 N normal load\"); "
+                     "2 N target |")
     if h:
         o = h.get("overall", {})
         lines.append(f"| h_x / h_y overall (mm) | {_f(o.get('h_x_mm'), 2)} / {_f(o.get('h_y_mm'), 2)} "
@@ -150,6 +158,53 @@ def _characterization(r, s) -> list[str]:
         for b in h.get("bins", []):
             lines.append(f"| {b['fz_low_n']}–{b['fz_high_n']} | {b['n_frames']} | {_f(b.get('h_x_mm'), 2)} | "
                          f"{_f(b.get('h_y_mm'), 2)} | {_f(b.get('r2_x'))} | {_f(b.get('r2_y'))} |")
+    return lines + [""] + _sensitivity_bands(c.get("sensitivity_bands"))
+
+
+def _g(x) -> str:
+    return "–" if x is None else f"{x:.3g}"
+
+
+def _sensitivity_bands(sb) -> list[str]:
+    """The simulator's band per headline outcome beside the study and this campaign; without a
+    screening result, how to make one."""
+    from analysis.sensitivity_result import HOW_TO
+
+    if not sb:
+        return [f"Sensitivity bands: none given. {HOW_TO}.", ""]
+    lines = ["### Simulator sensitivity bands", "",
+             f"From `{sb['file']}`: {sb['n_samples']} Morris samples over {len(sb['parameters'])} parameters, each a "
+             f"short calibration campaign ({' '.join(f'`{o}`' for o in sb.get('campaign') or [])}). "
+             f"The band is the simulator's uncertainty over the brackets of `{sb.get('brackets_file')}` "
+             "(min..max of the outcome over the samples, all run with one seed), not measurement noise. "
+             "mu*: the outcome's mean change per full bracket.", "",
+             "| outcome | study | this campaign | band over the brackets | moved most by (mu*) |", "|---|---|---|---|---|"]
+    said = []
+    for r in sb["rows"]:
+        unit = f" ({r['unit']})" if r["unit"] else ""
+        approx = "≈ " if r.get("study_approximate") else ""
+        study = (f"{approx}{_g(r['study'])} ({r['study_source']})" if r["study"] is not None
+                 else f"– ({r['study_source']})")
+        ours = f"{_g(r['ours'])} ({r['ours_source']})" if r["ours"] is not None else "–"
+        if r["band"] is None:
+            band = f"– ({r.get('reason', 'undefined')})"
+        else:
+            band = f"{_g(r['band'][0])} .. {_g(r['band'][1])}"
+            if r["missing"]:
+                band += f" ({r['missing']} of {sb['n_samples']} samples undefined)"
+        moved = ", ".join(f"`{m['parameter']}` ({_g(m['mu_star'])})" for m in r["moved_most_by"]) or (
+            "none (constant over the samples)" if r["band"] is not None else "–")
+        lines.append(f"| {r['label']}{unit} | {study} | {ours} | {band} | {moved} |")
+        where = r["study_vs_band"]
+        value_unit = f" {r['unit']}" if r["unit"] not in ("", "fraction") else ""
+        if where in ("above", "below"):
+            said.append(f"- {r['label']}: the study's {approx}{_g(r['study'])}{value_unit} lies {where} the band "
+                        f"({_g(r['band'][0])} .. {_g(r['band'][1])}{value_unit}): none of the {sb['n_samples']} screened "
+                        "settings of the simulator reached it.")
+        elif where == "inside":
+            said.append(f"- {r['label']}: the study's {approx}{_g(r['study'])}{value_unit} lies inside the band.")
+    if said:
+        lines += ["", "Where the study's value lies against the band (a result to read, not a pass/fail):", ""] + said
     return lines + [""]
 
 

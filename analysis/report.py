@@ -1,4 +1,4 @@
-"""`python -m analysis.report sessions=DIR out=DIR [analysis=demo|default|paper]`
+"""`python -m analysis.report sessions=DIR out=DIR [analysis=demo|default|paper] [sensitivity=FILE]`
 
 Turns a folder of session files into the study's tables and figures, ours beside the study's:
 out/results.json, out/predictions.npz, out/report.md, out/config.yaml (the resolved config), out/*.png,
@@ -7,7 +7,9 @@ each carries the preprocessing from raw counts with the model; T-s5.pt also the 
 ready for OnlineEstimator.from_artifact and `python -m layerskin_exp.estimation.export`).
 The estimators come from layerskin_exp.estimation; this module orchestrates them and writes tables.
 A missing input (no calibration campaign, no shear trials, no grip sessions, no markers) skips
-the sections that need it with the reason in results.json and report.md.
+the sections that need it with the reason in results.json and report.md. `sensitivity=FILE` (a
+`python -m analysis.sensitivity out=FILE` result) adds the simulator's bands over its brackets to
+the characterisation section; a missing or unreadable file is refused before anything runs.
 """
 
 from __future__ import annotations
@@ -187,11 +189,13 @@ def deterministic_torch(threads: int):
 
 
 def run_report(sessions, out, analysis: AnalysisConfig | None = None, skin: SkinConfig | None = None,
-               preset: str | None = None) -> dict:
+               preset: str | None = None, sensitivity=None) -> dict:
     """Library entry point: the same as the command line. preset: a name for the record (report.md,
-    results.json); the config itself is `analysis`."""
+    results.json); the config itself is `analysis`. sensitivity: a screening result file (ConfigError
+    before anything runs when it cannot be read)."""
     return Analysis(ReportConfig(sessions=str(sessions), out=str(out), analysis=analysis or AnalysisConfig(),
-                                 skin=skin or SkinConfig()), preset).run()
+                                 skin=skin or SkinConfig(),
+                                 sensitivity=None if sensitivity is None else str(sensitivity)), preset).run()
 
 
 def _hydra_preset() -> str | None:

@@ -15,7 +15,8 @@ numbers), so an elementary effect is the parameter's, not the noise's.
 
 Writes a JSON (`out`, default outputs/sensitivity.json): per outcome and parameter Morris mu*
 (mean |elementary effect|, in the outcome's unit per full bracket) and sigma, and the outcome's
-range over all samples (the band over the brackets). `markdown_table(result)` renders it.
+range over all samples (the band over the brackets). `markdown_table(result)` renders it;
+analysis.sensitivity_result reads it back for the report (`sensitivity=FILE`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from layerskin_exp.cli import CONF_DIR
+from layerskin_exp.config import CONF_DIR
 
 BRACKETS_FILE = CONF_DIR / "sim" / "brackets.yaml"  # conf/ in a checkout, layerskin_exp/conf installed
 SIZES = {  # campaign per Morris sample
@@ -112,25 +113,17 @@ def grip_preload_n(sim_cfg, skin_cfg, depth_mm: float = GRIP_DEPTH_MM) -> float:
 
 def run_sample(overrides: list[str], size: str, workdir: Path) -> dict:
     """One short campaign with these overrides; its outcomes (keys of OUTCOMES)."""
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-
     import protocols.config  # noqa: F401 - stores the calibration app's schemas for Hydra
     from analysis.design_map import DesignMapConfig, campaign_outcomes
     from hardware import build_rig
-    from layerskin_exp.config import validate
+    from layerskin_exp.config import compose
     from protocols.calibration import run_campaign
 
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = compose(config_name="force_calibration",
-                      overrides=[*SIZES[size], *overrides, f"data_root={workdir}", "progress=false"])
-    GlobalHydra.instance().clear()
-    typed = validate(cfg)
-    rig = build_rig(cfg, "platform")
+    typed = compose("force_calibration", [*SIZES[size], *overrides, f"data_root={workdir}", "progress=false"])
+    rig = build_rig(typed, "platform")
     with rig:
-        run_campaign(typed, rig, {"config": OmegaConf.to_container(cfg, resolve=True), "backend": "sim",
-                                  "provenance": {"overrides": overrides}})
+        run_campaign(typed, rig, {"config": OmegaConf.to_container(OmegaConf.structured(typed), resolve=True),
+                                  "backend": "sim", "provenance": {"overrides": overrides}})
     (folder,) = [p for p in (workdir / "force_calibration").iterdir() if p.is_dir()]
     o = campaign_outcomes(folder, DesignMapConfig(min_frames=10))
     slides = o.get("slides", {})

@@ -66,3 +66,29 @@ SLIP_LATENCY_MS = {"before": 82, "after": 10}  # median tactile lead over vision
 
 ALL = {"force": FORCE, "slip": SLIP, "tracking": TRACKING, "characterization": CHARACTERIZATION,
        "heights": HEIGHTS, "force_range_n": FORCE_RANGE_N, "preload_n": PRELOAD_N, "slip_latency_ms": SLIP_LATENCY_MS}
+
+# The study's figure for each outcome of the sensitivity screen (analysis.sensitivity.OUTCOMES), with
+# where it stands; None where the study gives none (its note says what it gives instead).
+SENSITIVITY_OUTCOMES = {
+    "shift_per_n_mm": {"value": None, "source": "not reported; only the shift at 1.9–2.1 N shear, Sec. IV-A"},
+    "cop_shift_at_2n_mm": {"value": CHARACTERIZATION["cop_shift"]["median_mm"],
+                           "source": "Sec. IV-A, trial-wise median at 1.9–2.1 N; 10th–90th percentile "
+                                     f"{CHARACTERIZATION['cop_shift']['p10_mm']}–{CHARACTERIZATION['cop_shift']['p90_mm']}"},
+    "linear_r2_shear": {"value": (FORCE["linear"]["Fx"]["r2"] + FORCE["linear"]["Fy"]["r2"]) / 2,
+                        "source": f"Table II, linear: mean of Fx {FORCE['linear']['Fx']['r2']} and "
+                                  f"Fy {FORCE['linear']['Fy']['r2']}, 70/15/15 trial split"},
+    "superficial_r2_shear": {"value": None,
+                             "source": "not reported for a linear probe; Table II's superficial-only CNN (S-s5) "
+                                       f"gives {FORCE['S-s5']['Fx']['r2']} / {FORCE['S-s5']['Fy']['r2']}, "
+                                       "a different estimator"},
+    "position_cv": {"value": CHARACTERIZATION["uniformity"]["cv"],
+                    "source": f"Sec. IV-A, 100 positions; 95 % CI {CHARACTERIZATION['uniformity']['ci_low']}–"
+                              f"{CHARACTERIZATION['uniformity']['ci_high']}"},
+    "slides_shear_reached": {"value": None, "source": "not reported"},
+    "slide_fz_at_shear_n": {"value": 6.0, "approximate": True, "source": "Sec. V, in words: \"±2 N shear force at approximately "
+                                                    "6 N normal load\""},
+    "slide_max_shear_n": {"value": None, "source": "not reported; the slides stop at a 2 N target, recorded "
+                                                   "Fx within ±2.01 N, Sec. III-A"},
+    "grip_preload_n": {"value": PRELOAD_N["12"], "source": "Sec. III-B, g = 12 mm, estimated with the T-s5 "
+                                                           "model, no F/T sensor in the gripper"},
+}

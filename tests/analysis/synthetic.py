@@ -131,3 +131,34 @@ def write_campaign(root, n_positions=6, grip_depths=(6, 12), trials=3, seed=0) -
             for t in range(trials):
                 grip_trial(root / "grip_depth" / f"g{g}_{motion}_t{t}.mcap", g, motion, t, rng)
     return root
+
+
+def write_sensitivity_result(path) -> Path:
+    """A screening result in the shape `python -m analysis.sensitivity` writes, with made-up
+    numbers chosen against the study's (no simulator runs): the inter-layer shift at 2 N spans
+    1.0-1.5 mm (the study's 2.20 lies above), position CV 0.10-0.20 (the study's 0.145 inside),
+    the normal load during shear 4.1-4.3 N (the study's about 6 above), the grip preload 4.0-9.0 N
+    (the study's 3.74 below), the linear R² undefined everywhere."""
+    import json
+
+    from analysis.sensitivity import OUTCOMES
+
+    names = ["sim.sheet.interface", "sim.cover.friction", "sim.rig.gripper.support_stiffness_n_per_mm"]
+
+    def entry(lo, hi, mu):
+        return {"range": [lo, hi], "missing": 0, "mu_star": dict(zip(names, mu, strict=True)),
+                "sigma": dict.fromkeys(names, 0.01)}
+
+    morris = {"shift_per_n_mm": entry(0.8, 1.4, (0.5, 0.3, 0.0)),
+              "cop_shift_at_2n_mm": entry(1.0, 1.5, (0.4, 0.3, 0.01)),
+              "linear_r2_shear": {"missing": 8, "reason": "undefined in every sample"},
+              "position_cv": entry(0.10, 0.20, (0.02, 0.05, 0.0)),
+              "slide_fz_at_shear_n": entry(4.1, 4.3, (0.1, 0.2, 0.0)),
+              "grip_preload_n": {**entry(4.0, 9.0, (0.0, 0.0, 4.5)), "missing": 2}}
+    result = {"size": "quick", "campaign": ["positions.count=2"], "trajectories": 2, "num_levels": 4, "seed": 0,
+              "problem": {"num_vars": 3, "names": names, "bounds": [[0, 1], [0.6, 1.2], [0.5, 2.0]]},
+              "brackets_file": "conf/sim/brackets.yaml", "wall_s": 1.0,
+              "outcomes": {k: {"label": lab, "unit": u} for k, (lab, u) in OUTCOMES.items()},
+              "morris": morris, "samples": [{"overrides": [], "outcomes": {}} for _ in range(8)]}
+    Path(path).write_text(json.dumps(result))
+    return Path(path)

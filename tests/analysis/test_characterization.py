@@ -9,6 +9,7 @@ from analysis.characterization import (
     effective_heights,
     repeatability,
     response_at,
+    slide_loads,
     uniformity,
 )
 from analysis.config import CharacterizationConfig
@@ -47,6 +48,16 @@ def test_repeatability_median_cv_and_position_exclusion():
     res = repeatability(presses, CFG)
     assert res["n_positions"] == 5
     assert res["median_cv"] == pytest.approx(np.std([0.9, 1, 1.1], ddof=1), rel=1e-6)
+
+
+def test_slide_loads_are_the_normal_load_at_shear_and_the_shear_reached():
+    shear = [np.linspace(0, 2.0, 101), np.linspace(0, 1.2, 61)]  # the second slide never reaches 1.5 N
+    fz = [np.where(shear[0] >= 1.5, 4.0, 3.0), np.full(61, 9.0)]
+    res = slide_loads(shear, fz)
+    assert res["fz_at_shear_n"] == 4.0 and res["n_frames_at_shear"] == 26
+    assert res["median_max_shear_n"] == pytest.approx(1.6) and res["n_trials"] == 2
+    assert slide_loads([np.linspace(0, 1.0, 5)], [np.ones(5)])["fz_at_shear_n"] is None
+    assert slide_loads([], [])["n_trials"] == 0
 
 
 def test_cop_shift_in_band_uses_trial_medians():

@@ -83,3 +83,65 @@ def test_empty_folder_gives_a_report_not_a_crash(tmp_path):
     (tmp_path / "none").mkdir()
     res = run_report(tmp_path / "none", tmp_path / "out", _fast())
     assert set(res["skipped"]) >= {"force", "characterization", "tracking", "slip"}
+
+
+def test_sensitivity_bands_sit_beside_the_study_in_markdown_and_json(campaign, tmp_path):
+    from synthetic import write_sensitivity_result
+
+    sens = write_sensitivity_result(tmp_path / "sens.json")
+    only_cal = tmp_path / "cal"
+    shutil.copytree(campaign / "force_calibration", only_cal)
+    cfg = _fast()
+    cfg.figures = False
+    run_report(only_cal, tmp_path / "out", cfg, sensitivity=sens)
+    data = json.loads((tmp_path / "out" / "results.json").read_text())
+    c = data["characterization"]
+    rows = {r["outcome"]: r for r in c["sensitivity_bands"]["rows"]}
+    # this campaign's value is the section's own measurement
+    assert rows["cop_shift_at_2n_mm"]["ours"] == c["cop_shift"]["median_mm"]
+    assert rows["position_cv"]["ours"] == c["uniformity"]["cv"]
+    assert rows["slide_fz_at_shear_n"]["ours"] == c["slide_loads"]["fz_at_shear_n"] is not None
+    md = (tmp_path / "out" / "report.md").read_text()
+    part = md[md.index("### Simulator sensitivity bands"):]
+    assert "not measurement noise" in part and "conf/sim/brackets.yaml" in part
+    assert ("| inter-layer shift at 2 N shear (mm) | 2.2 (Sec. IV-A" in part
+            and f"| {rows['cop_shift_at_2n_mm']['ours']:.3g} (this section) | 1 .. 1.5 |" in part)
+    # a study value outside the band is said in words, one inside too; no verdict
+    assert "the study's 2.2 mm lies above the band (1 .. 1.5 mm)" in part
+    assert "the study's 3.74 N lies below the band (4 .. 9 N)" in part
+    assert "the study's 0.145 lies inside the band" in part
+    assert "the study's ≈ 6 N lies above the band (4.1 .. 4.3 N)" in part
+    assert "2 of 8 samples undefined" in part and "undefined in every sample" in part
+    assert "PASS" not in part.upper().replace("PASS/FAIL", "")
+
+
+def test_without_a_screening_result_the_report_says_how_to_make_one(campaign, tmp_path):
+    only_cal = tmp_path / "cal"
+    shutil.copytree(campaign / "force_calibration", only_cal)
+    cfg = _fast()
+    cfg.figures = False
+    run_report(only_cal, tmp_path / "out", cfg)
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "Sensitivity bands: none given. `python -m analysis.sensitivity out=FILE`" in md
+    assert "sensitivity=FILE" in md
+    assert "sensitivity_bands" not in json.loads((tmp_path / "out" / "results.json").read_text())["characterization"]
+
+
+def test_a_missing_screening_result_is_refused_before_anything_runs(campaign, tmp_path):
+    import subprocess
+
+    from analysis.config import ReportConfig
+    from layerskin_exp.config import ConfigError
+
+    nope = tmp_path / "nope.json"
+    with pytest.raises(ConfigError, match=f"sensitivity={nope}: no such file"):
+        run_report(campaign, tmp_path / "lib", _fast(), sensitivity=nope)
+    assert not (tmp_path / "lib").exists()
+    with pytest.raises(ConfigError, match="sensitivity="):
+        ReportConfig(sensitivity=str(tmp_path))
+    out = tmp_path / "cli"
+    r = subprocess.run([sys.executable, "-m", "analysis.report", f"sessions={campaign}", f"out={out}",
+                        f"sensitivity={nope}"], capture_output=True, text=True, cwd=Path(__file__).parents[2])
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert r.stderr.strip().count("\n") == 0 and f"sensitivity={nope}: no such file" in r.stderr
+    assert not (out / "results.json").exists() and not (out / "report.md").exists()
