@@ -89,3 +89,38 @@ def test_the_count_comparison_follows_the_spacers_shear_compliance(monkeypatch, 
     lo, _ = fc.load_tolerances()["ratio"]["effective_height_counts"]
     assert heights and all(r.fast / base[(r.metric, r.load)].fast < lo for r in heights)
     assert not any(r.passed for r in heights)
+
+
+def test_the_comparison_fails_on_a_cover_rigid_in_shear(monkeypatch, fresh_tables):
+    """The sheet's share of the cap's travel and the tangential stiffness judge the cover's
+    tangential path: with it removed (a cover rigid in shear, the sheet following the cap
+    wholly) the rows that pass fail."""
+    from layerskin_exp.sim import laminate
+
+    def judged(rows):
+        return [r for r in rows if r.metric in ("sheet_share_of_travel", "tangential_stiffness")]
+
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    assert judged(rows) and all(r.passed for r in judged(rows))
+    flank = laminate.PlateOnFoundation.flank
+    monkeypatch.setattr(laminate.PlateOnFoundation, "flank", lambda self, sol: (flank(self, sol)[0], 0.0))
+    monkeypatch.setattr(skin, "_TABLE_CACHE", {})
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    share = [r for r in rows if r.metric == "sheet_share_of_travel"]
+    assert share and not any(r.passed for r in share)
+
+
+def test_the_comparison_fails_on_a_cover_squeezed_over_a_fixed_width(monkeypatch, fresh_tables):
+    """Contact width and peak contact pressure judge the cover's compression stiffness: taking
+    its shape factor over a fixed 2 mm (the cap's radius scale) instead of the contact's own
+    width makes it ~10x too stiff, and the width rows fail."""
+    from layerskin_exp.sim import contact
+
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    widths = [r for r in rows if r.metric == "contact_width"]
+    assert widths and all(r.passed for r in widths)
+    monkeypatch.setattr(contact, "contact_confinement_mm", lambda *a: 2.0)
+    monkeypatch.setattr(skin, "_TABLE_CACHE", {})
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    widths = [r for r in rows if r.metric == "contact_width"]
+    assert widths and not any(r.passed for r in widths)
