@@ -124,3 +124,77 @@ def test_the_comparison_fails_on_a_cover_squeezed_over_a_fixed_width(monkeypatch
     rows, _ = fc.compare(SIM, bounds=("bonded",))
     widths = [r for r in rows if r.metric == "contact_width"]
     assert widths and not any(r.passed for r in widths)
+
+
+def _fast_values(rows) -> dict:
+    out: dict = {}
+    for r in rows:
+        out.setdefault(r.metric, []).append(r.fast)
+    return out
+
+
+def _inject_fixed_cover_width(monkeypatch):
+    from layerskin_exp.sim import contact
+
+    monkeypatch.setattr(contact, "contact_confinement_mm", lambda *a: 2.0)
+
+
+def _inject_lost_flank(monkeypatch):
+    from layerskin_exp.sim import laminate
+
+    flank = laminate.PlateOnFoundation.flank
+
+    def no_flank_pressure(self, sol):
+        resp, k = flank(self, sol)
+        return laminate.CoupleResponse(resp.w_mm, 0.0 * resp.contact_kpa, 0.0 * resp.foundation_kpa), k
+
+    monkeypatch.setattr(laminate.PlateOnFoundation, "flank", no_flank_pressure)
+
+
+def _inject_stiff_spacer_shear(monkeypatch):
+    law = skin.SpacerLaw.shear_stiffness_kpa_per_mm
+    monkeypatch.setattr(skin.SpacerLaw, "shear_stiffness_kpa_per_mm", lambda self, c: 10.0 * law(self, c))
+
+
+def _stiff_sheet(fsim):
+    return replace(fsim, sheet=replace(fsim.sheet, film_modulus_mpa=100.0 * fsim.sheet.film_modulus_mpa))
+
+
+# physical error -> (how it is injected: a monkeypatch or a design hook, the metrics that must see it)
+INJECTIONS = {
+    "cover squeezed over a fixed 2 mm": (_inject_fixed_cover_width, None, ("contact_width", "peak_superficial_kpa")),
+    "flank pressure lost": (_inject_lost_flank, None, ("superficial_offset_counts_mm", "superficial_asymmetry_counts")),
+    "lattice 10x too stiff in shear": (_inject_stiff_spacer_shear, None, ("tangential_stiffness",
+                                                                          "effective_height_counts")),
+    "sheet 100x too stiff in bending": (None, _stiff_sheet, ("peak_deep_taxel_kpa", "effective_height_rise",
+                                                             "interlayer_shift_counts_mm", "deep_cop_counts_mm")),
+}
+
+
+@pytest.fixture(scope="module")
+def fast_base():
+    skin._TABLE_CACHE.clear()
+    rows, _ = fc.compare(SIM, bounds=("bonded",))
+    return _fast_values(rows)
+
+
+@pytest.mark.parametrize("error", list(INJECTIONS))
+def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, fresh_tables):
+    """A fast model that matched the FEM exactly (at the band's centre) would fail the check
+    under the injected error: the fast value moves by more than the tolerance (difference
+    metrics) or by a factor outside [lo, hi] (ratio metrics), at one load at least. Which error
+    each metric catches is what conf/sim/fem_tolerances.yaml and validate's notes say."""
+    patch, hook, metrics = INJECTIONS[error]
+    if patch is not None:
+        patch(monkeypatch)
+    rows, _ = fc.compare(SIM, bounds=("bonded",), model_hook=hook)
+    got = _fast_values(rows)
+    tol = fc.load_tolerances()
+    for metric in metrics:
+        base, inj = np.asarray(fast_base[metric]), np.asarray(got[metric])
+        if metric in tol["difference"]:
+            assert (np.abs(inj - base) > tol["difference"][metric]).any(), (metric, base, inj)
+        else:
+            lo, hi = tol["ratio"][metric]
+            factor = inj / base
+            assert ((factor < lo) | (factor > hi)).any(), (metric, base, inj)
