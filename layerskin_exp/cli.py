@@ -13,12 +13,11 @@ from __future__ import annotations
 import itertools
 import sys
 
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 
-from layerskin_exp.config import CONF_DIR, ConfigError, check_retired, format_config_error, one_line, validate
+from layerskin_exp import config
+from layerskin_exp.config import CONF_DIR, ConfigError, check_retired, format_config_error, one_line
 
 __all__ = ["CONF_DIR", "EXIT_CONFIG", "expand_sweep", "one_line", "preflight", "refuse"]
 
@@ -67,17 +66,11 @@ def preflight(config_name: str, argv: list[str]) -> None:
         jobs = expand_sweep(overrides) if multirun else [overrides]
     except HydraException as e:
         refuse(ConfigError(f"override: {one_line(e)}"))
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        for job in jobs:
-            try:
-                cfg = compose(config_name=config_name, overrides=job)
-                validate(cfg)
-            except ConfigError as e:
-                refuse(e)
-            except HydraException as e:
-                refuse(ConfigError(one_line(e)))
-    GlobalHydra.instance().clear()
+    for job in jobs:  # every job of a sweep, before any of them runs
+        try:
+            config.compose(config_name, job)
+        except ConfigError as e:
+            refuse(e)
 
 
 def _check_launcher(argv: list[str]) -> None:
