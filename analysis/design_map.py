@@ -245,8 +245,8 @@ def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -
     # The tip's travel is the spacer's compression plus the cover's (at most its thickness): past
     # e_d h + t_cover the cells under the tip have closed whatever the cover took (the load is an
     # upper bound on the onset; for a solid spacer, e_d ~ 0.05, the cover dominates it).
-    cover_mm = float(config.get("sim", {}).get("cover", {}).get("thickness", 0.2))
-    onset_mm = spacer.densification_strain * spacer.thickness + cover_mm
+    cover_mm = float(config.get("sim", {}).get("cover", {}).get("thickness_mm", 0.2))
+    onset_mm = spacer.densification_strain * spacer.thickness_mm + cover_mm
     dens, unreached = [], []
     for i, _ in presses:
         ex = extras[cal[i].name]
@@ -298,7 +298,7 @@ def _names(outcome: dict) -> tuple[str, str]:
             bracket = value
     sp = outcome.get("config", {}).get("sim", {}).get("spacer", {})
     if design is None:
-        design = f"E{sp.get('modulus')}_h{sp.get('thickness')}_c{sp.get('cell')}_w{sp.get('wall')}"
+        design = f"E{sp.get('modulus_kpa')}_h{sp.get('thickness_mm')}_c{sp.get('cell_mm')}_w{sp.get('wall_mm')}"
     return design, bracket or "nominal"
 
 
@@ -376,8 +376,8 @@ def write_markdown(path: Path, result: dict, brackets_doc: dict, figures: list[s
         rng = (f"{_fmt(nom.get('shear_low_n'))}–{_fmt(nom.get('shear_high_n'))} ({nom.get('shear_limited_by')}); "
                f"top {_cell(e, 'shear_high_n')}")
         mark = " ★" if name == STUDY_DESIGN else ""
-        lines.append(f"| {name}{mark} | {sp.get('modulus', 0):g} | {sp.get('thickness', 0):g} / {sp.get('cell', 0):g} / "
-                     f"{sp.get('wall', 0):g} | {_cell(e, 'shift_per_n_mm')} | {rng} | {dens_s} | "
+        lines.append(f"| {name}{mark} | {sp.get('modulus_kpa', 0):g} | {sp.get('thickness_mm', 0):g} / {sp.get('cell_mm', 0):g} / "
+                     f"{sp.get('wall_mm', 0):g} | {_cell(e, 'shift_per_n_mm')} | {rng} | {dens_s} | "
                      f"{_cell(e, 'linear_r2_shear')} | {_cell(e, 'superficial_r2_shear')} | {_cell(e, 'position_cv', '.3f')} |")
     lines += ["", "★ the study's design. T-s5 (CNN-GRU) R² is not computed per design: training it per design "
               "is not affordable in a sweep on 2 cores (see the README).", "",

@@ -50,7 +50,7 @@ def test_sweep_through_submitit_local_resumes_and_maps(tmp_path, hydra_dirs):
 
 
 def _outcome(design: str, bracket: str, shift: float, high: float) -> dict:
-    return {"overrides": [f"+design={design}", f"+bracket={bracket}"], "config": {"sim": {"spacer": {"modulus": 1}}},
+    return {"overrides": [f"+design={design}", f"+bracket={bracket}"], "config": {"sim": {"spacer": {"modulus_kpa": 1}}},
             "shift_per_n_mm": shift, "shear_high_n": high}
 
 
@@ -106,5 +106,5 @@ def test_design_search_sweeper_composes(tmp_path):
     sweeper = r.stdout[r.stdout.index("sweeper:"):]
     assert "_target_: optuna.samplers.NSGAIISampler" in sweeper
     assert "direction:\n    - maximize\n    - maximize" in sweeper
-    for key in ("sim.spacer.modulus", "sim.spacer.thickness", "sim.spacer.cell", "sim.spacer.wall"):
+    for key in ("sim.spacer.modulus_kpa", "sim.spacer.thickness_mm", "sim.spacer.cell_mm", "sim.spacer.wall_mm"):
         assert f"{key}:" in sweeper
