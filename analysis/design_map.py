@@ -49,6 +49,7 @@ from analysis.config import CharacterizationConfig
 from analysis.markdown import json_safe
 from analysis.metrics import r2_score
 from layerskin_exp.cli import CONF_DIR
+from layerskin_exp.config import ConfigError, retired_message
 from layerskin_exp.estimation.config import PreprocessConfig
 from layerskin_exp.estimation.linear import LinearForceModel, linear_features
 from layerskin_exp.features import two_layer_features
@@ -176,7 +177,11 @@ def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -
         return {"error": f"no complete force_calibration sessions under {root}"}
     first = load_session(Path(root) / cal[0].name, streams=set(), warn=False).metadata
     config = first.get("config", {})
-    spacer = SpacerConfig(**config.get("sim", {}).get("spacer", {}))
+    spacer_keys = config.get("sim", {}).get("spacer", {})
+    old = next((f"sim.spacer.{k}" for k in spacer_keys if retired_message(f"sim.spacer.{k}")), None)
+    if old:  # a campaign recorded under a retired key: its design is not the one the key now names
+        raise ConfigError(f"{root}: recorded with {retired_message(old)}; rerun the sweep to map it")
+    spacer = SpacerConfig(**spacer_keys)
     skin = SkinConfig(**{k: v for k, v in config.get("skin", {}).items() if k in SkinConfig.__dataclass_fields__})
     pitch_mm = getattr(skin, "pitch_mm", pitch_mm)
     X = np.concatenate([t.maps for t in cal])
@@ -507,7 +512,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         res = run(cfg)
-    except FileNotFoundError as e:
+    except (FileNotFoundError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     out = Path(cfg.out) if cfg.out else Path(cfg.sweep_dir) / "design_map"

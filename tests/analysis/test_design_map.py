@@ -79,6 +79,20 @@ def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
     assert "no force_calibration sessions" in capsys.readouterr().err
 
 
+def test_a_campaign_recorded_under_a_renamed_key_is_refused_in_one_line(tmp_path, capsys):
+    """A sweep recorded before the spacer's keys carried units: its sessions' configs name
+    `sim.spacer.modulus`; the map refuses it naming the new key rather than failing on it."""
+    from tests.analysis.synthetic import calibration_trial
+
+    folder = tmp_path / "force_calibration" / "0123456789"
+    folder.mkdir(parents=True)
+    calibration_trial(folder / "pos000_press0.mcap", 0, "press", 0, np.random.default_rng(0), n=60,
+                      config={"sim": {"spacer": {"modulus": 35.0, "thickness": 2.5}}})
+    assert main([f"sweep_dir={tmp_path}", "figures=false", "progress=false"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "sim.spacer.modulus" in err and "renamed to sim.spacer.modulus_kpa" in err and "rerun" in err, err
+
+
 def test_design_groups_compose():
     """Every design and bracket composes into a valid calibration config (preflight's check)."""
     designs = sorted(p.stem for p in (REPO / "conf" / "design").glob("*.yaml"))
