@@ -49,6 +49,7 @@ from analysis.config import CharacterizationConfig
 from analysis.markdown import json_safe
 from analysis.metrics import r2_score
 from layerskin_exp.cli import CONF_DIR
+from layerskin_exp.config import ConfigError, retired_message
 from layerskin_exp.estimation.config import PreprocessConfig
 from layerskin_exp.estimation.linear import LinearForceModel, linear_features
 from layerskin_exp.features import two_layer_features
@@ -176,7 +177,11 @@ def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -
         return {"error": f"no complete force_calibration sessions under {root}"}
     first = load_session(Path(root) / cal[0].name, streams=set(), warn=False).metadata
     config = first.get("config", {})
-    spacer = SpacerConfig(**config.get("sim", {}).get("spacer", {}))
+    spacer_keys = config.get("sim", {}).get("spacer", {})
+    old = next((f"sim.spacer.{k}" for k in spacer_keys if retired_message(f"sim.spacer.{k}")), None)
+    if old:  # a campaign recorded under a retired key: its design is not the one the key now names
+        raise ConfigError(f"{root}: recorded with {retired_message(old)}; rerun the sweep to map it")
+    spacer = SpacerConfig(**spacer_keys)
     skin = SkinConfig(**{k: v for k, v in config.get("skin", {}).items() if k in SkinConfig.__dataclass_fields__})
     pitch_mm = getattr(skin, "pitch_mm", pitch_mm)
     X = np.concatenate([t.maps for t in cal])
@@ -245,8 +250,8 @@ def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -
     # The tip's travel is the spacer's compression plus the cover's (at most its thickness): past
     # e_d h + t_cover the cells under the tip have closed whatever the cover took (the load is an
     # upper bound on the onset; for a solid spacer, e_d ~ 0.05, the cover dominates it).
-    cover_mm = float(config.get("sim", {}).get("cover", {}).get("thickness", 0.2))
-    onset_mm = spacer.densification_strain * spacer.thickness + cover_mm
+    cover_mm = float(config.get("sim", {}).get("cover", {}).get("thickness_mm", 0.2))
+    onset_mm = spacer.densification_strain * spacer.thickness_mm + cover_mm
     dens, unreached = [], []
     for i, _ in presses:
         ex = extras[cal[i].name]
@@ -298,7 +303,7 @@ def _names(outcome: dict) -> tuple[str, str]:
             bracket = value
     sp = outcome.get("config", {}).get("sim", {}).get("spacer", {})
     if design is None:
-        design = f"E{sp.get('modulus')}_h{sp.get('thickness')}_c{sp.get('cell')}_w{sp.get('wall')}"
+        design = f"E{sp.get('modulus_kpa')}_h{sp.get('thickness_mm')}_c{sp.get('cell_mm')}_w{sp.get('wall_mm')}"
     return design, bracket or "nominal"
 
 
@@ -376,8 +381,8 @@ def write_markdown(path: Path, result: dict, brackets_doc: dict, figures: list[s
         rng = (f"{_fmt(nom.get('shear_low_n'))}–{_fmt(nom.get('shear_high_n'))} ({nom.get('shear_limited_by')}); "
                f"top {_cell(e, 'shear_high_n')}")
         mark = " ★" if name == STUDY_DESIGN else ""
-        lines.append(f"| {name}{mark} | {sp.get('modulus', 0):g} | {sp.get('thickness', 0):g} / {sp.get('cell', 0):g} / "
-                     f"{sp.get('wall', 0):g} | {_cell(e, 'shift_per_n_mm')} | {rng} | {dens_s} | "
+        lines.append(f"| {name}{mark} | {sp.get('modulus_kpa', 0):g} | {sp.get('thickness_mm', 0):g} / {sp.get('cell_mm', 0):g} / "
+                     f"{sp.get('wall_mm', 0):g} | {_cell(e, 'shift_per_n_mm')} | {rng} | {dens_s} | "
                      f"{_cell(e, 'linear_r2_shear')} | {_cell(e, 'superficial_r2_shear')} | {_cell(e, 'position_cv', '.3f')} |")
     lines += ["", "★ the study's design. T-s5 (CNN-GRU) R² is not computed per design: training it per design "
               "is not affordable in a sweep on 2 cores (see the README).", "",
@@ -507,7 +512,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         res = run(cfg)
-    except FileNotFoundError as e:
+    except (FileNotFoundError, ConfigError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     out = Path(cfg.out) if cfg.out else Path(cfg.sweep_dir) / "design_map"

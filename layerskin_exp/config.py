@@ -12,6 +12,7 @@ the value and what to do — before any device is touched.
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,12 +57,17 @@ def retire(key: str, instead: str) -> None:
     RETIRED_KEYS[key] = instead
 
 
+def retired_message(key: str) -> str | None:
+    """The one-line refusal of a retired dotted key, or None if `key` is a current one."""
+    return f"{key}: no longer a setting; {RETIRED_KEYS[key]}" if key in RETIRED_KEYS else None
+
+
 def check_retired(overrides: Sequence[str]) -> None:
     """ConfigError for the first override that sets a retired key."""
     for o in overrides:
-        key = o.split("=", 1)[0].lstrip("+~")
-        if key in RETIRED_KEYS:
-            raise ConfigError(f"{key}: no longer a setting; {RETIRED_KEYS[key]}")
+        msg = retired_message(o.split("=", 1)[0].lstrip("+~"))
+        if msg:
+            raise ConfigError(msg)
 
 
 @dataclass
@@ -126,6 +132,12 @@ def one_line(err: Exception) -> str:
 
     lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
     text = lines[0] if lines else type(err).__name__
+    # A retired key set in a yaml file (a user's design, material or lattice file): Hydra names the
+    # key as `full_key: ...` below its first line.
+    key = next((ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("full_key:")), None)
+    if key and retired_message(key):
+        where = re.match(r"In '([^']+)'", text)
+        return retired_message(key) + (f" (set in '{where.group(1)}')" if where else "")
     cause = err.__cause__
     if isinstance(err, HydraException) and cause is not None:
         cause_lines = [ln.strip() for ln in str(cause).splitlines() if ln.strip()]
@@ -193,6 +205,8 @@ def validate(cfg: DictConfig, key: str | None = None):
         extra = unknown_keys(node)
         if extra:
             k, schema = extra[0]
+            if retired_message(k):
+                raise ConfigError(retired_message(k))
             raise ConfigError(f"{k}: Key '{k.rsplit('.', 1)[-1]}' not in '{schema}' (check the spelling; "
                               "'+' cannot add a setting the schema does not have)")
     try:

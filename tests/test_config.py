@@ -78,3 +78,44 @@ def test_slurm_launcher_without_sbatch_is_refused_before_hydra(monkeypatch, caps
     err = capsys.readouterr().err
     assert "hydra/launcher=slurm" in err and "sbatch" in err
     cli._check_launcher(["-m", "hydra/launcher=submitit_local"])  # runs here: not refused
+
+
+RENAMED = {"sim.spacer.modulus": "sim.spacer.modulus_kpa", "sim.spacer.thickness": "sim.spacer.thickness_mm",
+           "sim.spacer.cell": "sim.spacer.cell_mm", "sim.spacer.wall": "sim.spacer.wall_mm",
+           "sim.spacer.width": "sim.spacer.width_mm", "sim.spacer.confinement_length": "sim.spacer.confinement_length_mm",
+           "sim.cover.thickness": "sim.cover.thickness_mm", "sim.cover.modulus": "sim.cover.modulus_kpa"}
+
+
+@pytest.mark.parametrize("old,new", RENAMED.items())
+def test_a_key_renamed_for_its_unit_is_refused_naming_the_new_one(old, new):
+    import layerskin_exp.sim.config  # noqa: F401 - the world's schemas
+
+    with pytest.raises(ConfigError, match=rf"^{old}: no longer a setting; renamed to {new} .* write {new}="):
+        compose("world", [f"{old}=1.5"])
+    assert compose("world", [f"{new}=1.5"]) is not None  # the new name takes the same value
+
+
+def test_an_old_key_in_a_user_written_design_file_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    """A design of one's own (conf/design/<name>.yaml naming a lattice file of one's own) written
+    with the old key is refused before anything runs, naming the new key and the file."""
+    import shutil
+
+    import layerskin_exp.sim.config  # noqa: F401 - the world's schemas
+    from layerskin_exp import cli, config
+
+    conf = tmp_path / "conf"
+    shutil.copytree(config.CONF_DIR, conf)
+    (conf / "lattice" / "mine.yaml").write_text("# @package sim.spacer\nthickness_mm: 3.0\ncell_mm: 2.5\nwall: 0.6\n")
+    (conf / "design" / "mine.yaml").write_text(
+        "# @package _global_\ndefaults:\n  - /spacer_material: ecoflex_0010_thinned\n  - /lattice: mine\n")
+    monkeypatch.setattr(config, "CONF_DIR", conf)
+    monkeypatch.setattr(cli, "CONF_DIR", conf)
+    with pytest.raises(ConfigError, match=r"^sim\.spacer\.wall: no longer a setting; renamed to sim\.spacer\.wall_mm"):
+        compose("world", ["+design=mine"])
+    with pytest.raises(SystemExit) as e:
+        cli.preflight("world", ["+design=mine"])
+    assert e.value.code == cli.EXIT_CONFIG
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "sim.spacer.wall_mm" in err and "lattice/mine" in err, err
+    (conf / "lattice" / "mine.yaml").write_text("# @package sim.spacer\nthickness_mm: 3.0\ncell_mm: 2.5\nwall_mm: 0.6\n")
+    assert compose("world", ["+design=mine"]).sim.spacer.wall_mm == 0.6  # the same file with the new key runs

@@ -2,9 +2,9 @@
 
 Every default is a material datum or a geometric fact of the study's sensor, never a value
 fitted to the study's results. Each section checks its own ranges in `__post_init__` and raises
-a `ConfigError` naming the key (`sim.spacer.modulus=-3.0: ...`). `SimConfig` is stored in
+a `ConfigError` naming the key (`sim.spacer.modulus_kpa=-3.0: ...`). `SimConfig` is stored in
 Hydra's ConfigStore as `sim/sim_schema`; `conf/sim/default.yaml` fills it in, so a design sweep
-is `-m sim.spacer.modulus=20,35,60`.
+is `-m sim.spacer.modulus_kpa=20,35,60`.
 """
 
 from __future__ import annotations
@@ -35,36 +35,36 @@ class SpacerConfig:
 
     Ecoflex 00-10 has a 100 % modulus of 55 kPa (Smooth-On datasheet) and an initial Young's
     modulus of roughly 40-55 kPa; 10 % thinner lowers it, hence 35 kPa for the solid walls.
-    A hexagonal honeycomb of cell pitch `cell` and wall thickness `wall` has solid fraction
+    A hexagonal honeycomb of cell pitch `cell_mm` and wall thickness `wall_mm` has solid fraction
     2t/P (1 - t/2P); loaded along its prism axis its modulus is fraction x E and its transverse
     shear modulus about half the solid's shear modulus times the fraction (Gibson & Ashby).
     """
 
-    modulus: float = 35.0  # kPa, Young's modulus of the (thinned) solid silicone
+    modulus_kpa: float = 35.0  # Young's modulus of the (thinned) solid silicone
     poisson: float = 0.49  # silicone is nearly incompressible
-    thickness: float = 2.5  # mm, lattice height
-    cell: float = 2.0  # mm, hexagonal cell pitch (the "feature size")
-    wall: float = 0.5  # mm, wall thickness of the lattice
-    width: float = 26.0  # mm, side of the square spacer pad (24 mm array + border)
-    confinement_length: float = 2.0  # mm, half-width of the squeezed region (~ indenter radius), sets S
+    thickness_mm: float = 2.5  # lattice height
+    cell_mm: float = 2.0  # hexagonal cell pitch (the "feature size")
+    wall_mm: float = 0.5  # wall thickness of the lattice
+    width_mm: float = 26.0  # side of the square spacer pad (24 mm array + border)
+    confinement_length_mm: float = 2.0  # half-width of the squeezed region (~ indenter radius), sets S
     lattice_contrast: float = 0.25  # relative depth of the cell pattern seen by the deep layer
 
     def __post_init__(self) -> None:
-        _positive(self.modulus, "sim.spacer.modulus", "Young's modulus must be > 0 kPa")
+        _positive(self.modulus_kpa, "sim.spacer.modulus_kpa", "Young's modulus must be > 0 kPa")
         require(0 <= self.poisson < 0.5, "sim.spacer.poisson", self.poisson, "must lie in [0, 0.5)")
-        _positive(self.thickness, "sim.spacer.thickness", "spacer height must be > 0 mm")
-        _positive(self.cell, "sim.spacer.cell", "lattice cell pitch must be > 0 mm")
-        require(self.wall is not None and 0 < self.wall < self.cell, "sim.spacer.wall", self.wall,
+        _positive(self.thickness_mm, "sim.spacer.thickness_mm", "spacer height must be > 0 mm")
+        _positive(self.cell_mm, "sim.spacer.cell_mm", "lattice cell pitch must be > 0 mm")
+        require(self.wall_mm is not None and 0 < self.wall_mm < self.cell_mm, "sim.spacer.wall_mm", self.wall_mm,
                 "wall thickness must be > 0 and smaller than the cell pitch")
-        _positive(self.width, "sim.spacer.width", "pad side must be > 0 mm")
-        _positive(self.confinement_length, "sim.spacer.confinement_length", "must be > 0 mm")
+        _positive(self.width_mm, "sim.spacer.width_mm", "pad side must be > 0 mm")
+        _positive(self.confinement_length_mm, "sim.spacer.confinement_length_mm", "must be > 0 mm")
         require(self.lattice_contrast is not None and 0 <= self.lattice_contrast < 0.5,
                 "sim.spacer.lattice_contrast", self.lattice_contrast, "must lie in [0, 0.5) to keep the load positive")
 
     @property
     def solid_fraction(self) -> float:
         """Relative density of the hexagonal honeycomb (0..1)."""
-        r = self.wall / self.cell
+        r = self.wall_mm / self.cell_mm
         return min(2.0 * r * (1.0 - 0.5 * r), 0.95)
 
     @property
@@ -75,7 +75,7 @@ class SpacerConfig:
     @property
     def lattice_modulus_kpa(self) -> float:
         """Out-of-plane (prism-axis) modulus of the lattice, kPa."""
-        return self.solid_fraction * self.modulus
+        return self.solid_fraction * self.modulus_kpa
 
     @property
     def shear_modulus_kpa(self) -> float:
@@ -84,7 +84,7 @@ class SpacerConfig:
 
     @property
     def solid_shear_modulus_kpa(self) -> float:
-        return self.modulus / (2.0 * (1.0 + self.poisson))
+        return self.modulus_kpa / (2.0 * (1.0 + self.poisson))
 
 
 @dataclass
@@ -97,16 +97,16 @@ class CoverConfig:
     undamped (1) to a critically damped (0) slip of the superficial layer.
     """
 
-    thickness: float = 0.2  # mm
-    modulus: float = 35.0  # kPa, Young's modulus of the cover silicone
+    thickness_mm: float = 0.2
+    modulus_kpa: float = 35.0  # Young's modulus of the cover silicone
     friction: float = 1.0  # static coefficient
     kinetic_ratio: float = 0.75  # kinetic / static
     aging_s: float = 0.05
     overshoot: float = 0.5
 
     def __post_init__(self) -> None:
-        _positive(self.thickness, "sim.cover.thickness", "cover thickness must be > 0 mm")
-        _positive(self.modulus, "sim.cover.modulus", "cover Young's modulus must be > 0 kPa")
+        _positive(self.thickness_mm, "sim.cover.thickness_mm", "cover thickness must be > 0 mm")
+        _positive(self.modulus_kpa, "sim.cover.modulus_kpa", "cover Young's modulus must be > 0 kPa")
         _positive(self.friction, "sim.cover.friction", "static friction coefficient must be > 0")
         require(self.kinetic_ratio is not None and 0 < self.kinetic_ratio <= 1, "sim.cover.kinetic_ratio",
                 self.kinetic_ratio, "kinetic/static ratio must lie in (0, 1]")
@@ -283,6 +283,14 @@ for _key, _fact in (("sim.contact.hemisphere_radius_mm", "the indenter's radius 
     retire(_key, f"{_fact}, one fact for the contact model, the grip scene and the protocols")
 for _key in ("marker_ids", "marker_size_mm", "marker_x_mm", "marker_y_mm", "dictionary"):
     retire(f"sim.rig.camera.{_key}", "the markers printed on the skin are the rig's: layerskin_exp.rig.MARKER_*")
+# Dimensional keys carry their unit in the name.
+for _section, _keys in (("spacer", ("modulus_kpa", "thickness_mm", "cell_mm", "wall_mm", "width_mm",
+                                    "confinement_length_mm")),
+                        ("cover", ("thickness_mm", "modulus_kpa"))):
+    for _new in _keys:
+        _old = _new.rsplit("_", 1)[0]
+        retire(f"sim.{_section}.{_old}", f"renamed to sim.{_section}.{_new} so that the name carries its unit; "
+                                         f"write sim.{_section}.{_new}=<same value> instead")
 
 
 def _store() -> None:

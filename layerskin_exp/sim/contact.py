@@ -101,19 +101,19 @@ def _solver(sim: SimConfig, kind: str, radius_mm: float | None = None) -> PlateO
     rig's indenter/rod radius only for reference comparisons (e.g. a 2-D section's cylinder)."""
     law = SpacerLaw(sim.spacer)
     radius = contact_radius_mm(kind) if radius_mm is None else radius_mm
-    g_p = sim.spacer.shear_modulus_kpa * KPA_MM2_TO_N * sim.spacer.thickness / 3.0  # Vlasov: G h / 3
+    g_p = sim.spacer.shear_modulus_kpa * KPA_MM2_TO_N * sim.spacer.thickness_mm / 3.0  # Vlasov: G h / 3
     # the cover's stiffness at a first contact of the cap's own scale; build_tables sets it per
     # indentation from the contact's size (contact_confinement_mm)
-    k_c = cover_stiffness_n_per_mm3(sim.cover.modulus, sim.cover.thickness, radius)
+    k_c = cover_stiffness_n_per_mm3(sim.cover.modulus_kpa, sim.cover.thickness_mm, radius)
     sheet = sim.sheet
     interface = None
     if sheet.interface == "friction":
         interface = FrictionInterface(sheet.rigidity_n_mm, sheet.sandwich_rigidity_n_mm, sheet.film_separation_mm,
                                       sheet.interface_friction)
     # the cover's silicone is taken as the spacer's (conf/sim/default.yaml), its Poisson ratio too
-    g_c = cover_shear_stiffness_n_per_mm3(sim.cover.modulus, sim.spacer.poisson, sim.cover.thickness)
+    g_c = cover_shear_stiffness_n_per_mm3(sim.cover.modulus_kpa, sim.spacer.poisson, sim.cover.thickness_mm)
     return PlateOnFoundation(kind, law, sheet.rigidity_n_mm, g_p, k_c, radius,
-                             pad_radius_mm(kind, sim.spacer.width), step_mm=_PLATE_STEP_MM, interface=interface,
+                             pad_radius_mm(kind, sim.spacer.width_mm), step_mm=_PLATE_STEP_MM, interface=interface,
                              cover_shear_n_per_mm3=g_c)
 
 
@@ -142,7 +142,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     law = SpacerLaw(sim.spacer)
     plate = _solver(sim, kind, radius_mm)
     radius = plate.radius
-    h = sim.spacer.thickness
+    h = sim.spacer.thickness_mm
     delta_max = min(0.99 * radius, 0.97 * h)
     n_delta = sim.contact.table_points
     delta = np.linspace(0.0, delta_max, n_delta)
@@ -160,7 +160,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     contact_f = np.zeros((n_delta, n_x))
     found_f = np.zeros((n_delta, n_x))
     w = eta = None
-    cover_e, cover_t = sim.cover.modulus, sim.cover.thickness
+    cover_e, cover_t = sim.cover.modulus_kpa, sim.cover.thickness_mm
     reach_mm = None
     for k, dl in enumerate(delta):
         if dl <= 0.0:
@@ -186,10 +186,10 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
             else g_c * float(touching @ plate.area)
     # what each layer's Velostat feels: the contact pressure under the cover, the lattice's
     # (compressive) pressure under the deep sheet's top film; each spread over its layer's thickness
-    sigma_s = sim.cover.thickness
+    sigma_s = sim.cover.thickness_mm
     sigma_d = 0.5 * sim.fsr.layer_thickness_mm
     # tabulated to just beyond the plate's edge (the equal-area disc), where the lattice ends
-    reach = min(float(np.abs(x).max()), pad_radius_mm(kind, sim.spacer.width) + 1.0)
+    reach = min(float(np.abs(x).max()), pad_radius_mm(kind, sim.spacer.width_mm) + 1.0)
     if kind == "hemisphere":
         dist = np.linspace(0.0, reach, 801)
         blur_s = _radial_gauss_matrix(dist, x, plate.step, sigma_s)
@@ -204,7 +204,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     deep = found @ blur_d.T  # signed: where the sheet lifts, the bonded lattice pulls (the FSR reads 0)
     # the flank's response joins the couple's: both are proportional to the tangential load, the
     # couple's tables are per unit couple F_t H (H the row's height), so the flank's per N is / H
-    h_row = np.maximum(sim.cover.thickness + sim.fsr.layer_thickness_mm + h - comp[:, int(np.argmin(np.abs(x)))], 1e-6)
+    h_row = np.maximum(sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, int(np.argmin(np.abs(x)))], 1e-6)
     superficial1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
     deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
@@ -216,7 +216,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     fr = np.nan_to_num(fr)
     halfwidth = np.array([np.abs(x[row > 0]).max() if (row > 0).any() else 0.0 for row in contact])
     centre = int(np.argmin(np.abs(x)))
-    height = sim.cover.thickness + sim.fsr.layer_thickness_mm + h - comp[:, centre]
+    height = sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
                          halfwidth, superficial1, deep1, height, comp[:, centre].copy(), cover_shear, cover_torsion,
                          cover_kc)

@@ -1,7 +1,7 @@
 """Look at the simulated skin: both layers' counts under a press and under a slide.
 
     python -m layerskin_exp.sim.preview [out=PATH] [seed=N] [sim.KEY=VALUE ...] [skin.KEY=VALUE ...]
-    python -m layerskin_exp.sim.preview out=soft.png sim.spacer.modulus=20
+    python -m layerskin_exp.sim.preview out=soft.png sim.spacer.modulus_kpa=20
 
 sim.* and skin.* are the same overrides the protocols take (conf/sim/, conf/skin/, composed by
 conf/world.yaml), checked the same way; seed=N is sim.seed=N. Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of

@@ -40,7 +40,7 @@ class ReferenceSkin:
         self.q = (skin.taxel_centres_mm()[:, None] + 0.5 * skin.electrode_mm * g[None, :]).ravel()  # (n*nq,)
         self.qw = 0.5 * w
         self.x, self.y = np.meshgrid(self.q, self.q)  # [y, x]
-        self.lattice = hex_cell_pattern(self.x, self.y, sim.spacer.cell, sim.spacer.lattice_contrast)
+        self.lattice = hex_cell_pattern(self.x, self.y, sim.spacer.cell_mm, sim.spacer.lattice_contrast)
         self.play = np.zeros((2, n, n))
         self.lag = np.zeros((2, n, n))
         self.last_maps: np.ndarray | None = None

@@ -143,11 +143,11 @@ class SkinModel:
         self._mech_tab = np.ascontiguousarray(np.stack([t.delta_mm, t.load, t.shear_extra, t.torsion_extra,
                                                         t.friction_radius_mm, t.cover_shear, t.cover_torsion]),
                                               dtype=float)
-        half = sim.spacer.width / 2
+        half = sim.spacer.width_mm / 2
         self._half = half
         k0 = float(self.law.shear_stiffness_kpa_per_mm(0.0)) * 1e-3  # N/mm per mm^2
         self._mech_geo = np.array([t.d_delta, -1.0 if self.k_support is None else self.k_support, half,
-                                   sim.spacer.width**2, k0 * sim.spacer.width**2, k0, sim.spacer.width**4 / 6.0])
+                                   sim.spacer.width_mm**2, k0 * sim.spacer.width_mm**2, k0, sim.spacer.width_mm**4 / 6.0])
         self.friction = StickSlip(sim.cover.friction, sim.cover.kinetic, sim.cover.aging_s, sim.cover.overshoot)
         self._contact = np.zeros(mk.CONTACT_SIZE)  # previous pose, configuration serial, last configuration
         self._contact[mk.C_CONFIG:] = np.nan  # the first step is a new configuration
@@ -160,7 +160,7 @@ class SkinModel:
         self._qw = 0.5 * w  # sums to 1
         self._nq = sim.contact.quad_points
         qx, qy = np.meshgrid(self._q, self._q)  # [y, x]
-        self._lattice32 = hex_cell_pattern(qx, qy, sim.spacer.cell, sim.spacer.lattice_contrast).astype(np.float32)
+        self._lattice32 = hex_cell_pattern(qx, qy, sim.spacer.cell_mm, sim.spacer.lattice_contrast).astype(np.float32)
         self._quad32 = np.concatenate([self._q, self._qw]).astype(np.float32)  # coordinates, then weights
         self._centres = centres
         self._half_electrode = 0.5 * skin.electrode_mm

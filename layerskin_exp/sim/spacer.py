@@ -34,10 +34,10 @@ class SpacerLaw:
 
     def __init__(self, cfg: SpacerConfig):
         self.cfg = cfg
-        self.h_mm = cfg.thickness
+        self.h_mm = cfg.thickness_mm
         self.e_lat_kpa = cfg.lattice_modulus_kpa
-        self.e_solid_kpa = cfg.modulus
-        self.conf_len_mm = cfg.confinement_length
+        self.e_solid_kpa = cfg.modulus_kpa
+        self.conf_len_mm = cfg.confinement_length_mm
         self.e_d = cfg.densification_strain
         self.g_open_kpa = cfg.shear_modulus_kpa
         self.g_solid_kpa = cfg.solid_shear_modulus_kpa

@@ -3,7 +3,7 @@ tests and the physical error it catches, computes the simulator's value, and com
 closed form, a bound, or the finite-element reference (`layerskin_exp.sim.fem_reference`).
 
     python -m layerskin_exp.sim.validate            # prints the table
-    python -m layerskin_exp.sim.validate sim.spacer.modulus=20   # the same for another design
+    python -m layerskin_exp.sim.validate sim.spacer.modulus_kpa=20   # the same for another design
 
 The checks run on the skin model itself (no protocol). A check never encodes a study outcome or
 a protocol outcome (stop-reason fractions, force maxima): those are printed below the table as
@@ -86,7 +86,7 @@ def lateral_stiffness(sim: SimConfig, model_sim: SimConfig | None = None) -> Che
     st = m.step(0.001, np.array([0.01, 0.0, z]))
     k_sim = st.force_n[0] / st.surface_shift_mm[0]
     sp = sim.spacer
-    k_closed = sp.shear_modulus_kpa * 1e-3 * sp.width**2 / sp.thickness
+    k_closed = sp.shear_modulus_kpa * 1e-3 * sp.width_mm**2 / sp.thickness_mm
     return Check("lateral stiffness, light touch / closed form G A / h",
                  "a bonded elastic layer in simple shear: the pad's honeycomb shear modulus over its area and height",
                  k_sim / k_closed, 0.97, 1.15, "ratio",
@@ -106,7 +106,7 @@ def plate_on_winkler_closed_form(sim: SimConfig, model_sim: SimConfig | None = N
     force = 1.0
     load[0] = force / plate.area[0]
     w = sparse_linalg.spsolve(a.tocsc(), load)
-    k = SpacerLaw(sim.spacer).e_lat_kpa * 1e-3 / sim.spacer.thickness  # N/mm^3, the open lattice's Winkler modulus
+    k = SpacerLaw(sim.spacer).e_lat_kpa * 1e-3 / sim.spacer.thickness_mm  # N/mm^3, the open lattice's Winkler modulus
     w0_closed = force / (8.0 * math.sqrt(sim.sheet.rigidity_n_mm * k))
     return Check("plate on linear foundation, w(0) / F / (8 sqrt(D k))",
                  "the laminate solver reproduces the closed form of a point-loaded plate on a Winkler foundation",

@@ -39,7 +39,7 @@ def _write_skin(w, sup, deep, t_ns):
         w.write(TwoLayerFrame(sup[i], deep[i], i, int(t_ns[i]), int(t_ns[i])))
 
 
-def calibration_trial(path, pos_index, kind, repeat, rng, n=500, h_mm=2.0, gain=1.0):
+def calibration_trial(path, pos_index, kind, repeat, rng, n=500, h_mm=2.0, gain=1.0, config=None):
     x0, y0 = rng.uniform(-6, 6, 2)
     s = np.linspace(0, 1, n)
     if kind == "press":
@@ -56,7 +56,7 @@ def calibration_trial(path, pos_index, kind, repeat, rng, n=500, h_mm=2.0, gain=
     t_ns = 10**9 + np.arange(n) * DT_NS
     labels = {"protocol": "force_calibration", "position_index": pos_index, "position_mm": [x0, y0], "kind": kind,
               "repeat": repeat, "direction_rad": None, "z_offset_mm": 0.0}
-    with SessionWriter(path, metadata={"config": {}, "backend": "synthetic"}, labels=labels) as w:
+    with SessionWriter(path, metadata={"config": config or {}, "backend": "synthetic"}, labels=labels) as w:
         _write_skin(w, _counts(sup, rng), _counts(deep, rng), t_ns)
         for i in range(0, n, 2):
             f = np.array([fxy[i, 0], fxy[i, 1], fz[i]]) + rng.normal(0, 0.01, 3)

@@ -50,7 +50,7 @@ def test_sweep_through_submitit_local_resumes_and_maps(tmp_path, hydra_dirs):
 
 
 def _outcome(design: str, bracket: str, shift: float, high: float) -> dict:
-    return {"overrides": [f"+design={design}", f"+bracket={bracket}"], "config": {"sim": {"spacer": {"modulus": 1}}},
+    return {"overrides": [f"+design={design}", f"+bracket={bracket}"], "config": {"sim": {"spacer": {"modulus_kpa": 1}}},
             "shift_per_n_mm": shift, "shear_high_n": high}
 
 
@@ -77,6 +77,20 @@ def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
     assert len(err) == 1 and "noise_sigmas" in err[0]
     assert main([f"sweep_dir={tmp_path}"]) == 2  # an empty folder: nothing to map
     assert "no force_calibration sessions" in capsys.readouterr().err
+
+
+def test_a_campaign_recorded_under_a_renamed_key_is_refused_in_one_line(tmp_path, capsys):
+    """A sweep recorded before the spacer's keys carried units: its sessions' configs name
+    `sim.spacer.modulus`; the map refuses it naming the new key rather than failing on it."""
+    from tests.analysis.synthetic import calibration_trial
+
+    folder = tmp_path / "force_calibration" / "0123456789"
+    folder.mkdir(parents=True)
+    calibration_trial(folder / "pos000_press0.mcap", 0, "press", 0, np.random.default_rng(0), n=60,
+                      config={"sim": {"spacer": {"modulus": 35.0, "thickness": 2.5}}})
+    assert main([f"sweep_dir={tmp_path}", "figures=false", "progress=false"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "sim.spacer.modulus" in err and "renamed to sim.spacer.modulus_kpa" in err and "rerun" in err, err
 
 
 def test_design_groups_compose():
@@ -106,5 +120,5 @@ def test_design_search_sweeper_composes(tmp_path):
     sweeper = r.stdout[r.stdout.index("sweeper:"):]
     assert "_target_: optuna.samplers.NSGAIISampler" in sweeper
     assert "direction:\n    - maximize\n    - maximize" in sweeper
-    for key in ("sim.spacer.modulus", "sim.spacer.thickness", "sim.spacer.cell", "sim.spacer.wall"):
+    for key in ("sim.spacer.modulus_kpa", "sim.spacer.thickness_mm", "sim.spacer.cell_mm", "sim.spacer.wall_mm"):
         assert f"{key}:" in sweeper

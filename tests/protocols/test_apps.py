@@ -102,7 +102,7 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     cfg, typed = compose_app("force_calibration", [
         "positions.count=1", "press.repeats=1", "slide.repeats=0", "press.speed_mm_s=4",
         "control_period_s=0.1", "press.target_normal_n=5.9", "press.stop_on_sample=false", f"data_root={tmp_path}", "progress=false",
-        "sim.spacer.modulus=200"])
+        "sim.spacer.modulus_kpa=200"])
     rig = build_rig(cfg, "platform")
     with rig:
         (result,) = run_campaign(typed, rig, {"config": {}, "backend": "sim"})
@@ -131,6 +131,8 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     ("protocols.grip_depth", "hardware=loopback +hardware.faults.skin_board.typo=1", "hardware.faults.skin_board.typo"),
     ("protocols.grip_depth", "release.opening_mm=nan", "release.opening_mm=nan: must be in"),
     ("protocols.grip_depth", "trajectory.speed=1", "use trajectory.translation.speed_mm_s (mm/s) or"),
+    ("protocols.force_calibration", "sim.spacer.modulus=20", "renamed to sim.spacer.modulus_kpa"),
+    ("protocols.force_calibration", "-m sim.cover.thickness=0.2,0.3", "renamed to sim.cover.thickness_mm"),
     ("protocols.grip_depth", "-m save_images=true,false", "would write the same session files"),
 ])
 def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
@@ -171,7 +173,7 @@ def test_sweep_over_a_protocol_key_keeps_every_combination_and_resumes_once(tmp_
 def test_design_sweep_writes_one_set_of_files_per_value(tmp_path, hydra_dirs):
     # The README's design sweep: each spacer modulus gets its own folder, none is skipped.
     data = tmp_path / "data"
-    r = run_cli("protocols.force_calibration", ["-m", "sim.spacer.modulus=20,60", "positions.count=1",
+    r = run_cli("protocols.force_calibration", ["-m", "sim.spacer.modulus_kpa=20,60", "positions.count=1",
                                                 "press.repeats=1", "slide.repeats=0", "press.hold_s=0.05",
                                                 f"data_root={data}", "progress=false", *hydra_dirs], tmp_path)
     assert r.returncode == 0, r.stderr[-2000:]
@@ -182,7 +184,7 @@ def test_design_sweep_writes_one_set_of_files_per_value(tmp_path, hydra_dirs):
         (f,) = d.glob("*.mcap")
         s = load_session(f, warn=False)
         assert s.complete
-        moduli.add(s.metadata["config"]["sim"]["spacer"]["modulus"])
+        moduli.add(s.metadata["config"]["sim"]["spacer"]["modulus_kpa"])
     assert len(moduli) == 2
     assert "2 ran, 0 already complete, 0 failed" in r.stdout
 

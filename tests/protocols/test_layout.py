@@ -28,7 +28,7 @@ def _grip(*overrides):
 def test_design_folder_changes_with_every_protocol_and_sim_key():
     base_typed, base = _grip("grip_depth=9", "trial=5")
     for override in ("trajectory.translation.speed_mm_s=1", "trajectory.torsion.speed_deg_s=1", "hold_s=0.6",
-                     "approach.threshold_counts=600", "sim.spacer.modulus=60", "seed=1"):
+                     "approach.threshold_counts=600", "sim.spacer.modulus_kpa=60", "seed=1"):
         typed, config = _grip("grip_depth=9", "trial=5", override)
         assert design_id(config) != design_id(base), override
         assert trial_path(typed, config) != trial_path(base_typed, base), override
@@ -129,14 +129,14 @@ def test_a_reused_sweep_folder_counts_this_runs_jobs_once(tmp_path, capsys):
 def test_sessions_listing_names_what_tells_designs_apart(tmp_path):
     root = tmp_path / "grip_depth"
     for modulus in (20.0, 60.0):
-        config = {"sim": {"spacer": {"modulus": modulus}}, "hold_s": 0.5, "trial": 0}
+        config = {"sim": {"spacer": {"modulus_kpa": modulus}}, "hold_s": 0.5, "trial": 0}
         folder = root / design_id(config)
         write_manifest(folder, config)
         (folder / "g6_translation_t0.mcap").write_bytes(b"")
-    (root / design_id({"sim": {"spacer": {"modulus": 20.0}}, "hold_s": 0.5}) / "g6_translation_t1.mcap.partial") \
+    (root / design_id({"sim": {"spacer": {"modulus_kpa": 20.0}}, "hold_s": 0.5}) / "g6_translation_t1.mcap.partial") \
         .write_bytes(b"")
     text = describe(tmp_path)
-    assert "2 design(s), differing in sim.spacer.modulus" in text
-    assert "1 complete, 1 interrupted  sim.spacer.modulus=20.0" in text
-    assert "1 complete, 0 interrupted  sim.spacer.modulus=60.0" in text
+    assert "2 design(s), differing in sim.spacer.modulus_kpa" in text
+    assert "1 complete, 1 interrupted  sim.spacer.modulus_kpa=20.0" in text
+    assert "1 complete, 0 interrupted  sim.spacer.modulus_kpa=60.0" in text
     assert all((root / d / MANIFEST).is_file() for d in [p.name for p in root.iterdir()])

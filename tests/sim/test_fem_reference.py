@@ -68,7 +68,7 @@ def test_the_comparison_fails_on_a_lattice_three_times_too_soft(fresh_tables):
     assert any(r.passed for r in rows if r.metric == "line_load_at_depth")
 
     def soft(fsim):
-        return replace(fsim, spacer=replace(fsim.spacer, modulus=fsim.spacer.modulus / 3.0))
+        return replace(fsim, spacer=replace(fsim.spacer, modulus_kpa=fsim.spacer.modulus_kpa / 3.0))
 
     rows, _ = fc.compare(SIM, bounds=("bonded",), model_hook=soft)
     load = [r for r in rows if r.metric == "line_load_at_depth"]

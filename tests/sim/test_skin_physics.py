@@ -103,7 +103,7 @@ def test_force_balance_superficial_and_deep(kind, z):
     if kind == "hemisphere":
         assert f_sup == pytest.approx(fz, rel=0.05)
     else:  # the rod's line load also falls on the border outside the 24 mm array
-        assert f_sup == pytest.approx(fz * 24.0 / m.sim.spacer.width, rel=0.05)
+        assert f_sup == pytest.approx(fz * 24.0 / m.sim.spacer.width_mm, rel=0.05)
     assert f_deep == pytest.approx(f_sup, rel=0.08)
 
 
@@ -187,7 +187,7 @@ def test_rod_torsion_friction_torque_bound_and_rotational_slip():
         yaw = math.radians(60.0) * min(k / 2000.0, 1.0)  # several times the contact's elastic twist
         states.append(m.step(0.05 + k * 1e-3, np.array([0.0, 0.0, -2.3]), yaw))
     st = states[-1]
-    half = m.sim.spacer.width / 2
+    half = m.sim.spacer.width_mm / 2
     chords = [_chord(0.0, 0.0, s.indenter_yaw_rad, half) for s in states]
     radius = np.array([(s1 * s1 + s2 * s2) / (2 * (s2 - s1)) for s1, s2 in chords])  # mean |s| on the line
     tq = np.array([abs(s.torque_z_nmm) for s in states])

@@ -98,10 +98,10 @@ def test_frames_are_deterministic_under_a_seed_and_well_formed():
 
 
 @pytest.mark.parametrize("factory,key", [
-    (lambda: SpacerConfig(modulus=0.0), "sim.spacer.modulus"),
-    (lambda: SpacerConfig(thickness=-1.0), "sim.spacer.thickness"),
-    (lambda: SpacerConfig(cell=0.0), "sim.spacer.cell"),
-    (lambda: CoverConfig(thickness=0.0), "sim.cover.thickness"),
+    (lambda: SpacerConfig(modulus_kpa=0.0), "sim.spacer.modulus_kpa"),
+    (lambda: SpacerConfig(thickness_mm=-1.0), "sim.spacer.thickness_mm"),
+    (lambda: SpacerConfig(cell_mm=0.0), "sim.spacer.cell_mm"),
+    (lambda: CoverConfig(thickness_mm=0.0), "sim.cover.thickness_mm"),
     (lambda: CoverConfig(friction=-0.2), "sim.cover.friction"),
     (lambda: FSRConfig(gain_cv=-0.1), "sim.fsr.gain_cv"),
     (lambda: ReadoutConfig(divider_kohm=0.0), "sim.readout.divider_kohm"),
@@ -113,9 +113,9 @@ def test_config_range_errors_name_the_key(factory, key):
 
 def test_hydra_sweep_key_and_refusal():
     with initialize_config_dir(config_dir=CONF_DIR, version_base=None):
-        cfg = compose(config_name=None, overrides=["+sim=default", "sim.spacer.modulus=20", "sim.cover.friction=0.8"])
+        cfg = compose(config_name=None, overrides=["+sim=default", "sim.spacer.modulus_kpa=20", "sim.cover.friction=0.8"])
         sim = validate(cfg, "sim")
-        assert sim.spacer.modulus == 20.0 and sim.cover.friction == 0.8 and sim.spacer.cell == 2.0
-        bad = compose(config_name=None, overrides=["+sim=default", "sim.spacer.thickness=0"])
-        with pytest.raises(ConfigError, match=r"sim\.spacer\.thickness"):
+        assert sim.spacer.modulus_kpa == 20.0 and sim.cover.friction == 0.8 and sim.spacer.cell_mm == 2.0
+        bad = compose(config_name=None, overrides=["+sim=default", "sim.spacer.thickness_mm=0"])
+        with pytest.raises(ConfigError, match=r"sim\.spacer\.thickness_mm"):
             validate(bad, "sim")

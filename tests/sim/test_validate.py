@@ -44,7 +44,7 @@ def test_plate_closed_form_catches_a_wrong_bending_operator(monkeypatch):
 
 def test_vertical_stiffness_catches_a_lattice_far_too_stiff(fresh_tables):
     assert v.vertical_stiffness(SIM).passed
-    stiff = replace(SIM, spacer=replace(SIM.spacer, modulus=4.0 * SIM.spacer.modulus))
+    stiff = replace(SIM, spacer=replace(SIM.spacer, modulus_kpa=4.0 * SIM.spacer.modulus_kpa))
     assert not v.vertical_stiffness(SIM, model_sim=stiff).passed
 
 
@@ -83,8 +83,8 @@ def test_slides_use_the_protocols_thresholds_and_are_reported_not_checked():
 
 
 def test_overrides_reach_the_design():
-    sim = v.load_sim(["sim.spacer.modulus=20", "sheet.interface=bonded"])
-    assert sim.spacer.modulus == 20 and sim.sheet.interface == "bonded"
+    sim = v.load_sim(["sim.spacer.modulus_kpa=20", "sheet.interface=bonded"])
+    assert sim.spacer.modulus_kpa == 20 and sim.sheet.interface == "bonded"
     assert sim.sheet.rigidity_n_mm == pytest.approx(SIM.sheet.sandwich_rigidity_n_mm)
 
 

@@ -167,7 +167,7 @@ def fast_side(model: SkinModel, reader: Reader, loads_n_per_mm, ratios=None) -> 
     """The fast model (rod mode) at the FEM's normal line loads, sheared while sticking to
     F_t / F_z = the FEM's ratio at each (SHEAR_RATIO where it reached it)."""
     tab = model.tab
-    half = model.sim.spacer.width / 2
+    half = model.sim.spacer.width_mm / 2
     length = 2.0 * half  # the line along y crosses the whole pad
     rows = []
     fresh = model.mech_state()  # unloaded, nothing stuck

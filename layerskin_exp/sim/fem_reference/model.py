@@ -88,10 +88,10 @@ class Section:
         cu_a = sh.copper_modulus_mpa * sh.copper_thickness_mm
         along = pi_a + sh.electrode_fill * cu_a
         across = 1.0 / (sh.electrode_fill / (pi_a + cu_a) + (1.0 - sh.electrode_fill) / pi_a)
-        return cls(width_mm=sp_.width, lattice_mm=sp_.thickness, pitch_mm=sp_.cell,
-                   wall_mm=BAND_SHARE * sp_.solid_fraction * sp_.cell, solid_fraction=sp_.solid_fraction, cover_mm=sim.cover.thickness, film_mm=t_film,
-                   core_mm=sh.velostat_thickness_mm, slip_mm=0.005, silicone_e_mpa=sp_.modulus * KPA,
-                   silicone_nu=sp_.poisson, cover_e_mpa=sim.cover.modulus * KPA,
+        return cls(width_mm=sp_.width_mm, lattice_mm=sp_.thickness_mm, pitch_mm=sp_.cell_mm,
+                   wall_mm=BAND_SHARE * sp_.solid_fraction * sp_.cell_mm, solid_fraction=sp_.solid_fraction, cover_mm=sim.cover.thickness_mm, film_mm=t_film,
+                   core_mm=sh.velostat_thickness_mm, slip_mm=0.005, silicone_e_mpa=sp_.modulus_kpa * KPA,
+                   silicone_nu=sp_.poisson, cover_e_mpa=sim.cover.modulus_kpa * KPA,
                    film_along_e_mpa=along / t_film, film_across_e_mpa=across / t_film,
                    core_e_mpa=sh.velostat_modulus_mpa, radius_mm=rig.INDENTER_RADIUS_MM,
                    interface=interface)
