@@ -600,9 +600,13 @@ def run(cfg: DesignMapConfig) -> dict:
         raise FileNotFoundError(f"sweep_dir={sweep}: no force_calibration sessions found under it; run the "
                                 "design sweep first (README, 'Spacer design map')")
     if cfg.n_jobs > 1:
-        from joblib import Parallel, delayed
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
 
-        measured = Parallel(n_jobs=cfg.n_jobs)(delayed(_measure)(folder, cfg) for folder in folders)
+        # spawn: fresh interpreters (no forked torch/numba threads); the stdlib pool, since joblib's
+        # loky workers failed to start their own children here ("cannot find context for 'loky'")
+        with ProcessPoolExecutor(cfg.n_jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            measured = list(pool.map(_measure, folders, [cfg] * len(folders)))
     else:
         measured = [_measure(folder, cfg) for folder in folders]
     outcomes = [o for o in measured if "error" not in o]
