@@ -125,7 +125,7 @@ def run_sample(overrides: list[str], size: str, workdir: Path) -> dict:
         run_campaign(typed, rig, {"config": OmegaConf.to_container(OmegaConf.structured(typed), resolve=True),
                                   "backend": "sim", "provenance": {"overrides": overrides}})
     (folder,) = [p for p in (workdir / "force_calibration").iterdir() if p.is_dir()]
-    o = campaign_outcomes(folder, DesignMapConfig(min_frames=10))
+    o = campaign_outcomes(folder, DesignMapConfig(min_frames=10, ts5=False))  # no T-s5 per sample: not an outcome here
     slides = o.get("slides", {})
     return {"shift_per_n_mm": o.get("shift_per_n_mm"),
             "cop_shift_at_2n_mm": (o.get("cop_shift_at_2n") or {}).get("median_mm"),

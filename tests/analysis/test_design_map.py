@@ -122,3 +122,46 @@ def test_design_search_sweeper_composes(tmp_path):
     assert "direction:\n    - maximize\n    - maximize" in sweeper
     for key in ("sim.spacer.modulus_kpa", "sim.spacer.thickness_mm", "sim.spacer.cell_mm", "sim.spacer.wall_mm"):
         assert f"{key}:" in sweeper
+
+
+def test_position_folds_never_share_a_position():
+    from analysis.design_map import position_folds
+
+    groups = np.repeat(np.arange(6), 10)
+    splits = position_folds(groups, 4)
+    assert len(splits) == 4
+    for tr, te in splits:
+        assert not set(groups[tr]) & set(groups[te])
+    assert sorted(np.concatenate([te for _, te in splits]).tolist()) == list(range(60))  # every frame tested once
+    assert len(position_folds(groups, 10)) == 6  # one position per fold when there are fewer positions
+    assert position_folds(np.zeros(5), 4) == []
+
+
+def test_ts5_per_design_on_a_synthetic_campaign_is_flagged_when_unconverged(tmp_path):
+    """A tiny T-s5 on the same position folds as the linear model; one epoch is the epoch cap, so
+    the report's flag marks it unconverged and the map shows that beside its R²."""
+    from analysis.design_map import campaign_outcomes
+    from layerskin_exp.estimation.config import CnnConfig
+    from tests.analysis.synthetic import write_campaign
+
+    root = write_campaign(tmp_path / "camp", n_positions=4, grip_depths=())
+    tiny = CnnConfig(configurations=["T-s5"], batch_size=32, segment_windows=8, max_epochs=1, max_train_windows=128,
+                     torch_threads=1)
+    cfg = DesignMapConfig(sweep_dir=str(tmp_path), min_frames=10, folds=2, cnn=tiny)
+    o = campaign_outcomes(root / "force_calibration", cfg)
+    assert o["folds"] == 2
+    assert set(o["ts5_r2"]) == {"x", "y", "z"} and all(np.isfinite(o["ts5_r2"][a]) for a in "xyz")
+    assert o["ts5_r2_shear"] == pytest.approx(np.mean([o["ts5_r2"]["x"], o["ts5_r2"]["y"]]))
+    tr = o["ts5_training"]
+    assert len(tr["folds"]) == 2 and all(f["epochs"] == 1 for f in tr["folds"])
+    assert tr["converged"] is False and any("epoch cap" in c for c in tr["caveats"])
+    o["overrides"] = ["+design=study", "+bracket=nominal"]
+    m = build_map([o])
+    from analysis.design_map import _ts5_cell
+
+    cell = _ts5_cell(m["designs"]["study"])
+    assert "†" in cell and "(1/1 unconverged)" in cell
+    o["ts5_training"] = {**tr, "converged": True, "caveats": []}  # the same numbers, converged: no mark
+    assert "†" not in _ts5_cell(build_map([o])["designs"]["study"])
+    cfg.ts5 = False
+    assert "ts5_r2" not in campaign_outcomes(root / "force_calibration", cfg)
