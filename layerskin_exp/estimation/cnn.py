@@ -176,6 +176,13 @@ def _channels_last(x: torch.Tensor) -> torch.Tensor:
     return x.contiguous(memory_format=torch.channels_last)
 
 
+# Frames per encoder call at inference (validation every epoch, predict): (CPU, CUDA). On a CPU,
+# 256 frames keep the first convolution's output (256 x 32 x 16 x 16 floats, 8 MiB) near the
+# cache, and encode a 64-position demo validation set in 0.6x the time of 4096-frame calls
+# (1.6 s vs 2.6 s for 22,864 frames, one thread); a GPU wants large calls.
+PREDICT_CHUNK = (256, 4096)
+
+
 def _to(a: np.ndarray, dev: torch.device) -> torch.Tensor:
     t = torch.from_numpy(np.ascontiguousarray(a))
     if dev.type == "cuda":
@@ -306,8 +313,11 @@ class CnnGruForceModel(BaseEstimator):
 
     # -- inference ---------------------------------------------------------------------------
     @torch.no_grad()
-    def _predict_tensor(self, x: torch.Tensor, win: torch.Tensor, chunk: int = 4096) -> torch.Tensor:
-        """Normalised inputs (N, C, 16, 16) and windows (M, T) on the device -> (M, 3) normalised force."""
+    def _predict_tensor(self, x: torch.Tensor, win: torch.Tensor, chunk: int | None = None) -> torch.Tensor:
+        """Normalised inputs (N, C, 16, 16) and windows (M, T) on the device -> (M, 3) normalised force.
+
+        chunk: frames encoded per call; None: PREDICT_CHUNK for the device."""
+        chunk = chunk or PREDICT_CHUNK[x.device.type == "cuda"]
         was_training = self.model_.training
         self.model_.eval()
         if len(x) == 0:

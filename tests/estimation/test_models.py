@@ -173,3 +173,15 @@ def test_cnn_params_come_from_the_constructor():
     assert set(m.get_params()) == {"configuration", "config", "progress"}
     m.set_params(configuration="S-s1")
     assert (m.layers, m.seq_len) == ("S", 1)
+
+
+def test_prediction_does_not_depend_on_the_inference_chunk():
+    """Validation and predict encode frames in chunks (PREDICT_CHUNK); chunk edges must not show.
+    120 frames in chunks of 7 put chunk edges inside trials' windows."""
+    X, y, trials = _toy_data(n_trials=6, n=20)
+    m = CnnGruForceModel("T-s5", CnnConfig(max_epochs=1, batch_size=64, segment_windows=16)).fit(X, y, trials)
+    x = torch.as_tensor(m._inputs(X))
+    win = torch.as_tensor(window_indices(np.arange(len(X)), trial_starts(trials), m.seq_len))
+    whole = m._predict_tensor(x, win, chunk=len(X))
+    np.testing.assert_allclose(m._predict_tensor(x, win, chunk=7).numpy(), whole.numpy(), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(m._predict_tensor(x, win).numpy(), whole.numpy(), rtol=1e-5, atol=1e-5)
