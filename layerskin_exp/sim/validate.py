@@ -25,8 +25,8 @@ import scipy.sparse.linalg as sparse_linalg
 
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.features import centre_of_pressure
-from layerskin_exp.sim.config import SimConfig, load_sim
 from layerskin_exp.sim import mechanics as mk
+from layerskin_exp.sim.config import SimConfig, load_sim
 from layerskin_exp.sim.contact import _solver
 from layerskin_exp.sim.laminate import PlateOnFoundation
 from layerskin_exp.sim.skin import SkinModel
