@@ -33,6 +33,10 @@ def _run(title: str, args: list[str]) -> float:
     return dt
 
 
+def _signed(x) -> str:
+    return "–" if x is None else f"{x:+.3f}"
+
+
 def force_summary(results_path: Path) -> str:
     """The force table (R² per axis, ours and the study's), each CNN's gain over the linear
     baseline with its confidence interval, and each CNN's training verdict, from the report's
@@ -54,7 +58,7 @@ def force_summary(results_path: Path) -> str:
         if m in gains:
             pct = round(100 * gains["confidence"])
             lines.append(f"{m} minus linear, R² ({pct} % CI over the {r['force_split']['test_trials']} test trials): "
-                         + ", ".join(f"{ax} {g:+.3f} [{lo:+.3f}, {hi:+.3f}]" for ax, (g, lo, hi) in gains[m].items()))
+                         + ", ".join(f"{ax} {_signed(g)} [{_signed(lo)}, {_signed(hi)}]" for ax, (g, lo, hi) in gains[m].items()))
     for m, t in training.items():
         verdict = ("converged" if t.get("converged") else "NOT CONVERGED: " + "; ".join(t.get("caveats", [])))
         lines.append(f"{m}: {t['epochs']}/{t['max_epochs']} epochs, best at {t['best_epoch']}, "

@@ -35,7 +35,7 @@ def r2_gain_ci(y: np.ndarray, pred: np.ndarray, base: np.ndarray, trial: np.ndar
 
     y, pred, base (N, 3) N on the test frames; trial (N,) ids. Trials, not frames, are resampled
     (frames of a trial are not independent), and both models see the same resample. Returns axis ->
-    [gain, ci_low, ci_high]. On a few dozen test trials the interval is wide: a gain whose interval
+    [gain, ci_low, ci_high] (the interval NaN with fewer than two test trials). On a few dozen test trials the interval is wide: a gain whose interval
     holds 0 is not resolved by this test set.
     """
     ids, inv = np.unique(np.asarray(trial), return_inverse=True)
@@ -45,6 +45,9 @@ def r2_gain_ci(y: np.ndarray, pred: np.ndarray, base: np.ndarray, trial: np.ndar
         rows = np.concatenate([frames[int(i)] for i in picked])
         return r2_score(y[rows], pred[rows]) - r2_score(y[rows], base[rows])
 
+    if len(ids) < 2:  # one test trial: nothing to resample, the interval is undefined
+        g = gain(np.arange(len(ids)))
+        return {ax: [float(g[i]), float("nan"), float("nan")] for i, ax in enumerate(AXES)}
     ci = bootstrap((np.arange(len(ids)),), gain, vectorized=False, n_resamples=GAIN_RESAMPLES,
                    confidence_level=GAIN_CONFIDENCE, method="percentile",
                    random_state=np.random.default_rng(seed)).confidence_interval
