@@ -9,6 +9,7 @@ import os
 import signal
 import time
 
+import numpy as np
 import pytest
 
 from layerskin_exp.log import load_session
@@ -70,8 +71,12 @@ def test_stalled_stream_on_loopback_stops_safely(tmp_path, hydra_dirs, app, devi
     assert "stalled" in error["fault"] or (device == "ur5e" and "link lost" in error["fault"]), error
     # motion was stopped within 50 ms of the stream's last sample (host receive times in the file):
     # the rig's watchdog asks every device every 5 ms, whatever the protocol thread is doing
-    last_ns = int(s.streams[stream]["host_t_ns"][-1])
-    assert error["detected_ns"] - last_ns <= 50e6 + 10e6, (error["detected_ns"] - last_ns) / 1e6
+    t_ns = s.streams[stream]["host_t_ns"]
+    last_ns = int(t_ns[-1])
+    # the Hand-E's driver polls its registers one GET at a time and writes a sample per full round;
+    # its stall clock starts at the last reply, which can be up to one round after the last sample
+    round_ns = float(np.median(np.diff(t_ns))) if device == "hande" else 0.0
+    assert error["detected_ns"] - last_ns <= 50e6 + 10e6 + round_ns, (error["detected_ns"] - last_ns) / 1e6
 
 
 def test_kill_9_during_a_loopback_trial_keeps_all_but_the_last_100_ms(tmp_path, hydra_dirs):
