@@ -10,6 +10,12 @@ for the current loop at the demo's batch (`conf/analysis/demo.yaml`). CPU time
 (time.process_time) is the measure, so that a machine shared with other work still gives a
 fair ratio; wall time is reported beside it. GPU rows when CUDA is present.
 Data: 24 trials x 400 downsampled frames of random maps (20 train, 4 validation).
+
+`analysis=paper` on a GPU (when CUDA is present, or with `--paper` on CPU): one epoch of each of
+the study's six configurations at the preset's settings on data the size of the full 100-position
+campaign (900 trials x 210 downsampled frames, 70 % trained on, 15 % validated on), giving seconds
+per epoch and the worst case of the preset (200 epochs each, no early stop). Speed does not
+depend on the maps' values, so random maps measure it fairly.
 """
 
 from __future__ import annotations
@@ -123,7 +129,33 @@ def _windows_per_s(cls, data, epochs: int, device: str = "cpu", **cfg) -> tuple[
     return n / cpu, n / wall
 
 
-def run(epochs: int = 1) -> dict:
+def paper_preset(device: str, epochs: int = 1, n_trials: int = 900, frames: int = 210) -> dict:
+    """Seconds per epoch of each configuration of `analysis=paper` at full-campaign size."""
+    paper = OmegaConf.load(f"{CONF_DIR}/analysis/paper.yaml").cnn
+    n_train, n_val = round(0.70 * n_trials), round(0.15 * n_trials)
+    rng = np.random.default_rng(1)
+    X = rng.random(((n_train + n_val) * frames, 2, 16, 16), dtype=np.float32)
+    y = rng.normal(size=(len(X), 3)).astype(np.float32)
+    trials = np.repeat(np.arange(n_train + n_val), frames)
+    tr = trials < n_train
+    data = X[tr], y[tr], trials[tr], X[~tr], y[~tr], trials[~tr]
+    res = {"paper_device": device, "paper_train_windows_per_epoch": int(tr.sum()), "paper_val_frames": int((~tr).sum())}
+    total = 0.0
+    for conf in paper.configurations:
+        c = CnnConfig(max_epochs=epochs, patience=epochs, device=device)
+        CnnGruForceModel(conf, CnnConfig(max_epochs=1, patience=1, device=device, max_train_windows=4096)).fit(*data)
+        w0 = time.perf_counter()
+        CnnGruForceModel(conf, c).fit(*data)
+        if device == "cuda":
+            torch.cuda.synchronize()
+        s_per_epoch = (time.perf_counter() - w0) / epochs
+        res[f"paper_{conf}_s_per_epoch"] = round(s_per_epoch, 2)
+        total += s_per_epoch
+    res["paper_worst_case_min"] = round(total * paper.max_epochs / 60, 1)
+    return res
+
+
+def run(epochs: int = 1, paper_cpu: bool = False) -> dict:
     data = _data()
     demo = OmegaConf.load(f"{CONF_DIR}/analysis/demo.yaml").cnn
     threads = torch.get_num_threads()
@@ -147,10 +179,16 @@ def run(epochs: int = 1) -> dict:
                 res[f"gpu_{name}_windows_per_wall_s"] = round(_windows_per_s(cls, data, epochs, "cuda")[1])
             res["gpu_ratio_current_over_today"] = round(
                 res["gpu_current_windows_per_wall_s"] / res["gpu_today_windows_per_wall_s"], 2)
+            res.update(paper_preset("cuda"))
+        elif paper_cpu:
+            torch.set_num_threads(threads)
+            res.update(paper_preset("cpu"))
     finally:
         torch.set_num_threads(threads)
     return res
 
 
 if __name__ == "__main__":
-    print(run())
+    import sys
+
+    print(run(paper_cpu="--paper" in sys.argv[1:]))
