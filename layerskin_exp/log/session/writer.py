@@ -23,6 +23,10 @@ from layerskin_exp.log.container.lock import WriterLock
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.session.epoch import session_offset_ns
 from layerskin_exp.log.view import frame_tree as F
+# Imported here, not where the layout is written: foxglove.layouts takes ~35 ms to import with the
+# interpreter lock held, and at the first trial's close that starved the loopback emulators (in
+# this process) past their 50 ms stream deadlines.
+from layerskin_exp.log.view.layout import app_layout, session_layout
 from layerskin_exp.sync import estimate_clock_map
 from layerskin_exp.types import (
     SKIN_SHAPE,
@@ -640,8 +644,6 @@ class SessionWriter:
     def _write_layout(self) -> None:
         """The Foxglove layout of the topics written (see view/layout.py), in the SDK's form and
         in the app's import form; a layout that cannot be built is left out, never the session."""
-        from layerskin_exp.log.view.layout import app_layout, session_layout
-
         try:
             layout = session_layout(self._channels)
         except ValueError:  # nothing written that a panel could show
