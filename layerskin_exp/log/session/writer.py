@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 from pathlib import Path
@@ -711,11 +712,13 @@ def _skin_array(layer, name: str) -> np.ndarray:
 
 
 def _vec(values, n: int, name: str) -> list[float]:
-    v = np.asarray(values, dtype=np.float64).reshape(-1)
-    if v.size != n:
-        raise ValueError(f"{name} has {v.size} values, expected {n}")
-    out = v.tolist()
-    if not np.all(np.isfinite(v)):
+    if type(values) in (tuple, list) or (type(values) is np.ndarray and values.ndim == 1):
+        out = [float(x) for x in values]  # the hot path (a wrench at 1 kHz): no array round trip
+    else:
+        out = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
+    if len(out) != n:
+        raise ValueError(f"{name} has {len(out)} values, expected {n}")
+    if not all(map(math.isfinite, out)):
         # JSON has no NaN: store null, which the reader turns back into NaN. Never drop the sample.
-        out = [x if np.isfinite(x) else None for x in out]
+        out = [x if math.isfinite(x) else None for x in out]
     return out
