@@ -1,11 +1,14 @@
 """`make demo`: the main job on the simulated rig, end to end.
 
-1. a reduced force-calibration campaign (platform + indenter + Mini40, virtual clock),
-2. a reduced grip-depth x trajectory multirun (UR5e + Hand-E + rod + camera), in parallel with
-   Hydra's joblib launcher,
-3. the analysis report on the session files both wrote,
+1. a reduced force-calibration campaign (platform + indenter + Mini40, virtual clock), and beside
+   it, on the other core, a reduced grip-depth x trajectory multirun (UR5e + Hand-E + rod +
+   camera; its console output goes to <out>/grip_depth.log),
+2. the analysis report on the session files both wrote,
 then prints where everything is. Each stage is the same command a user would type, so the demo
 also shows how to run them. Re-running resumes: complete trials are not simulated again.
+Both simulations run one process each (a campaign is one process; the grip multirun runs its jobs
+one after the other, so the contact tables and kernels load once), so on two cores they take the
+time of the longer, not the sum.
 
     python -m layerskin_exp.demo [--out DIR] [--positions N] [--grip-trials N]
 """
@@ -21,16 +24,50 @@ import time
 from pathlib import Path
 
 
+def _announce(title: str, args: list[str], where: str = "") -> None:
+    print(f"\n== {title}{where}\n$ python {shlex.join(args)}", flush=True)
+
+
 def _run(title: str, args: list[str]) -> float:
-    cmd = [sys.executable, *args]
-    print(f"\n== {title}\n$ python {shlex.join(args)}", flush=True)
+    _announce(title, args)
     t0 = time.perf_counter()
-    rc = subprocess.call(cmd)
+    rc = subprocess.call([sys.executable, *args])
     dt = time.perf_counter() - t0
     if rc != 0:
         raise SystemExit(f"demo: stage '{title}' failed with exit code {rc}; see the output above")
     print(f"-- {title}: {dt:.1f} s", flush=True)
     return dt
+
+
+class _Background:
+    """A stage run beside the foreground one, its console output in a log file."""
+
+    def __init__(self, title: str, args: list[str], log_path: Path) -> None:
+        self.title, self.log_path = title, log_path
+        _announce(title, args, f" (beside the next stage; output in {log_path})")
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+        self._log = log_path.open("w")
+        self.t0 = time.perf_counter()
+        self.proc = subprocess.Popen([sys.executable, *args], stdout=self._log, stderr=subprocess.STDOUT)
+
+    def wait(self) -> float:
+        if self.proc.poll() is None:
+            print(f"\n.. waiting for: {self.title}", flush=True)
+        rc = self.proc.wait()
+        dt = time.perf_counter() - self.t0
+        self._log.close()
+        if rc != 0:
+            tail = self.log_path.read_text(errors="replace").splitlines()[-15:]
+            raise SystemExit(f"demo: stage '{self.title}' failed with exit code {rc}; the end of "
+                             f"{self.log_path}:\n" + "\n".join(tail))
+        print(f"-- {self.title}: {dt:.1f} s", flush=True)
+        return dt
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            self.proc.wait()
+        self._log.close()
 
 
 def _signed(x) -> str:
@@ -73,24 +110,32 @@ def main(argv: list[str] | None = None) -> None:
                     help="contact positions of the calibration campaign (on 32, T-s5 fits its 202 training "
                          "trials and its test R² depends on the split; see conf/analysis/demo.yaml)")
     ap.add_argument("--grip-trials", type=int, default=3, help="trials per grip depth and motion")
-    ap.add_argument("--jobs", type=int, default=2, help="parallel grip trials (joblib launcher)")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="parallel grip trials (joblib launcher when > 1; the default runs them one after "
+                         "the other beside the calibration campaign)")
     a = ap.parse_args(argv)
 
     out = Path(a.out).resolve()
     data = out / "sessions"
     report = out / "report"
     timings = {}
-    timings["calibration"] = _run(
-        f"force-calibration campaign: {a.positions} positions x (5 presses + 4 slides)",
-        ["-m", "protocols.force_calibration", f"data_root={data}", f"positions.count={a.positions}",
-         f"hydra.run.dir={out}/hydra/force_calibration"],
-    )
-    timings["grip"] = _run(
+    launcher = ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={a.jobs}"] if a.jobs > 1 else []
+    grip = _Background(
         f"grip-depth multirun: g = 6, 9, 12, 15 mm x translation, torsion x {a.grip_trials} trials",
         ["-m", "protocols.grip_depth", "-m", "grip_depth=6,9,12,15", "trajectory=translation,torsion",
-         f"trial=range({a.grip_trials})", f"data_root={data}", "hydra/launcher=joblib",
-         f"hydra.launcher.n_jobs={a.jobs}", f"hydra.sweep.dir={out}/hydra/grip_depth"],
+         f"trial=range({a.grip_trials})", f"data_root={data}", *launcher, "progress=false",
+         f"hydra.sweep.dir={out}/hydra/grip_depth"],
+        out / "grip_depth.log",
     )
+    try:
+        timings["calibration"] = _run(
+            f"force-calibration campaign: {a.positions} positions x (5 presses + 4 slides)",
+            ["-m", "protocols.force_calibration", f"data_root={data}", f"positions.count={a.positions}",
+             f"hydra.run.dir={out}/hydra/force_calibration"],
+        )
+        timings["grip"] = grip.wait()
+    finally:
+        grip.stop()
     timings["report"] = _run(
         "analysis report (analysis=demo preset)",
         ["-m", "analysis.report", f"sessions={data}", f"out={report}", "analysis=demo"],
@@ -101,7 +146,8 @@ def main(argv: list[str] | None = None) -> None:
     print(f"session files: {data}  (inspect one: python -m layerskin_exp.log inspect FILE)")
     print(f"report:        {report / 'report.md'}")
     print(f"results:       {report / 'results.json'}")
-    print("wall time:     " + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()))
+    print("wall time:     " + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items())
+          + " (calibration and grip side by side)")
 
 
 if __name__ == "__main__":
