@@ -87,6 +87,16 @@ def _study_ranges(s) -> str:
             if fr else "not stated")
 
 
+def _gain_cell(g) -> str:
+    """'+0.484 [+0.279, +0.757]'; '–' where the gain or its interval is undefined (NaN / None)."""
+    def one(x):
+        return "–" if x is None or x != x else f"{x:+.3f}"
+    if not g:
+        return "–"
+    gain, lo, hi = g
+    return f"{one(gain)} [{one(lo)}, {one(hi)}]"
+
+
 def _force(r, s) -> list[str]:
     models = list(r["force"])
     if not models:
@@ -100,6 +110,16 @@ def _force(r, s) -> list[str]:
         for met, label in (("r2", "R²"), ("mae", "MAE (N)")):
             cells = [_pair(_get(r["force"], m, ax, met), _get(s["force"], m, ax, met)) for m in models]
             lines.append(f"| {ax} | {label} | " + " | ".join(cells) + " |")
+    gains = r.get("force_gain_over_linear") or {}
+    cnns = [m for m in models if m in gains and m != "confidence"]
+    if cnns:
+        pct = round(100 * gains["confidence"])
+        lines += ["", f"Gain over the linear baseline, R² difference with its {pct} % interval (bootstrap over "
+                  f"the {r.get('force_split', {}).get('test_trials')} test trials; an interval holding 0 is not "
+                  "resolved by this test set):", "", "| axis | " + " | ".join(f"{m} − linear" for m in cnns) + " |",
+                  "|---|" + "---|" * len(cnns)]
+        for ax in ("Fx", "Fy", "Fz"):
+            lines.append(f"| {ax} | " + " | ".join(_gain_cell(gains[m].get(ax)) for m in cnns) + " |")
     sp = r.get("force_split", {})
     lines += ["", f"Split by trial: {sp.get('train_trials')}/{sp.get('val_trials')}/{sp.get('test_trials')} "
               f"train/val/test trials, {sp.get('test_frames')} test frames (seed {sp.get('seed')}).", ""]

@@ -62,6 +62,9 @@ def test_report_writes_results_predictions_markdown_and_figures(campaign, tmp_pa
     assert data["provenance"]["version"] and "git_dirty" in data["provenance"]
     assert data["force_training"]["T-s5"]["epochs"] == 1 and not data["force_training"]["T-s5"]["converged"]
     assert "not converged" in md and "study: Fx, Fy within about" in md
+    # the CNN's gain over linear is in the markdown as in results.json (interval, or '–' if undefined)
+    gain_fx = data["force_gain_over_linear"]["T-s5"]["Fx"][0]
+    assert "| axis | T-s5 − linear |" in md and f"| Fx | {gain_fx:+.3f} [" in md
     split = data["data"]["split"]
     assert sum(p["frames"] for p in split.values()) == data["data"]["calibration_frames"]
     assert "max_epochs: 1" in (tmp_path / "config.yaml").read_text()
