@@ -10,13 +10,14 @@ from setuptools import find_namespace_packages, find_packages, setup
 
 PACKAGES = find_packages(include=["layerskin_exp*", "hardware*", "protocols*", "analysis*"])
 CONF = ["layerskin_exp.conf", *(f"layerskin_exp.conf.{p}" for p in find_namespace_packages(where="conf"))]
+DATA = ["layerskin_exp.sim.fem_reference.reference"]  # data-only folders, named for the same reason
 
 setup(
-    packages=[*PACKAGES, *CONF],
+    packages=[*PACKAGES, *CONF, *DATA],
     package_dir={"layerskin_exp.conf": "conf"},
     package_data={
         "layerskin_exp": ["py.typed"],
-        "layerskin_exp.sim.fem_reference": ["reference/*.npz", "reference/*.json"],
+        "layerskin_exp.sim.fem_reference.reference": ["*.npz", "*.json"],
         "": ["*.yaml", "*.md"],
     },
 )

@@ -54,6 +54,8 @@ def test_wheel_contents(installed):
     in_checkout = {str(p.relative_to(REPO / "conf")) for p in (REPO / "conf").rglob("*.yaml")}
     assert confs == in_checkout
     assert "layerskin_exp/py.typed" in names
+    ref = "layerskin_exp/sim/fem_reference/reference/"
+    assert {ref + "bonded.npz", ref + "summary.json"} <= set(names)  # the FEM reference the validation reads
     assert any(n.endswith("licenses/LICENSE") for n in names)
     entry = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
     for script in ("lsx-calibrate", "lsx-grip", "lsx-report", "lsx-log", "lsx-live"):
