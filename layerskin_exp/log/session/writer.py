@@ -24,9 +24,10 @@ from layerskin_exp.log.container.lock import WriterLock
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.session.epoch import session_offset_ns
 from layerskin_exp.log.view import frame_tree as F
-# Imported here, not where the layout is written: foxglove.layouts takes ~35 ms to import with the
-# interpreter lock held, and at the first trial's close that starved the loopback emulators (in
-# this process) past their 50 ms stream deadlines.
+
+# Imported with the writer, not where the layout is written: foxglove.layouts takes ~35 ms to
+# import with the interpreter lock held, and at the first trial's close that starved the loopback
+# emulators (in this process) past their 50 ms stream deadlines.
 from layerskin_exp.log.view.layout import app_layout, session_layout
 from layerskin_exp.sync import estimate_clock_map
 from layerskin_exp.types import (
