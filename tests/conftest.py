@@ -1,8 +1,22 @@
 import os
+import tempfile
 
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+# Contact tables on disk (layerskin_exp.sim.table_cache): the protocol runs this suite starts as
+# subprocesses share one folder of this session's own, never the user's cache; the in-process
+# tests, which replace physics functions to show checks failing, use no disk cache at all.
+_TABLES = tempfile.TemporaryDirectory(prefix="lsx-test-tables-")
+os.environ["LAYERSKIN_CACHE_DIR"] = _TABLES.name
+
+
+@pytest.fixture(autouse=True)
+def _no_disk_tables_in_process(monkeypatch):
+    from layerskin_exp.sim import table_cache
+
+    monkeypatch.setattr(table_cache, "ENABLED", False)
 
 
 @pytest.fixture

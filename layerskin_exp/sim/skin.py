@@ -38,6 +38,7 @@ import numpy as np
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.sim import frame_kernels as fk
 from layerskin_exp.sim import mechanics as mk
+from layerskin_exp.sim import table_cache
 from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.contact import ContactTables, build_tables
 from layerskin_exp.sim.friction import StickSlip
@@ -104,12 +105,13 @@ _KERNELS_LOADED = False  # the frame kernels are loaded once per process (SkinMo
 
 
 def tables_for(sim: SimConfig, kind: str, radius_mm: float | None = None) -> ContactTables:
-    """Contact tables for a design, computed once per distinct (spacer, cover, contact) config."""
+    """Contact tables for a design, computed once per distinct (spacer, cover, contact) config
+    (in this process, and on disk for later processes: see table_cache)."""
     key = repr((sim.spacer, sim.cover, sim.sheet, sim.fsr.layer_thickness_mm, sim.contact, kind, radius_mm))
     if key not in _TABLE_CACHE:
         if len(_TABLE_CACHE) > 16:
             _TABLE_CACHE.clear()
-        _TABLE_CACHE[key] = build_tables(sim, kind, radius_mm)
+        _TABLE_CACHE[key] = table_cache.load_or_build(key, lambda: build_tables(sim, kind, radius_mm))
     return _TABLE_CACHE[key]
 
 
