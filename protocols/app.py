@@ -17,6 +17,7 @@ import threading
 from collections.abc import Callable
 
 from omegaconf import DictConfig, OmegaConf
+from tqdm.auto import tqdm
 
 from hardware.interfaces import DeviceError
 from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, refuse
@@ -105,15 +106,23 @@ def _sigterm_as_exception():
         signal.signal(signal.SIGINT, previous[1])
 
 
-def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object]):
-    """Validate, build and connect the rig, run body(typed_cfg, rig, metadata), always stop and disconnect.
+def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object],
+            prepare: Callable[[object], None] | None = None):
+    """Validate, run prepare(typed_cfg) when given, build and connect the rig, run
+    body(typed_cfg, rig, metadata), always stop and disconnect.
 
-    Nothing moves before every device is connected and the config validated.
+    Nothing moves before every device is connected and the config validated. Whatever a run
+    would import or load lazily belongs before the devices connect (here or in `prepare`): an
+    import holds the interpreter lock for much of its body, and the loopback emulators run in
+    this process against 50 ms stream deadlines (tests/protocols/test_late_imports.py).
     """
     from hardware import build_rig  # the backends import heavy optional drivers
 
     try:
         typed = validate(cfg)
+        tqdm.get_lock()  # tqdm makes its lock, importing multiprocessing, at its first bar
+        if prepare is not None:
+            prepare(typed)
         rig = build_rig(cfg, setup)
     except ConfigError as e:
         refuse(e)
@@ -132,6 +141,7 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         rig.disconnect()
         print(f"error: could not connect the {rig.backend} rig: {one_line(e)}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
+    sys.audit("layerskin_exp.rig_connected", rig.backend)  # from here on the devices stream
     if not rig.clock.is_virtual:
         # Everything built so far (modules, configs, drivers) leaves the garbage collector's reach:
         # a full collection stops every thread, and over this heap it took ~200 ms, which the

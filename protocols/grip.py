@@ -11,6 +11,7 @@ the online estimator and the live force and slip estimates are logged (/estimate
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -166,6 +167,23 @@ def log_estimates(log: TrialLog, online) -> None:
     log.drain = drain_and_estimate
 
 
+@functools.lru_cache(maxsize=4)
+def online_estimator(path: str):
+    """The OnlineEstimator of an artifact, loaded once per process (its ONNX export imports torch.onnx
+    and onnx and takes a while): the jobs of a sweep in one process share it, each trial resets it."""
+    from layerskin_exp.estimation import OnlineEstimator
+
+    return OnlineEstimator.from_artifact(path)
+
+
+def prepare_grip(cfg: GripDepthConfig) -> None:
+    """Before the devices connect (run_app's `prepare`): load the estimator, so that a bad artifact
+    refuses the run before anything moves and its imports and export do not run while the devices
+    stream (the loopback emulators in this process keep 50 ms deadlines)."""
+    if cfg.estimator:
+        online_estimator(cfg.estimator)
+
+
 def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) -> TrialResult:
     if rig.arm is None or rig.gripper is None:
         raise ConfigError(f"hardware: backend {rig.backend!r} gave no arm/gripper; the grip-depth protocol "
@@ -174,10 +192,9 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) ->
     safety.check_grip_depth(cfg.grip_depth)
     labels = trial_labels(cfg)
     online = None
-    if cfg.estimator:  # loaded before the trial starts: a bad artifact refuses the run, not a trial half-way
-        from layerskin_exp.estimation import OnlineEstimator
-
-        online = OnlineEstimator.from_artifact(cfg.estimator)
+    if cfg.estimator:
+        online = online_estimator(cfg.estimator)
+        online.reset()  # this trial's own baseline and windows
 
     def body(log: TrialLog) -> None:
         if online is not None:
