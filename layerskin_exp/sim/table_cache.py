@@ -1,7 +1,7 @@
 """Contact tables kept on disk, so that each process of a sweep does not solve them again.
 
-Solving one design's contact tables (`contact.build_tables`) takes about 4 s for the hemisphere
-and 20 s for the rod on one core, and every process that simulates the design needs them: a
+Solving one design's contact tables (`contact.build_tables`) takes about 2 s for the hemisphere
+and 12 s for the rod on one core, reading them back 8 ms (benchmarks/contact_tables), and every process that simulates the design needs them: a
 campaign, each job of a grip sweep under the joblib or submitit launcher, each protocol run of
 the test suite. They are a pure function of the design's parameters and of the simulator's code,
 so a file is stored under a key that hashes both: the caller's description of the design (the
