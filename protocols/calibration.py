@@ -118,7 +118,7 @@ class PlatformControl:
     def bind(self, log: TrialLog) -> PlatformControl:
         """Use this trial's log (and a control loop on it) from now on."""
         self.log = log
-        self.loop = ControlLoop(log, self.cfg.control_period_s)
+        self.loop = ControlLoop(log, self.cfg.control_period_s, trial_timeout_s=self.cfg.trial_timeout_s)
         return self
 
     def position_mm(self) -> np.ndarray:

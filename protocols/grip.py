@@ -72,7 +72,7 @@ class GripControl:
     def __init__(self, log: TrialLog, safety: Safety, cfg: GripDepthConfig) -> None:
         self.log, self.safety, self.cfg = log, safety, cfg
         self.rig = log.rig
-        self.loop = ControlLoop(log, cfg.control_period_s, trips_abort=True)
+        self.loop = ControlLoop(log, cfg.control_period_s, trips_abort=True, trial_timeout_s=cfg.trial_timeout_s)
 
     def gripper_opening_mm(self, first_state_timeout_s: float = 0.5) -> float:
         """The last reported jaw opening; waits (ticking) for the gripper's first state report."""

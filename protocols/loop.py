@@ -4,8 +4,9 @@ checks live in one place.
 
 Every tick asks the rig for a fault (a stalled stream, a lost link, a fault a device signals,
 one a driver thread reported): the first one stops all motion and raises `DeviceFault`, which
-closes the trial file "aborted: <reason>". A wait that outlasts its deadline raises
-`DeviceTimeout`. Both are `DeviceError`s.
+closes the trial file "aborted: <reason>". A wait that outlasts its deadline, or a trial that
+outlasts `trial_timeout_s`, raises `DeviceTimeout` after stopping all motion. Both are
+`DeviceError`s.
 """
 
 from __future__ import annotations
@@ -36,14 +37,18 @@ class DeviceTimeout(DeviceError):
 class ControlLoop:
     """Ticks of one trial: `period_s` of rig clock each, every sample drained into `log`."""
 
-    def __init__(self, log: TrialLog, period_s: float, trips_abort: bool = False) -> None:
+    def __init__(self, log: TrialLog, period_s: float, trips_abort: bool = False,
+                 trial_timeout_s: float | None = None) -> None:
         """trips_abort: a guard trip ends the trial (raises GuardTripped) instead of being left to
-        the protocol to handle (the calibration protocol retracts and goes on)."""
+        the protocol to handle (the calibration protocol retracts and goes on).
+        trial_timeout_s: rig-clock seconds from now after which the trial is stopped."""
         self.trips_abort = trips_abort
         self.log = log
         self.rig = log.rig
         self.clock = log.rig.clock
         self.period_s = float(period_s)
+        self.trial_timeout_s = trial_timeout_s
+        self._trial_end_ns = None if trial_timeout_s is None else self.clock.now_ns() + int(trial_timeout_s * 1e9)
 
     def check(self) -> None:
         """Raise DeviceFault (after stopping all motion) if any device reports a fault, and
@@ -59,6 +64,10 @@ class ControlLoop:
             raise
         if self.trips_abort and self.rig.tripped is not None:
             raise GuardTripped(self.rig.tripped)
+        if self._trial_end_ns is not None and self.clock.now_ns() > self._trial_end_ns:
+            self.rig.stop_motion()
+            raise DeviceTimeout(f"the trial outlasted trial_timeout_s={self.trial_timeout_s:g} s and was stopped "
+                                "(raise trial_timeout_s if the protocol needs longer)")
 
     def tick(self) -> tuple[list, list]:
         """One control period: sleep, drain, check faults. Returns the new (skin frames, wrenches)."""
