@@ -5,8 +5,8 @@ and 12 s for the rod on one core, reading them back 8 ms (benchmarks/contact_tab
 process that simulates the design needs them: a campaign, each job of a grip sweep under the
 joblib or submitit launcher, each protocol run of the test suite. They are a pure function of the design's parameters and of the simulator's code,
 so a file is stored under a key that hashes both: the caller's description of the design (the
-config's repr) and the bytes of every module of `layerskin_exp.sim`, with numpy's and scipy's
-versions. Editing the simulator therefore never reads a stale table.
+config's repr) and the bytes of every module of `layerskin_exp.sim` and of `layerskin_exp/rig.py`
+(the rig's facts they read), with numpy's and scipy's versions. Editing the simulator therefore never reads a stale table.
 
 Where: `$LAYERSKIN_CACHE_DIR` when set (set to an empty string: no disk cache), else
 `$XDG_CACHE_HOME/layerskin-exp/contact-tables` (`~/.cache/...`). A file that cannot be read is
@@ -56,7 +56,8 @@ def code_hash() -> str:
     if _CODE_HASH is None:
         h = hashlib.sha256(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
         here = Path(__file__).parent
-        for path in sorted(here.glob("*.py")):
+        # the simulator's modules, and the rig's facts they read (indenter and rod radii, pitch)
+        for path in [*sorted(here.glob("*.py")), here.parent / "rig.py"]:
             h.update(path.name.encode())
             h.update(path.read_bytes())
         _CODE_HASH = h.hexdigest()

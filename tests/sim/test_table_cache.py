@@ -4,6 +4,7 @@ code or the design changes, and a damaged file costs only the time."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -73,3 +74,26 @@ def test_empty_setting_or_disabled_means_no_disk(disk, monkeypatch):
     monkeypatch.setattr(table_cache, "ENABLED", False)
     table_cache.load_or_build("design A", build)
     assert calls == [0, 0, 0] and not any(folder.iterdir())
+
+
+def test_the_code_hash_covers_the_simulator_and_the_rigs_facts(monkeypatch, tmp_path):
+    import shutil
+
+    from layerskin_exp import rig
+
+    # a copy of the sim package and rig.py: an edit of either must change the hash
+    pkg = tmp_path / "layerskin_exp"
+    shutil.copytree(Path(table_cache.__file__).parent, pkg / "sim",
+                    ignore=shutil.ignore_patterns("__pycache__", "fem_reference"))
+    shutil.copy(rig.__file__, pkg / "rig.py")
+    monkeypatch.setattr(table_cache, "__file__", str(pkg / "sim" / "table_cache.py"))
+
+    def fresh_hash():
+        monkeypatch.setattr(table_cache, "_CODE_HASH", None)
+        return table_cache.code_hash()
+
+    hashes = [fresh_hash()]
+    for edited in (pkg / "rig.py", pkg / "sim" / "laminate.py"):
+        edited.write_text(edited.read_text() + "\n# edited\n")
+        hashes.append(fresh_hash())
+    assert len(set(hashes)) == 3
