@@ -3,10 +3,11 @@
 Solving one design's contact tables (`contact.build_tables`) takes about 2 s for the hemisphere
 and 12 s for the rod on one core, reading them back 8 ms (benchmarks/contact_tables), and every
 process that simulates the design needs them: a campaign, each job of a grip sweep under the
-joblib or submitit launcher, each protocol run of the test suite. They are a pure function of the design's parameters and of the simulator's code,
-so a file is stored under a key that hashes both: the caller's description of the design (the
-config's repr) and the bytes of every module of `layerskin_exp.sim` and of `layerskin_exp/rig.py`
-(the rig's facts they read), with numpy's and scipy's versions. Editing the simulator therefore never reads a stale table.
+joblib or submitit launcher, each protocol run of the test suite. They are a pure function of the
+design's parameters and of the simulator's code, so a file is stored under a key that hashes
+both: the caller's description of the design (the config's repr) and the bytes of every module
+of `layerskin_exp.sim` and of `layerskin_exp/rig.py` (the rig's facts they read), with numpy's
+and scipy's versions. Editing the simulator therefore never reads a stale table.
 
 Where: `$LAYERSKIN_CACHE_DIR` when set (set to an empty string: no disk cache), else
 `$XDG_CACHE_HOME/layerskin-exp/contact-tables` (`~/.cache/...`). A file that cannot be read is

@@ -176,7 +176,7 @@ def to_jsonable(value):
 
 
 # One encoder for every message: json.dumps with arguments builds a new encoder per call, which
-# cost as much as the encoding itself on the 1 kHz wrench stream (benchmarks/log_write).
+# cost as much as the encoding itself on the 1 kHz wrench stream (benchmarks/log_json).
 # allow_nan=False: NaN/inf are not JSON and would not reopen in other tools.
 _ENCODER = json.JSONEncoder(default=to_jsonable, allow_nan=False, separators=(",", ":"))
 
