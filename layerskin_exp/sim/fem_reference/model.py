@@ -3,36 +3,48 @@
 
 What is modelled, from the base up (lengths mm, stresses MPa = N/mm^2, forces N per mm of
 section depth):
-- the base: rigid; the lattice is bonded to it (the deep FSR sheet lies on it and only reads
-  the walls' pressure, so its own deformation is left out);
+- the base: rigid, the deep FSR sheet bonded to it;
+- the deep FSR sheet as its three layers (film, Velostat core, film), so its bending spreads the
+  walls' load before the deep Velostat reads it, as in the skin;
 - the lattice spacer as cells: the walls crossing the section (two thirds of a hexagonal
   honeycomb's wall material) as vertical silicone walls at the cell pitch; the walls lying
   along it (the other third) smeared over the voids as a compressible medium that carries the
   honeycomb's transverse shear G rho / 2 and whose energy grows without bound as a cell is
   squeezed flat (it carries the walls' contact when a cell closes, like a third medium:
-  Wriggers, Schroder & Auricchio 2013). Without it a plane-strain section shears only by
-  bending its crossing walls, some 25 times softer than a honeycomb;
+  Wriggers, Schroder & Auricchio 2013). The walls' width is the honeycomb's share times
+  (1 - nu^2): a plane-strain wall is stiffer by 1 / (1 - nu^2) in compression than the
+  honeycomb's free-edged one, so the section's through-thickness modulus is the honeycomb's
+  rho E (Gibson & Ashby, Cellular Solids, 2nd ed. 1997, sec. 4.4: E3 = rho E_s, G13 = rho G_s / 2
+  for regular hexagons). tests/sim/test_fem_reference.py checks both moduli on a periodic strip;
 - the superficial FSR sheet as its three layers: the film whose copper strips run along the
-  section (polyimide + copper, homogenised), the Velostat core, the film whose strips cross
-  the section (strips and polyimide gaps in series); between films and core either the same
-  material (bonded bound) or a 5 um layer that transmits pressure but hardly any shear
-  (frictionless bound: nearly incompressible, shear modulus 1e-7 of the core's);
+  section (polyimide + copper, homogenised), the Velostat core, the film whose strips cross the
+  section (strips and polyimide gaps in series); films and core bonded (the glued bound);
 - the 0.2 mm silicone cover;
 - the rigid cap, a cylinder of the hemisphere's radius (the section's indenter), pressed by
   penalty contact: frictionless while it presses in, sticking (no slip) during the shear
   phase, with nodes that come into contact while shearing stuck where they touch and nodes
   whose contact force turns tensile released.
 
-Nothing of the fast model's contact law, plate theory, couple response or shear stiffness is
-used: each layer's pressure, the flank load, the cover's shear and the cells' deformation come
-out of the continuum solution.
+Each layer's pressure is the normal load it transmits, read from the solution's nodal forces:
+the internal forces of the elements above a horizontal node line, on that line, are the force
+the material below exerts across it (their sum is the cap's load, exactly, at equilibrium).
+A lumped (Simpson) tributary length per node turns them into a traction profile whose sum
+sum(p w) is the transmitted force. The superficial layer is read across its Velostat core's
+mid-plane, the deep layer across its own, the lattice-to-deep-sheet interface and the base as
+well. Nothing of the fast model's contact law, plate theory, couple response or shear
+stiffness is used.
+
+Only the bonded film interface is modelled. A frictionless (unbonded) interface was once
+approximated by a 5 um solid layer with 1e-7 of the core's shear modulus: that tangent is
+near-singular (a symmetric press gave a 0.19 mm lateral offset, the core's stress swung to
+-164 kPa under +50 kPa of contact pressure), and a well-posed version needs frictional contact
+between deformable bodies, which felupe does not provide. The bonded bound is the glued sandwich.
 
 What the section misses (state it beside every comparison): it is a line contact, infinite
 along the cap's axis (forces are per mm; a hemisphere's load spreads in two directions, a
-cylinder's in one); the walls are plane-strain plates, stiffer against buckling than a
-honeycomb's short walls; the crossing film's strips are homogenised; the deep sheet's
-bending and the bottom film are left out (the base is rigid); the air in closed cells is
-ignored.
+cylinder's in one); the walls are plane-strain plates (they also bend, which a honeycomb's
+walls loaded in their own plane hardly do: +~10 % on the transverse shear modulus); the
+films' strips are homogenised; the air in closed cells is ignored.
 """
 
 from __future__ import annotations
@@ -68,7 +80,6 @@ class Section:
     cover_mm: float
     film_mm: float
     core_mm: float
-    slip_mm: float
     silicone_e_mpa: float
     silicone_nu: float
     cover_e_mpa: float
@@ -76,40 +87,60 @@ class Section:
     film_across_e_mpa: float
     core_e_mpa: float
     radius_mm: float
-    interface: str  # "bonded" | "unbonded"
+    deep_sheet: bool = True  # False: the lattice bonded to the rigid base (the closed-form checks)
 
     @classmethod
-    def from_sim(cls, sim: SimConfig, interface: str) -> Section:
-        if interface not in ("bonded", "unbonded"):
-            raise ValueError(f"interface={interface!r}: must be 'bonded' or 'unbonded'")
+    def from_sim(cls, sim: SimConfig) -> Section:
         sp_, sh = sim.spacer, sim.sheet
         t_film = sh.film_thickness_mm + sh.copper_thickness_mm
         pi_a = sh.film_modulus_mpa * sh.film_thickness_mm  # N/mm tension stiffness per width
         cu_a = sh.copper_modulus_mpa * sh.copper_thickness_mm
         along = pi_a + sh.electrode_fill * cu_a
         across = 1.0 / (sh.electrode_fill / (pi_a + cu_a) + (1.0 - sh.electrode_fill) / pi_a)
+        wall = BAND_SHARE * sp_.solid_fraction * sp_.cell_mm * (1.0 - sp_.poisson ** 2)
         return cls(width_mm=sp_.width_mm, lattice_mm=sp_.thickness_mm, pitch_mm=sp_.cell_mm,
-                   wall_mm=BAND_SHARE * sp_.solid_fraction * sp_.cell_mm, solid_fraction=sp_.solid_fraction, cover_mm=sim.cover.thickness_mm, film_mm=t_film,
-                   core_mm=sh.velostat_thickness_mm, slip_mm=0.005, silicone_e_mpa=sp_.modulus_kpa * KPA,
+                   wall_mm=wall, solid_fraction=sp_.solid_fraction, cover_mm=sim.cover.thickness_mm,
+                   film_mm=t_film, core_mm=sh.velostat_thickness_mm, silicone_e_mpa=sp_.modulus_kpa * KPA,
                    silicone_nu=sp_.poisson, cover_e_mpa=sim.cover.modulus_kpa * KPA,
                    film_along_e_mpa=along / t_film, film_across_e_mpa=across / t_film,
-                   core_e_mpa=sh.velostat_modulus_mpa, radius_mm=rig.INDENTER_RADIUS_MM,
-                   interface=interface)
+                   core_e_mpa=sh.velostat_modulus_mpa, radius_mm=rig.INDENTER_RADIUS_MM)
+
+    def honeycomb_moduli_kpa(self) -> tuple[float, float]:
+        """The honeycomb's through-thickness Young's modulus and transverse shear modulus
+        (Gibson & Ashby 1997, sec. 4.4; regular hexagons): rho E_s and rho G_s / 2."""
+        e = self.silicone_e_mpa / KPA
+        return self.solid_fraction * e, 0.5 * self.solid_fraction * e / (2 * (1 + self.silicone_nu))
+
+
+@dataclass(frozen=True)
+class Mesher:
+    """Element counts of the section. `refine` multiplies the rows of the thin layers and the
+    elements of the coarse region; a refinement study doubles every count."""
+
+    wall_elems: int = 3
+    void_elems: int = 4
+    lattice_rows: int = 5
+    refine: int = 1
+
+    def finer(self) -> Mesher:
+        return Mesher(2 * self.wall_elems, 2 * self.void_elems, 2 * self.lattice_rows, 2 * self.refine)
 
 
 # layer names, bottom to top, with their element rows (thickness split evenly)
-LAYERS = ("lattice", "film_across", "slip_low", "core", "slip_high", "film_along", "cover")
+LAYERS = ("deep_film_along", "deep_core", "deep_film_across", "lattice", "film_across", "core",
+          "film_along", "cover")
 
 
-def _x_edges(sec: Section, wall_elems: int, void_elems: int, fine_mm: float = 7.0) -> tuple[np.ndarray, np.ndarray]:
+def _x_edges(sec: Section, wall_elems: int, void_elems: int, coarse: int, fine_mm: float = 7.0
+             ) -> tuple[np.ndarray, np.ndarray]:
     """Element edges along the section and, per element, whether it lies in a wall. Walls are
     centred on multiples of the pitch (one under the cap's start position x = 0); the pad's rim
     (beyond the last full wall) is solid. Beyond fine_mm from the centre, where the sheet has
-    spread the load into a smooth field, walls and voids get two elements each."""
+    spread the load into a smooth field, walls and voids get `coarse` elements each."""
     half = 0.5 * sec.width_mm
     p, w = sec.pitch_mm, sec.wall_mm
     edges, wall = [-half], []
-    k_last = int(np.floor((half - 0.5 * w) / p))
+    k_last = int(np.floor((half - 0.5 * w) / p + 1e-9))
 
     def fill(to, n, solid):
         edges.extend(np.linspace(edges[-1], to, n + 1)[1:])
@@ -118,12 +149,12 @@ def _x_edges(sec: Section, wall_elems: int, void_elems: int, fine_mm: float = 7.
     for k in range(-k_last, k_last + 1):
         lo, hi = k * p - 0.5 * w, k * p + 0.5 * w
         fine = abs(k * p) <= fine_mm
-        nw, nv = (wall_elems, void_elems) if fine else (2, 2)
+        nw, nv = (wall_elems, void_elems) if fine else (coarse, coarse)
         if lo > edges[-1] + 1e-9:  # void (or the rim, solid) before this wall
             fill(lo, max(1, round(nv * (lo - edges[-1]) / (p - w))), k == -k_last)
         fill(hi, nw, True)
     if half > edges[-1] + 1e-9:
-        fill(half, max(1, round(2 * (half - edges[-1]) / (p - w))), True)
+        fill(half, max(1, round(coarse * (half - edges[-1]) / (p - w))), True)
     return np.array(edges), np.array(wall)
 
 
@@ -131,24 +162,63 @@ def _x_edges(sec: Section, wall_elems: int, void_elems: int, fine_mm: float = 7.
 class Mesh:
     points: np.ndarray  # (n, 2) reference coordinates
     cells: np.ndarray  # (m, 9) quad9 (VTK order)
-    layer: np.ndarray  # (m,) index into LAYERS
+    layer: np.ndarray  # (m,) index into the stack's layer names
     wall: np.ndarray  # (m,) lattice element in a wall (False: void medium; True outside the lattice)
-    column: np.ndarray  # (m,) element column
+    names: tuple  # the stack's layer names, bottom to top
     x_edges: np.ndarray
     z_edges: np.ndarray
+    layer_z: dict  # name -> (bottom, top) reference heights
     top_nodes: np.ndarray  # cover surface nodes, left to right
     top_weights: np.ndarray  # their tributary lengths (Simpson lumping of a quadratic edge)
     base_nodes: np.ndarray
 
+    def line_nodes(self, z_mm: float) -> np.ndarray:
+        """The nodes on the horizontal line z = z_mm (an element edge), left to right."""
+        on = np.flatnonzero(np.isclose(self.points[:, 1], z_mm, atol=1e-9))
+        if len(on) == 0:
+            raise ValueError(f"no node line at z = {z_mm} mm")
+        return on[np.argsort(self.points[on, 0])]
 
-def build_mesh(sec: Section, wall_elems: int = 3, void_elems: int = 4, lattice_rows: int = 5) -> Mesh:
-    xe, wall_col = _x_edges(sec, wall_elems, void_elems)
-    rows = {"lattice": (sec.lattice_mm, lattice_rows), "film_across": (sec.film_mm, 1),
-            "slip_low": (sec.slip_mm, 1), "core": (sec.core_mm - 2 * sec.slip_mm, 2),
-            "slip_high": (sec.slip_mm, 1), "film_along": (sec.film_mm, 1), "cover": (sec.cover_mm, 2)}
-    ze, row_layer = [0.0], []
-    for li, name in enumerate(LAYERS):
-        t, n = rows[name]
+    def line_weights(self) -> np.ndarray:
+        """Simpson tributary lengths of a node line's nodes (every line has the same x)."""
+        return simpson_weights(self.x_edges)
+
+
+def simpson_weights(x_edges: np.ndarray) -> np.ndarray:
+    """Lumped tributary lengths of the nodes of a line of quadratic edges (corners and mid-points
+    alternating): L/6, 4L/6, L/6 per edge. A uniform traction's consistent nodal forces divided
+    by them give it back at every node."""
+    w = np.zeros(2 * len(x_edges) - 1)
+    for c in range(len(x_edges) - 1):
+        length = x_edges[c + 1] - x_edges[c]
+        w[2 * c] += length / 6
+        w[2 * c + 1] += 4 * length / 6
+        w[2 * c + 2] += length / 6
+    return w
+
+
+def stack_rows(sec: Section, mesher: Mesher) -> list[tuple[str, float, int]]:
+    """(layer, thickness mm, element rows), bottom to top."""
+    r = mesher.refine
+    sheet = [("film_across", sec.film_mm, r), ("core", sec.core_mm, 2 * r), ("film_along", sec.film_mm, r)]
+    deep = [("deep_film_along", sec.film_mm, r), ("deep_core", sec.core_mm, 2 * r),
+            ("deep_film_across", sec.film_mm, r)] if sec.deep_sheet else []
+    return deep + [("lattice", sec.lattice_mm, mesher.lattice_rows)] + sheet + [("cover", sec.cover_mm, 2 * r)]
+
+
+def build_mesh(sec: Section, mesher: Mesher = Mesher(), rows: list | None = None,
+               x_edges: np.ndarray | None = None) -> Mesh:
+    """The section's mesh. `rows` (layer, thickness, element rows) and `x_edges` replace the
+    skin's stack and the lattice's cell pattern (the closed-form checks use a plain layer)."""
+    rows = stack_rows(sec, mesher) if rows is None else rows
+    if x_edges is None:
+        xe, wall_col = _x_edges(sec, mesher.wall_elems, mesher.void_elems, 2 * mesher.refine)
+    else:
+        xe, wall_col = np.asarray(x_edges, float), np.ones(len(x_edges) - 1, bool)
+    names = tuple(name for name, _, _ in rows)
+    ze, row_layer, layer_z = [0.0], [], {}
+    for li, (name, t, n) in enumerate(rows):
+        layer_z[name] = (ze[-1], ze[-1] + t)
         ze += list(ze[-1] + np.linspace(0.0, t, n + 1)[1:])
         row_layer += [li] * n
     ze = np.array(ze)
@@ -165,24 +235,19 @@ def build_mesh(sec: Section, wall_elems: int = 3, void_elems: int = 4, lattice_r
     def nid(iz, ix):
         return ix * nzn + iz
 
-    cells, layer, wall, column = [], [], [], []
+    lattice = names.index("lattice") if "lattice" in names else -1
+    cells, layer, wall = [], [], []
     for r in range(len(ze) - 1):
         for c in range(len(xe) - 1):
             i, j = 2 * c, 2 * r
             cells.append([nid(j, i), nid(j, i + 2), nid(j + 2, i + 2), nid(j + 2, i),
                           nid(j, i + 1), nid(j + 1, i + 2), nid(j + 2, i + 1), nid(j + 1, i), nid(j + 1, i + 1)])
             layer.append(row_layer[r])
-            wall.append(bool(wall_col[c]) or row_layer[r] != 0)
-            column.append(c)
+            wall.append(bool(wall_col[c]) or row_layer[r] != lattice)
     top = np.array([nid(len(zn) - 1, i) for i in range(nxn)])
-    w = np.zeros(nxn)
-    for c in range(len(xe) - 1):  # Simpson lumping on each quadratic edge: L/6, 4L/6, L/6
-        length = xe[c + 1] - xe[c]
-        w[2 * c] += length / 6
-        w[2 * c + 1] += 4 * length / 6
-        w[2 * c + 2] += length / 6
     base = np.array([nid(0, i) for i in range(nxn)])
-    return Mesh(points, np.array(cells), np.array(layer), np.array(wall), np.array(column), xe, ze, top, w, base)
+    return Mesh(points, np.array(cells), np.array(layer), np.array(wall), names, xe, ze, layer_z, top,
+                simpson_weights(xe), base)
 
 
 def _neo_hooke(e_mpa: float, nu: float):
@@ -191,34 +256,36 @@ def _neo_hooke(e_mpa: float, nu: float):
     return fem.NeoHooke(mu=mu, bulk=bulk)
 
 
+def fill_shear_modulus_mpa(sec: Section) -> float:
+    """Shear modulus of the void medium: the crossing walls (fraction f of the section, shear
+    modulus G_s) and the medium in series give the honeycomb's G13 = rho G_s / 2."""
+    f = sec.wall_mm / sec.pitch_mm
+    g_s = sec.silicone_e_mpa / (2 * (1 + sec.silicone_nu))
+    g13 = 0.5 * sec.solid_fraction * g_s
+    return (1.0 - f) / (1.0 / g13 - f / g_s)
+
+
 def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
     """(cell mask, felupe material) per material region."""
     lay = mesh.layer
-    idx = {n: i for i, n in enumerate(LAYERS)}
-    core = _neo_hooke(sec.core_e_mpa, 0.4)
-    if sec.interface == "bonded":
-        slip = core
-    else:  # pressure passes, shear does not: the core's bulk modulus, a vanishing shear modulus
-        k_core = sec.core_e_mpa / (3 * (1 - 2 * 0.4))
-        slip = fem.NeoHooke(mu=1e-7 * sec.core_e_mpa, bulk=k_core)
-    # the walls along the section, smeared over the voids: their silicone share of the plan
-    # (1 - BAND_SHARE) rho over the voids' fraction of the section carries the honeycomb's
-    # transverse shear G rho / 2 (Gibson & Ashby) and its share of compression, with no lateral
-    # coupling (nu = 0: the voids let it bulge). Its -mu ln J term stiffens without bound as a
-    # cell is squeezed flat, which carries the walls' contact when it closes (as a third medium:
-    # Wriggers, Schroder & Auricchio 2013).
-    void_fraction = 1.0 - sec.wall_mm / sec.pitch_mm
-    g_s = sec.silicone_e_mpa / (2 * (1 + sec.silicone_nu))
-    mu_fill = 0.5 * sec.solid_fraction * g_s / void_fraction
-    void = fem.NeoHookeCompressible(mu=mu_fill, lmbda=0.0)
+
+    def is_(*names):
+        return np.isin(lay, [mesh.names.index(n) for n in names if n in mesh.names])
+
+    # the walls along the section, smeared over the voids (lambda = 0: the voids let it bulge).
+    # In the section the crossing walls and this medium alternate as vertical plies, which a
+    # shear along x loads in series: 1 / G = f / G_s + (1 - f) / mu. The medium's mu is the one
+    # that makes that laminate's G the honeycomb's transverse G13 = rho G_s / 2 (Gibson & Ashby).
+    # Its -mu ln J term stiffens without bound as a cell is squeezed flat, which carries the
+    # walls' contact when it closes (a third medium).
+    mu_fill = fill_shear_modulus_mpa(sec)
     out = [
-        ((lay == idx["lattice"]) & mesh.wall, _neo_hooke(sec.silicone_e_mpa, sec.silicone_nu)),
-        ((lay == idx["lattice"]) & ~mesh.wall, void),
-        (lay == idx["film_across"], _neo_hooke(sec.film_across_e_mpa, 0.34)),
-        (lay == idx["film_along"], _neo_hooke(sec.film_along_e_mpa, 0.34)),
-        (lay == idx["core"], core),
-        ((lay == idx["slip_low"]) | (lay == idx["slip_high"]), slip),
-        (lay == idx["cover"], _neo_hooke(sec.cover_e_mpa, sec.silicone_nu)),
+        (is_("lattice") & mesh.wall, _neo_hooke(sec.silicone_e_mpa, sec.silicone_nu)),
+        (is_("lattice") & ~mesh.wall, fem.NeoHookeCompressible(mu=mu_fill, lmbda=0.0)),
+        (is_("film_across", "deep_film_across"), _neo_hooke(sec.film_across_e_mpa, 0.34)),
+        (is_("film_along", "deep_film_along"), _neo_hooke(sec.film_along_e_mpa, 0.34)),
+        (is_("core", "deep_core"), _neo_hooke(sec.core_e_mpa, 0.4)),
+        (is_("cover"), _neo_hooke(sec.cover_e_mpa, sec.silicone_nu)),
     ]
     return [(m, u) for m, u in out if m.any()]
 
@@ -265,29 +332,32 @@ class CapContact:
         return f, k, normal
 
 
-class StackFE:
-    """The section, its fields and bodies, and a Newton solver with the cap's contact."""
+def moment_scale(fz: float, fx: float, load_x_mm: float, load_height_mm: float) -> float:
+    """What a first-moment error is judged against (N mm / mm): the load's moment about the
+    line's origin, or F_z x 1 mm where that is smaller (a centred press has none)."""
+    return max(abs(fz * load_x_mm) + abs(fx * load_height_mm), abs(fz) * 1.0, 1e-12)
 
-    def __init__(self, sec: Section, wall_elems: int = 3, void_elems: int = 4, lattice_rows: int = 5,
-                 penalty: float = 2.0e3):
+
+class StackFE:
+    """The section, its fields and bodies, and a Newton solver with the cap's contact.
+
+    `mesh` and `mats` (cell mask, felupe material) replace the skin's section (the closed-form
+    checks solve a plain layer with the same machinery)."""
+
+    def __init__(self, sec: Section, mesher: Mesher = Mesher(), penalty: float = 2.0e3,
+                 mesh: Mesh | None = None, mats: list | None = None):
         self.sec = sec
-        self.mesh = build_mesh(sec, wall_elems, void_elems, lattice_rows)
+        self.mesher = mesher
+        self.mesh = build_mesh(sec, mesher) if mesh is None else mesh
         m = self.mesh
         self.height_mm = float(m.z_edges[-1])
-        self.bodies, self.fields, self.regions = [], [], []
-        first = None
-        for mask, umat in materials(sec, m):
-            mesh_k = fem.Mesh(m.points, m.cells[mask], "quad9")
-            region = fem.RegionBiQuadraticQuad(mesh_k)
-            fld = fem.FieldContainer([fem.FieldPlaneStrain(region, dim=2)])
-            if first is None:
-                first = fld
-            else:
-                fld.link(first)
-            self.bodies.append((mask, fem.SolidBody(umat, fld)))
+        self.bodies, self.fields = [], []
+        self._first = None
+        for mask, umat in (materials(sec, m) if mats is None else mats):
+            body, fld = self._body(mask, umat)
+            self.bodies.append((mask, body))
             self.fields.append(fld)
-            self.regions.append(region)
-        self.u = first[0].values  # (n, 2) shared displacement array
+        self.u = self._first[0].values  # (n, 2) shared displacement array
         n = len(m.points)
         fixed = np.zeros((n, 2), bool)
         fixed[m.base_nodes] = True
@@ -295,6 +365,16 @@ class StackFE:
         self.contact = CapContact(m.top_nodes, m.top_weights, sec.radius_mm, penalty)
         self.centre = np.array([0.0, self.height_mm + sec.radius_mm])
         self.max_step_mm = 0.15
+        self._probes: dict = {}
+
+    def _body(self, mask: np.ndarray, umat):
+        region = fem.RegionBiQuadraticQuad(fem.Mesh(self.mesh.points, self.mesh.cells[mask], "quad9"))
+        fld = fem.FieldContainer([fem.FieldPlaneStrain(region, dim=2)])
+        if self._first is None:
+            self._first = fld
+        else:
+            fld.link(self._first)
+        return fem.SolidBody(umat, fld), fld
 
     def move_to(self, centre: np.ndarray, sticking: bool, step_mm: float = 0.02, min_step_mm: float = 1e-4) -> int:
         """Move the cap from where it is to `centre` in increments of at most step_mm, halving an
@@ -339,9 +419,9 @@ class StackFE:
         K = K + sp.csr_matrix((k.ravel(), (rows, cols)), shape=(n, n))
         return r, K, f, normal
 
-    def newton(self, tol: float = 1e-7, max_iter: int = 25) -> int:
-        """Equilibrium at the cap's current position; returns iterations (raises on failure)."""
-        scale = None
+    def newton(self, tol: float = 1e-7, max_iter: int = 25, scale: float | None = None) -> int:
+        """Equilibrium at the cap's current position; returns iterations (raises on failure).
+        The residual is judged against `scale` (N/mm; default: the cap's contact force)."""
         for it in range(1, max_iter + 1):
             r, K, f, _ = self._system()
             rf = r[self.free]
@@ -389,6 +469,22 @@ class StackFE:
             c.stuck[release] = False
         return total
 
+    def platen(self, u_top: tuple[float, float], steps: int = 4) -> np.ndarray:
+        """Displace the whole top surface by u_top (mm) as a bonded rigid platen would (the cap
+        withdrawn), in `steps` increments; returns the platen's force on the section (N/mm),
+        from the top nodes' reactions."""
+        m = self.mesh
+        self.centre = np.array([0.0, self.height_mm + 10.0 * self.sec.radius_mm + 10.0])  # out of reach
+        fixed = np.zeros((len(m.points), 2), bool)
+        fixed[m.base_nodes] = True
+        fixed[m.top_nodes] = True
+        self.free = np.flatnonzero(~fixed.ravel())
+        for k in range(1, steps + 1):
+            self.u[m.top_nodes] = np.asarray(u_top, float) * k / steps
+            self.newton(scale=1e-3)
+        r, _, _, _ = self._system()
+        return r.reshape(-1, 2)[m.top_nodes].sum(axis=0)
+
     def stick_all_in_contact(self) -> None:
         """Start of the shear phase: every node in contact sticks where it is."""
         c = self.contact
@@ -399,88 +495,107 @@ class StackFE:
         c.stuck[:] = on
         c.anchor[on] = d[on]  # where it is now (the tie's rest length is its penetration)
 
+    # -------------------------------------------------------------- what crosses a node line
+    def transmitted(self, z_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """Nodes on the line z = z_mm (reference) and the force (n, 2) that the material below the
+        line exerts on the material above it through each: the internal forces of the row of
+        elements just above the line, at its nodes. At equilibrium their sum is minus the load
+        on everything above (the cap's contact force): F_z and F_x cross every line whole.
+        z_mm = 0 gives the base's reactions."""
+        m = self.mesh
+        if z_mm not in self._probes:
+            nodes = m.line_nodes(z_mm)
+            bottom = m.points[m.cells[:, 0], 1]  # VTK quad9: node 0 is the lower-left corner
+            above = np.isclose(bottom, z_mm, atol=1e-9)
+            if not above.any():
+                raise ValueError(f"no element row above z = {z_mm} mm")
+            probes = []
+            for mask, body in self.bodies:
+                sel = above & mask
+                if sel.any():
+                    probe, fld = self._body(sel, body.umat)
+                    probes.append((probe, fld))
+            self._probes[z_mm] = (nodes, probes)
+        nodes, probes = self._probes[z_mm]
+        f = np.zeros(self.u.size)
+        for probe, fld in probes:
+            f += np.asarray(probe.assemble.vector(fld).todense()).ravel()
+        return nodes, f.reshape(-1, 2)[nodes]
+
+    def layer_pressure(self, z_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Across the node line z = z_mm: the nodes' reference x (mm), their normal traction
+        (kPa, compressive > 0: the vertical transmitted force over each node's Simpson tributary
+        length), those lengths (mm; sum(p w) is the transmitted F_z) and the lateral traction (kPa)."""
+        nodes, f = self.transmitted(z_mm)
+        w = self.mesh.line_weights()
+        return self.mesh.points[nodes, 0], f[:, 1] / w / KPA, w, f[:, 0] / w / KPA
+
+    def layer_mid_z(self, name: str) -> float:
+        """The mid-plane node line of a layer with an even number of element rows (the Velostat
+        cores), else its bottom line."""
+        lo, hi = self.mesh.layer_z[name]
+        z = 0.5 * (lo + hi)
+        edges = self.mesh.z_edges
+        return float(edges[np.argmin(np.abs(edges - z))])
+
     # -------------------------------------------------------------- results
     def state(self) -> dict:
-        """Per-layer pressure profiles and the contact at the current equilibrium."""
+        """Forces, per-layer pressure profiles, the contact and the moment balance at the current
+        equilibrium. Forces on the skin (the fast model's convention): F_x along +x, F_z > 0
+        compressive."""
         m = self.mesh
         _, _, f, normal = self._system()
-        # forces on the skin (the fast model's convention): F_x along +x, F_z > 0 compressive
         fx, fz = float(f[:, 0].sum()), -float(f[:, 1].sum())
         in_contact = normal > 1e-9
-        x_top = m.points[m.top_nodes, 0] + self.u[m.top_nodes, 0]
+        x_top = m.points[m.top_nodes] + self.u[m.top_nodes]
         out = {"cap_x_mm": float(self.centre[0]), "depth_mm": float(self.height_mm + self.sec.radius_mm - self.centre[1]),
                "fx_n_per_mm": fx, "fz_n_per_mm": fz,
-               "contact_from_mm": float(x_top[in_contact].min()) if in_contact.any() else np.nan,
-               "contact_to_mm": float(x_top[in_contact].max()) if in_contact.any() else np.nan,
-               "contact_x_mm": x_top, "contact_kpa": normal / KPA,
+               "contact_from_mm": float(x_top[in_contact, 0].min()) if in_contact.any() else np.nan,
+               "contact_to_mm": float(x_top[in_contact, 0].max()) if in_contact.any() else np.nan,
+               "contact_x_mm": x_top[:, 0], "contact_kpa": -f[:, 1] / m.top_weights / KPA,
                "stuck_fraction": float(self.contact.stuck[in_contact].mean()) if in_contact.any() else 0.0}
-        core, deep = self._layer_pressure("core"), self._layer_pressure("lattice", bottom=True)
-        out["superficial_x_mm"], out["superficial_kpa"] = core
-        out["deep_x_mm"], out["deep_kpa"] = deep
+        # where the load acts: its centroid along x and the height of its tangential part
+        load_x = float((x_top[:, 0] * -f[:, 1]).sum() / fz) if fz else np.nan
+        load_h = float((x_top[:, 1] * f[:, 0]).sum() / fx) if abs(fx) > 1e-6 * abs(fz) else float(self.height_mm)
+        out.update(load_x_mm=load_x, load_height_mm=load_h)
+        lines = {"superficial": self.layer_mid_z("core"), "base": 0.0}
+        if "deep_core" in m.names:
+            lines["deep"] = self.layer_mid_z("deep_core")
+            lines["interface"] = m.layer_z["lattice"][0]
+        else:
+            lines["deep"] = 0.0
+        for name, z in lines.items():
+            x, p, w, q = self.layer_pressure(z)
+            out[f"{name}_x_mm"], out[f"{name}_kpa"], out[f"{name}_w_mm"] = x, p, w
+            out[f"{name}_shear_kpa"] = q
+            # statics: the first moment of what crosses the line (its nodes where they are now)
+            # is F_z x_load + F_x h_load + sum(z g_x): the load's moment carried down to it
+            nodes, g = self.transmitted(z)
+            y = m.points[nodes] + self.u[nodes]
+            first = float((y[:, 0] * g[:, 1]).sum())
+            expected = fz * load_x + fx * load_h + float((y[:, 1] * g[:, 0]).sum())
+            out[f"{name}_first_moment"] = first
+            out[f"{name}_moment_error"] = (first - expected) / moment_scale(fz, fx, load_x, load_h)
         # the superficial sheet's lateral displacement (its core's mean, under the cap's start)
         out["sheet_shift_mm"] = float(self._core_shift())
         out["sheet_x_under_cap_mm"] = float(self._core_point_under(self.centre[0]))
         out["max_lattice_strain"] = float(self._max_compression())
         return out
 
-    def _quadrature_stress(self, li: int, bottom: bool = False):
-        """Reference x of the quadrature points and the through-thickness compressive stress
-        (MPa) on the layer's material plane, for the cells of layer li (bottom row only if asked)."""
-        xs, ps = [], []
-        for (mask, body), fld, region in zip(self.bodies, self.fields, self.regions, strict=True):
-            sel = np.flatnonzero(self.mesh.layer[mask] == li)
-            if len(sel) == 0:
-                continue
-            sigma = body.evaluate.cauchy_stress(fld)  # (3, 3, q, cells) in plane strain
-            F = fld.extract()[0]  # deformation gradient (3, 3, q, cells)
-            Finv_t = np.linalg.inv(F[:2, :2].transpose(2, 3, 0, 1)).transpose(0, 1, 3, 2)  # (q, c, 2, 2) F^-T
-            nrm = Finv_t[..., :, 1]  # F^-T e_z: the normal of the deformed material plane z = const
-            nrm = nrm / np.linalg.norm(nrm, axis=-1, keepdims=True)
-            s = sigma[:2, :2].transpose(2, 3, 0, 1)  # (q, c, 2, 2)
-            snn = np.einsum("qci,qcij,qcj->qc", nrm, s, nrm)
-            cells = self.mesh.cells[mask]
-            # reference coordinates of the quadrature points
-            h = region.h[..., 0]  # (9, q) shape functions at the quadrature points
-            xq = np.einsum("aq,ca->qc", h, self.mesh.points[cells, 0])
-            zq = np.einsum("aq,ca->qc", h, self.mesh.points[cells, 1])
-            if bottom:
-                keep = zq[:, sel] < zq[:, sel].min() + 1e-9 + 0.5 * (self.mesh.z_edges[1] - self.mesh.z_edges[0]) * 0.3
-                xsel, psel = xq[:, sel][keep], -snn[:, sel][keep]
-            else:
-                xsel, psel = xq[:, sel].ravel(), -snn[:, sel].ravel()
-            xs.append(xsel.ravel())
-            ps.append(psel.ravel())
-        x = np.concatenate(xs)
-        p = np.concatenate(ps)
-        if not bottom:  # mean over the layer's quadrature rows at each x
-            ux, inv = np.unique(np.round(x, 9), return_inverse=True)
-            return ux, np.bincount(inv, p) / np.bincount(inv)
-        order = np.argsort(x)
-        return x[order], p[order]
-
-    def _layer_pressure(self, name: str, bottom: bool = False):
-        x, p = self._quadrature_stress(LAYERS.index(name), bottom)
-        return x, p / KPA
+    def _core_nodes(self) -> np.ndarray:
+        return self.mesh.line_nodes(self.layer_mid_z("core"))
 
     def _core_shift(self) -> float:
-        m = self.mesh
-        li = LAYERS.index("core")
-        nodes = np.unique(m.cells[m.layer == li])
-        near = nodes[np.abs(m.points[nodes, 0]) < 0.5 * self.sec.width_mm]
-        return float(self.u[near, 0].mean())
+        return float(self.u[self._core_nodes(), 0].mean())
 
     def _core_point_under(self, x_mm: float) -> float:
         """Reference x (the superficial sheet's own frame) of the core's mid-plane point that now
         lies at x_mm."""
-        m = self.mesh
-        nodes = np.unique(m.cells[m.layer == LAYERS.index("core")])
-        z = m.points[nodes, 1]
-        mid = nodes[np.isclose(z, np.median(np.unique(z)))]
-        xr = m.points[mid, 0]
-        order = np.argsort(xr)
-        return float(np.interp(x_mm, (xr + self.u[mid, 0])[order], xr[order]))
+        mid = self._core_nodes()
+        xr = self.mesh.points[mid, 0]
+        return float(np.interp(x_mm, xr + self.u[mid, 0], xr))
 
     def _max_compression(self) -> float:
-        m = self.mesh
-        top = np.flatnonzero(np.isclose(m.points[:, 1], self.sec.lattice_mm))
-        return float(-self.u[top, 1].min() / self.sec.lattice_mm)
+        lo, hi = self.mesh.layer_z["lattice"]
+        bottom, top = self.mesh.line_nodes(lo), self.mesh.line_nodes(hi)
+        return float((self.u[bottom, 1] - self.u[top, 1]).max() / (hi - lo))
