@@ -131,13 +131,17 @@ def _stiff_sheet(fsim):
 
 # physical error -> (how it is injected: a monkeypatch or a design hook, the metrics that must see it)
 INJECTIONS = {
-    "cover squeezed over a fixed 2 mm": (_inject_fixed_cover_width, None, ("contact_width", "peak_superficial_kpa")),
-    # at the corrected reference's loads (0.059, 0.096 N/mm) the superficial offset moves 0.14-0.15 mm
+    # With the bands widened by the reference's own mesh error (conf/sim/fem_tolerances.yaml,
+    # discretisation), two rows no longer see an error alone: the peak superficial pressure moves
+    # 1.46-1.55x under the fixed cover width (band up to 1.59x) and the effective height 0.64-0.77x
+    # under the 10x stiff lattice (band down to 0.52x); contact width and tangential stiffness do.
+    # A finer reference narrows those bands again.
+    "cover squeezed over a fixed 2 mm": (_inject_fixed_cover_width, None, ("contact_width",)),
+    # at the corrected reference's loads (0.025, 0.059 N/mm) the superficial offset moves 0.14-0.15 mm
     # under this error, inside its 0.15 mm band: the asymmetry row is the one that sees it
     "flank pressure lost": (_inject_lost_flank, None, ("superficial_asymmetry_counts",)),
     "cover rigid in shear": (_inject_rigid_cover, None, ("sheet_share_of_travel",)),
-    "lattice 10x too stiff in shear": (_inject_stiff_spacer_shear, None, ("tangential_stiffness",
-                                                                          "effective_height_counts")),
+    "lattice 10x too stiff in shear": (_inject_stiff_spacer_shear, None, ("tangential_stiffness",)),
     "sheet 100x too stiff in bending": (None, _stiff_sheet, ("peak_deep_taxel_kpa", "effective_height_rise",
                                                              "interlayer_shift_counts_mm", "deep_cop_counts_mm")),
 }
@@ -161,13 +165,13 @@ def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, 
         patch(monkeypatch)
     rows, _ = fc.compare(SIM, bounds=("bonded",), model_hook=hook)
     got = _fast_values(rows)
-    tol = fc.load_tolerances()
+    bands = {r.metric: (r.lo, r.hi) for r in rows}  # as judged: widened by the reference's mesh error
     for metric in metrics:
         base, inj = np.asarray(fast_base[metric]), np.asarray(got[metric])
-        if metric in tol["difference"]:
-            assert (np.abs(inj - base) > tol["difference"][metric]).any(), (metric, base, inj)
+        lo, hi = bands[metric]
+        if metric in fc.load_tolerances()["difference"]:
+            assert (np.abs(inj - base) > hi).any(), (metric, base, inj)
         else:
-            lo, hi = tol["ratio"][metric]
             factor = inj / base
             assert ((factor < lo) | (factor > hi)).any(), (metric, base, inj)
 
@@ -210,6 +214,12 @@ def test_the_refinement_study_is_of_the_committed_data(committed):
     now = conv.quantities(committed, reader)
     for name, q in study["quantities"].items():
         assert now[q["metric"]][q["load"]] == pytest.approx(q["default"], rel=1e-4, abs=1e-6), name
+
+
+def test_every_compared_quantity_converged_or_is_covered():
+    """Each quantity of the refinement study converged or its measured change is inside the
+    tolerances' discretisation widening of its metric."""
+    assert conv.uncovered(conv.load(), fc.load_tolerances()) == []
 
 
 def test_the_refinement_check_sees_an_unconverged_quantity():
