@@ -15,8 +15,10 @@ client sends (captured in the tests):
                         and signal_done_with_cmd() unless cmd == 255 (stop script)
 
 Commands acted on: moveL (3, synchronous or asynchronous), stopL (33) / stopJ (34), speedL (10),
-speedStop (15), servoStop (16), isSteady (47), setPayload (17), setTcp (29), getTCPOffset (40),
-stop script (255). The TCP offset and payload belong to the running program (a new upload starts
+speedStop (15), servoStop (16), isSteady (47), isPoseWithinSafetyLimits (36: the pose against the
+safety planes, here the twin's workspace box; orientation is not limited), triggerProtectiveStop
+(31: the controller's protective stop, which pauses the program before the command is done),
+setPayload (17), setTcp (29), getTCPOffset (40), stop script (255). The TCP offset and payload belong to the running program (a new upload starts
 from the installation's, here none); the controller reports the payload on RTDE. Commands that
 only set state the emulator does not model (setWatchdog 35, force-mode damping 20 / gain 21) are
 acknowledged like the script would without effect; any other command is acknowledged and
@@ -42,9 +44,11 @@ CMD_SPEED_STOP = 15
 CMD_SERVO_STOP = 16
 CMD_SET_PAYLOAD = 17
 CMD_SET_TCP = 29
+CMD_PROTECTIVE_STOP = 31
 CMD_STOPL = 33
 CMD_STOPJ = 34
 CMD_SET_WATCHDOG = 35
+CMD_IS_POSE_WITHIN_SAFETY_LIMITS = 36
 CMD_GET_TCP_OFFSET = 40
 CMD_IS_STEADY = 47
 CMD_STOP_SCRIPT = 255
@@ -72,6 +76,7 @@ class ArmAccess(Protocol):
     def stop(self) -> None: ...
     def is_moving(self) -> bool: ...
     def tcp_pose6(self) -> np.ndarray: ...
+    def within_safety_limits(self, pose6: np.ndarray) -> bool: ...
 
 
 class Registers:
@@ -97,12 +102,14 @@ class ToolSettings:
 class ControlScript:
     """One running instance of the uploaded control script.
 
-    arm: access to the twin. regs: the shared registers. Call tick() every 2 ms; `running`
-    turns False once the script ends (stop-script command).
+    arm: access to the twin. regs: the shared registers. protective_stop: the controller's
+    protective stop (URScript protective_stop()). Call tick() every 2 ms; `running` turns False
+    once the script ends (stop-script command).
     """
 
-    def __init__(self, arm: ArmAccess, regs: Registers) -> None:
+    def __init__(self, arm: ArmAccess, regs: Registers, protective_stop: Callable[[], None] | None = None) -> None:
         self.arm, self.regs = arm, regs
+        self._protective_stop = protective_stop
         self.running = True
         self.executing = False
         self.unsupported: list[int] = []
@@ -229,6 +236,8 @@ class ControlScript:
             self._pending = lambda: not self.arm.is_moving()
         elif cmd == CMD_IS_STEADY:
             r.output_int[1] = 0 if self.arm.is_moving() else 1
+        elif cmd == CMD_IS_POSE_WITHIN_SAFETY_LIMITS:  # is_within_safety_limits(pose)
+            r.output_int[1] = 1 if self.arm.within_safety_limits(self._pose_in(0)) else 0
         elif cmd == CMD_SET_TCP:
             self.tool.tcp_offset = [float(x) for x in r.input_double[0:6]]
         elif cmd == CMD_SET_PAYLOAD:
@@ -238,6 +247,11 @@ class ControlScript:
                 self.tool.payload_cog_m = cog
         elif cmd == CMD_GET_TCP_OFFSET:
             r.output_double[0:6] = list(self.tool.tcp_offset)
+        elif cmd == CMD_PROTECTIVE_STOP and self._protective_stop is not None:
+            # protective_stop() stops the arm and pauses the program there: the command's done
+            # signal comes only if the program is resumed (the client sees the script not running)
+            self._protective_stop()
+            self._pending = lambda: True
         elif cmd == CMD_STOP_SCRIPT:
             log.info("ur5e emulator: Received stop script!")
             return False

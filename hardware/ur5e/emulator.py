@@ -78,9 +78,11 @@ class UR5eEmulator(Emulator):
         """Start the controller process and the bridge; returns "host:30004" once it listens."""
         parent, child = socket.socketpair()
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(_ROOT), os.environ.get("PYTHONPATH", "")]))
+        cfg = self.rt.rig.arm.cfg  # its workspace box stands for the controller's safety planes
+        box = ",".join(repr(float(v)) for v in (*cfg.workspace_min_m, *cfg.workspace_max_m))
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "hardware.ur5e.controller", str(child.fileno()), self.host,
-             repr(float(self.rt.world_time_s()))], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
+             repr(float(self.rt.world_time_s())), box], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
         child.close()
         self._conn = Connection(parent.detach())
         self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message

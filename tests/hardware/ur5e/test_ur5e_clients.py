@@ -155,6 +155,46 @@ def test_tcp_offset_and_payload_are_set_and_read_back(controller):
     assert emu.info["unsupported"] == []
 
 
+def test_pose_within_safety_limits_is_judged_against_the_workspace(controller):
+    rt, emu = controller("127.0.0.49")
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.49")
+    controller.clients.append(ctrl)
+    with rt.lock:
+        lo, hi = (np.asarray(b, float) for b in (rt.rig.arm.cfg.workspace_min_m, rt.rig.arm.cfg.workspace_max_m))
+    here = twin_pose(rt)
+    assert ctrl.isPoseWithinSafetyLimits(here.tolist())
+    assert not ctrl.isPoseWithinSafetyLimits([5.0, 0.0, 0.3, 0.0, 3.14, 0.0])  # 5 m away
+    for axis in range(3):  # just past each plane of the box, the rest of the pose unchanged
+        for bound, step in ((hi, 1e-3), (lo, -1e-3)):
+            pose = here.copy()
+            pose[axis] = bound[axis] + step
+            assert not ctrl.isPoseWithinSafetyLimits(pose.tolist()), (axis, pose)
+            pose[axis] = bound[axis] - step
+            assert ctrl.isPoseWithinSafetyLimits(pose.tolist()), (axis, pose)
+    assert emu.info["unsupported"] == []
+
+
+def test_trigger_protective_stop_stops_the_arm_and_changes_the_safety_mode(controller):
+    rt, emu = controller("127.0.0.50")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.50", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.50")
+    dash = dashboard_client.DashboardClient("127.0.0.50")
+    dash.connect()
+    controller.clients += [ctrl, recv, dash]
+    assert recv.getSafetyMode() == wire.SAFETY_MODE_NORMAL and not recv.isProtectiveStopped()
+    assert ctrl.speedL([0.02, 0.0, 0.0, 0.0, 0.0, 0.0], 0.5, 0.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed()[0] > 0.019)
+    result = ctrl.triggerProtectiveStop()
+    # protective_stop() pauses the control program before the command's done signal; the client
+    # then finds the script not running (it answers False, as on a controller whose program paused)
+    assert wait_for(lambda: recv.isProtectiveStopped() and recv.getSafetyMode() == wire.SAFETY_MODE_PROTECTIVE_STOP)
+    assert wait_for(lambda: recv.getActualTCPSpeed() == [0.0] * 6)
+    assert dash.safetymode().endswith("PROTECTIVE_STOP") and not ctrl.isProgramRunning()
+    assert emu.info["unsupported"] == [] and result is False
+    dash.unlockProtectiveStop()
+    assert wait_for(lambda: recv.getSafetyMode() == wire.SAFETY_MODE_NORMAL and not recv.isProtectiveStopped())
+
+
 def test_dashboard_answers_as_the_dashboard_server(controller):
     rt, emu = controller("127.0.0.44")
     recv = rtde_receive.RTDEReceiveInterface("127.0.0.44", 500)
