@@ -15,7 +15,7 @@ client sends (captured in the tests):
                         and signal_done_with_cmd() unless cmd == 255 (stop script)
 
 Commands acted on: moveL (3, synchronous or asynchronous), stopL (33) / stopJ (34), speedL (10),
-speedStop (15), servoStop (16), isSteady (47), isPoseWithinSafetyLimits (36: the pose against the
+servoL (24: the TCP follows the stream of poses, see _command_servo), speedStop (15), servoStop (16), isSteady (47), isPoseWithinSafetyLimits (36: the pose against the
 safety planes, here the twin's workspace box; orientation is not limited), triggerProtectiveStop
 (31: the controller's protective stop, which pauses the program before the command is done),
 setPayload (17), setTcp (29), getTCPOffset (40), stop script (255). The TCP offset and payload belong to the running program (a new upload starts
@@ -43,6 +43,7 @@ CMD_SPEEDL = 10
 CMD_SPEED_STOP = 15
 CMD_SERVO_STOP = 16
 CMD_SET_PAYLOAD = 17
+CMD_SERVOL = 24
 CMD_SET_TCP = 29
 CMD_PROTECTIVE_STOP = 31
 CMD_STOPL = 33
@@ -66,10 +67,16 @@ SIGNAL_DONE = 2
 SPEED_HORIZON_S = 2.0
 MAX_HORIZON_ANGLE_RAD = 1.0
 CYCLE_S = 0.002
+# What the controller process knows of the twin (sim.rig.arm): the workspace box (the safety
+# planes) and the speed limits a servo stream is held to.
+ARM_LIMITS = ("workspace_min_m", "workspace_max_m", "max_speed_m_s", "max_accel_m_s2", "max_angular_speed_rad_s")
 
 
 class ArmAccess(Protocol):
-    """The simulated arm as the script reaches it (the emulator takes the world lock)."""
+    """The simulated arm as the script reaches it (the emulator takes the world lock);
+    limits: the twin's ARM_LIMITS by name, or None."""
+
+    limits: dict | None
 
     def move_linear(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
                     angular_speed_rad_s: float | None, stop_at_workspace: bool = False) -> None: ...
@@ -122,6 +129,7 @@ class ControlScript:
         self._speed_accel = 0.5
         self._pending: Callable[[], bool] | None = None  # blocking command: done when it returns True
         self._speed_renew_in = 0  # cycles until a running speedl's target is renewed
+        self._servo_target: np.ndarray | None = None  # the pose a servoL stream last gave
         self._last_twist: np.ndarray | None = None
         self.tool = ToolSettings()
         self.speed_fraction = 1.0  # the speed slider, set by the controller (applies to moves commanded after)
@@ -195,6 +203,7 @@ class ControlScript:
         self._move_active = False
         self._speeding = False
         self._last_twist = None
+        self._servo_target = None
         self._pending = None
 
     # ---- commands -----------------------------------------------------------------------------
@@ -206,6 +215,7 @@ class ControlScript:
         if cmd == CMD_MOVEL:
             pose, v, a, is_async = self._pose_in(0), r.input_double[6], r.input_double[7], r.input_int[1]
             self._stop_async_move()
+            self._servo_target = None
             f = self._slider()
             self.arm.move_linear(pose, v * f, a * f * f, None)
             if is_async == 1:
@@ -216,6 +226,7 @@ class ControlScript:
         elif cmd in (CMD_STOPL, CMD_STOPJ):
             is_async = r.input_int[1]
             self._stop_async_move()
+            self._servo_target = None
             self.arm.stop()
             if is_async == 1:
                 self._move_active = True  # stop_thread
@@ -229,7 +240,13 @@ class ControlScript:
                 self._speed_twist = twist
                 self._speeding = True
                 self._command_twist(twist, self._speed_accel)
+        elif cmd == CMD_SERVOL:  # servo_target = get_inverse_kin(pose), then servoj(q, t, lookahead, gain)
+            pose = self._pose_in(0)
+            if self._servo_target is None or not np.array_equal(pose, self._servo_target):
+                self._servo_target = pose
+                self._command_servo(pose, float(r.input_double[8]), float(r.input_double[9]))
         elif cmd in (CMD_SPEED_STOP, CMD_SERVO_STOP):
+            self._servo_target = None
             self._speeding = False
             self._speed_twist = np.zeros(6)
             self.arm.stop()
@@ -289,6 +306,20 @@ class ControlScript:
         target = _advance(here, v, w, horizon_s)
         self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None,
                              stop_at_workspace=True)
+
+    def _command_servo(self, pose6: np.ndarray, t_s: float, lookahead_s: float) -> None:
+        """servoj follows its target with a lag of about lookahead_time (its smoothing), each
+        target reached over at least t. The twin takes targets: it moves toward each new one at
+        the speed that covers the distance in that time, within the arm's limits; a stream that
+        leads out of the workspace stops on its boundary (the safety planes), as speedL does."""
+        here = np.asarray(self.arm.tcp_pose6(), float)
+        horizon_s = max(t_s, lookahead_s, CYCLE_S)
+        lim = self.arm.limits or {}
+        dist = float(np.linalg.norm(pose6[:3] - here[:3]))
+        turn = (Rotation.from_rotvec(pose6[3:]) * Rotation.from_rotvec(here[3:]).inv()).magnitude()
+        v = min(max(dist / horizon_s, 1e-4), lim.get("max_speed_m_s", np.inf))
+        w = None if turn < 1e-9 else min(max(turn / horizon_s, 1e-4), lim.get("max_angular_speed_rad_s", np.inf))
+        self.arm.move_linear(pose6, v, lim.get("max_accel_m_s2", 1.5), w, stop_at_workspace=True)
 
     def _decelerate(self, here: np.ndarray, accel: float) -> None:
         last = self._last_twist

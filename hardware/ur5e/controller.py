@@ -16,6 +16,7 @@ the world's time when the emulator started). Socket readers run one thread per c
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import socket
@@ -63,9 +64,10 @@ class BridgedArm:
     cycle, commands sent back to it. A command counts as moving until the parent reports it
     applied (the state it pushed before may predate the command)."""
 
-    def __init__(self, conn, workspace_m: tuple[tuple[float, ...], tuple[float, ...]] | None = None) -> None:
+    def __init__(self, conn, limits: dict | None = None) -> None:
         self.conn = conn
-        self.workspace_m = workspace_m  # (lo, hi) TCP box, m: the safety planes; None: no planes
+        # the twin's ARM_LIMITS (workspace box: the safety planes; speed limits); None: unlimited
+        self.limits = limits
         self._send_lock = threading.Lock()
         self.pose = np.zeros(6)
         self.speed = np.zeros(6)  # TCP twist [v (m/s), w (rad/s)], base frame
@@ -100,9 +102,9 @@ class BridgedArm:
         p = np.asarray(pose6, float)
         if p.shape != (6,) or not np.all(np.isfinite(p)):
             return False
-        if self.workspace_m is None:
+        if self.limits is None:
             return True
-        lo, hi = (np.asarray(b, float) for b in self.workspace_m)
+        lo, hi = (np.asarray(self.limits[k], float) for k in ("workspace_min_m", "workspace_max_m"))
         return bool(np.all(p[:3] >= lo) and np.all(p[:3] <= hi))
 
     def on_state(self, t_s: float, pose6, moving: bool, applied_id: int, error: str | None, speed6) -> None:
@@ -701,8 +703,7 @@ def main(argv: list[str]) -> int:
 
     logging.basicConfig(level=logging.WARNING, format="ur5e-controller %(levelname)s %(message)s")
     conn = Connection(int(argv[0]))
-    box = [float(v) for v in argv[3].split(",")] if len(argv) > 3 else None
-    arm = BridgedArm(conn, (tuple(box[:3]), tuple(box[3:])) if box else None)
+    arm = BridgedArm(conn, json.loads(argv[3]) if len(argv) > 3 else None)
     ctl = URController(arm, host=argv[1], t0_s=float(argv[2]))
     try:
         where = ctl.start()

@@ -155,6 +155,24 @@ def test_tcp_offset_and_payload_are_set_and_read_back(controller):
     assert emu.info["unsupported"] == []
 
 
+def test_a_servol_stream_moves_the_tool_along_it(controller):
+    rt, emu = controller("127.0.0.51")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.51", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.51")
+    controller.clients += [ctrl, recv]
+    start = twin_pose(rt)
+    step = np.array([1e-4, -5e-5, 0.0, 0.0, 0.0, 0.0])  # 0.1 mm in x, -0.05 mm in y per 2 ms
+    for i in range(1, 501):  # 500 x 2 ms, as a lab's servo loop (ur_rtde's own pacing)
+        t0 = ctrl.initPeriod()
+        assert ctrl.servoL((start + i * step).tolist(), 0.5, 0.5, 0.002, 0.1, 300)
+        ctrl.waitPeriod(t0)
+    end = start + 500 * step
+    assert wait_for(lambda: np.allclose(twin_pose(rt), end, atol=1e-5), 5.0), (twin_pose(rt), end)
+    assert ctrl.servoStop()
+    assert np.allclose(recv.getActualTCPPose(), end, atol=1e-3)  # (the pose stream carries sensor noise)
+    assert emu.info["unsupported"] == []
+
+
 def test_pose_within_safety_limits_is_judged_against_the_workspace(controller):
     rt, emu = controller("127.0.0.49")
     ctrl = rtde_control.RTDEControlInterface("127.0.0.49")
