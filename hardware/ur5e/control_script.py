@@ -18,6 +18,7 @@ Commands acted on: moveL (3, synchronous or asynchronous), stopL (33) / stopJ (3
 servoL (24: the TCP follows the stream of poses, see _command_servo), speedStop (15), servoStop (16), isSteady (47), isPoseWithinSafetyLimits (36: the pose against the
 safety planes, here the twin's workspace box; orientation is not limited), triggerProtectiveStop
 (31: the controller's protective stop, which pauses the program before the command is done),
+getInverseKinematics (30 with qnear, 46 without: the UR5e's closed-form IK, kinematics.py),
 setPayload (17), setTcp (29), getTCPOffset (40), stop script (255). The TCP offset and payload belong to the running program (a new upload starts
 from the installation's, here none); the controller reports the payload on RTDE. Commands that
 only set state the emulator does not model (setWatchdog 35, force-mode damping 20 / gain 21) are
@@ -34,6 +35,8 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from hardware.ur5e import kinematics
+
 log = logging.getLogger(__name__)
 
 # Command numbers of the control script (ur_rtde 1.6.5, RTDE::RobotCommand::Type).
@@ -45,12 +48,14 @@ CMD_SERVO_STOP = 16
 CMD_SET_PAYLOAD = 17
 CMD_SERVOL = 24
 CMD_SET_TCP = 29
+CMD_GET_INVERSE_KINEMATICS = 30  # get_inverse_kin(x, qnear, maxPositionError, maxOrientationError)
 CMD_PROTECTIVE_STOP = 31
 CMD_STOPL = 33
 CMD_STOPJ = 34
 CMD_SET_WATCHDOG = 35
 CMD_IS_POSE_WITHIN_SAFETY_LIMITS = 36
 CMD_GET_TCP_OFFSET = 40
+CMD_GET_INVERSE_KINEMATICS_DEFAULT = 46  # get_inverse_kin(x): nearest the current joint positions
 CMD_IS_STEADY = 47
 CMD_STOP_SCRIPT = 255
 # Processed every cycle and answered with "ready", never "done" (the script's list).
@@ -132,6 +137,7 @@ class ControlScript:
         self._servo_target: np.ndarray | None = None  # the pose a servoL stream last gave
         self._last_twist: np.ndarray | None = None
         self.tool = ToolSettings()
+        self.actual_q = [0.0] * 6  # what RTDE reports as actual_q (no joint space here: zeros)
         self.speed_fraction = 1.0  # the speed slider, set by the controller (applies to moves commanded after)
         self._reset_async_progress()
         self._signal(SIGNAL_READY)
@@ -262,6 +268,10 @@ class ControlScript:
             cog = [float(x) for x in r.input_double[1:4]]
             if any(cog):  # all zero: the script keeps the current centre of gravity
                 self.tool.payload_cog_m = cog
+        elif cmd in (CMD_GET_INVERSE_KINEMATICS, CMD_GET_INVERSE_KINEMATICS_DEFAULT):
+            # (the closed form is exact: maxPositionError / maxOrientationError have nothing to bound)
+            near = r.input_double[6:12] if cmd == CMD_GET_INVERSE_KINEMATICS else self.actual_q
+            r.output_double[0:6] = self._inverse_kinematics(self._pose_in(0), near).tolist()
         elif cmd == CMD_GET_TCP_OFFSET:
             r.output_double[0:6] = list(self.tool.tcp_offset)
         elif cmd == CMD_PROTECTIVE_STOP and self._protective_stop is not None:
@@ -278,6 +288,14 @@ class ControlScript:
             self.unsupported.append(cmd)
             log.warning("ur5e emulator: control script command %d is not emulated (acknowledged only)", cmd)
         return True
+
+    def _inverse_kinematics(self, tcp_pose6: np.ndarray, q_near) -> np.ndarray:
+        """get_inverse_kin for the active TCP: the flange pose is the TCP pose less the TCP
+        offset. Unreachable: kinematics.NoSolution, a runtime error that ends the program as
+        URControl's "inverse kinematics" error does."""
+        flange = (kinematics.pose6_to_matrix(tcp_pose6)
+                  @ np.linalg.inv(kinematics.pose6_to_matrix(self.tool.tcp_offset)))
+        return kinematics.inverse(kinematics.matrix_to_pose6(flange), q_near)
 
     def _slider(self) -> float:
         # Time scaling by the speed slider: speeds scale by f, accelerations by f^2; kept above

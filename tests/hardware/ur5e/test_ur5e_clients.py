@@ -173,6 +173,53 @@ def test_a_servol_stream_moves_the_tool_along_it(controller):
     assert emu.info["unsupported"] == []
 
 
+def _ur5e_flange(q):
+    """Flange pose (4, 4) of joint angles q: a product of DH transforms with Universal Robots'
+    published UR5e parameters (written here, apart from hardware/ur5e/kinematics.py)."""
+    a, d = (0, -0.425, -0.3922, 0, 0, 0), (0.1625, 0, 0, 0.1333, 0.0997, 0.0996)
+    alpha = (np.pi / 2, 0, 0, np.pi / 2, -np.pi / 2, 0)
+    t = np.eye(4)
+    for i, th in enumerate(q):
+        rz = np.array([[np.cos(th), -np.sin(th), 0, 0], [np.sin(th), np.cos(th), 0, 0], [0, 0, 1, d[i]], [0, 0, 0, 1]])
+        rx = np.array([[1, 0, 0, a[i]], [0, np.cos(alpha[i]), -np.sin(alpha[i]), 0],
+                       [0, np.sin(alpha[i]), np.cos(alpha[i]), 0], [0, 0, 0, 1]])
+        t = t @ rz @ rx
+    return t
+
+
+def _pose6(t):
+    from scipy.spatial.transform import Rotation
+    return np.concatenate((t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_rotvec())).tolist()
+
+
+def test_inverse_kinematics_is_the_ur5e_s(controller):
+    rt, emu = controller("127.0.0.52")
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.52")
+    controller.clients.append(ctrl)
+    q_true = np.array([0.3, -1.2, 1.5, -1.9, -1.57, 0.4])  # elbow up, wrist down: a working posture
+    flange = _ur5e_flange(q_true)
+    # with qnear: the solution nearest it (of the eight the arm has for this pose)
+    q = ctrl.getInverseKinematics(_pose6(flange), (q_true + 0.05).tolist(), 1e-10, 1e-10)
+    np.testing.assert_allclose(q, q_true, atol=1e-6)
+    other = ctrl.getInverseKinematics(_pose6(flange), (q_true + [0, 0, -3.0, 0, 0, 0]).tolist(), 1e-10, 1e-10)
+    assert not np.allclose(other, q_true, atol=1e-3)  # elbow down: another solution...
+    np.testing.assert_allclose(_ur5e_flange(other), flange, atol=1e-9)  # ...of the same pose
+    # without: nearest the current joint positions; any answer puts the flange on the pose
+    np.testing.assert_allclose(_ur5e_flange(ctrl.getInverseKinematics(_pose6(flange))), flange, atol=1e-9)
+    # the active TCP counts: the pose asked for is the TCP's
+    tcp = [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]
+    assert ctrl.setTcp(tcp)
+    tcp_pose = flange @ np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.1], [0, 0, 0, 1.0]])
+    q = ctrl.getInverseKinematics(_pose6(tcp_pose), (q_true + 0.05).tolist(), 1e-10, 1e-10)
+    np.testing.assert_allclose(q, q_true, atol=1e-6)
+    assert emu.info["unsupported"] == []
+    # out of reach: get_inverse_kin is a runtime error that ends the control program (the client
+    # then finds the script not running and answers nothing)
+    assert ctrl.getInverseKinematics([5.0, 0.0, 0.3, 0.0, 3.14, 0.0]) == []
+    assert not ctrl.isProgramRunning()
+    assert emu.wait_info(lambda i: i["runtime_state"] == wire.RUNTIME_STOPPED)
+
+
 def test_pose_within_safety_limits_is_judged_against_the_workspace(controller):
     rt, emu = controller("127.0.0.49")
     ctrl = rtde_control.RTDEControlInterface("127.0.0.49")
