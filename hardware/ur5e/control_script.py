@@ -14,7 +14,7 @@ client sends (captured in the tests):
     elif not executing: process it (blocking commands finish first); executing = True
                         and signal_done_with_cmd() unless cmd == 255 (stop script)
 
-Commands acted on: moveL (3, synchronous or asynchronous), stopL (33) / stopJ (34), speedL (10),
+Commands acted on: moveL (3, synchronous or asynchronous), moveJ (1, likewise: see _joint_move), stopL (33) / stopJ (34), speedL (10),
 servoL (24: the TCP follows the stream of poses, see _command_servo), speedStop (15), servoStop (16), isSteady (47), isPoseWithinSafetyLimits (36: the pose against the
 safety planes, here the twin's workspace box; orientation is not limited), triggerProtectiveStop
 (31: the controller's protective stop, which pauses the program before the command is done),
@@ -41,6 +41,7 @@ log = logging.getLogger(__name__)
 
 # Command numbers of the control script (ur_rtde 1.6.5, RTDE::RobotCommand::Type).
 CMD_NONE = 0
+CMD_MOVEJ = 1
 CMD_MOVEL = 3
 CMD_SPEEDL = 10
 CMD_SPEED_STOP = 15
@@ -218,12 +219,15 @@ class ControlScript:
         if cmd != CMD_NONE and (not self.commands or self.commands[-1] != cmd or cmd not in REALTIME_CMDS):
             self.commands.append(cmd)
         r = self.regs
-        if cmd == CMD_MOVEL:
+        if cmd in (CMD_MOVEL, CMD_MOVEJ):
             pose, v, a, is_async = self._pose_in(0), r.input_double[6], r.input_double[7], r.input_int[1]
             self._stop_async_move()
             self._servo_target = None
             f = self._slider()
-            self.arm.move_linear(pose, v * f, a * f * f, None)
+            if cmd == CMD_MOVEL:
+                self.arm.move_linear(pose, v * f, a * f * f, None)
+            else:  # the registers hold joint angles q, joint speed and acceleration
+                self.arm.move_linear(*self._joint_move(pose, v * f, a * f * f))
             if is_async == 1:
                 self._move_active = True
                 self._write_async_progress(0)
@@ -296,6 +300,33 @@ class ControlScript:
         flange = (kinematics.pose6_to_matrix(tcp_pose6)
                   @ np.linalg.inv(kinematics.pose6_to_matrix(self.tool.tcp_offset)))
         return kinematics.inverse(kinematics.matrix_to_pose6(flange), q_near)
+
+    def _joint_move(self, q, speed_rad_s: float, accel_rad_s2: float):
+        """moveJ(q) for a twin without joints: a straight move of the TCP to where q puts it
+        (forward kinematics, active TCP), timed like the joint move (the joint that turns
+        furthest at speed_rad_s) within the twin's limits; the path between is straight, not the
+        joint-interpolated arc. Returns move_linear's (pose6, speed, accel, angular speed)."""
+        q = np.asarray(q, float)
+        t_tcp = kinematics.forward(q) @ kinematics.pose6_to_matrix(self.tool.tcp_offset)
+        target = kinematics.matrix_to_pose6(t_tcp)
+        here = np.asarray(self.arm.tcp_pose6(), float)
+        flange_here = kinematics.pose6_to_matrix(here) @ np.linalg.inv(kinematics.pose6_to_matrix(self.tool.tcp_offset))
+        try:
+            q_here = kinematics.inverse(kinematics.matrix_to_pose6(flange_here), q)
+        except kinematics.NoSolution:
+            q_here = q  # (a pose the arm cannot be in: time the move by the TCP alone)
+        lead = float(np.max(np.abs(q - q_here)))
+        dist = float(np.linalg.norm(target[:3] - here[:3]))
+        turn = (Rotation.from_rotvec(target[3:]) * Rotation.from_rotvec(here[3:]).inv()).magnitude()
+        lim = self.arm.limits or {}
+        if lead < 1e-9:
+            scale_m, scale_rad = 1.0, 1.0
+        else:
+            scale_m, scale_rad = dist / lead, turn / lead  # TCP metres / radians per joint radian
+        v = min(max(speed_rad_s * scale_m, 1e-4), lim.get("max_speed_m_s", np.inf))
+        a = min(max(accel_rad_s2 * scale_m, 1e-3), lim.get("max_accel_m_s2", np.inf))
+        w = None if turn < 1e-9 else min(max(speed_rad_s * scale_rad, 1e-4), lim.get("max_angular_speed_rad_s", np.inf))
+        return target, v, a, w
 
     def _slider(self) -> float:
         # Time scaling by the speed slider: speeds scale by f, accelerations by f^2; kept above

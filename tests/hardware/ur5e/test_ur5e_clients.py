@@ -220,6 +220,30 @@ def test_inverse_kinematics_is_the_ur5e_s(controller):
     assert emu.wait_info(lambda i: i["runtime_state"] == wire.RUNTIME_STOPPED)
 
 
+def test_movej_moves_the_tool_to_where_the_joints_put_it(controller):
+    from scipy.spatial.transform import Rotation
+
+    rt, emu = controller("127.0.0.53")
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.53")
+    controller.clients.append(ctrl)
+    q_here = np.array(ctrl.getInverseKinematics(twin_pose(rt).tolist(), [0, -1.57, 1.57, -1.57, -1.57, 0], 0, 0))
+    q = q_here + [0.3, -0.1, 0.15, 0.0, 0.0, 0.2]
+    flange = _ur5e_flange(q)
+    assert ctrl.moveJ(q.tolist(), 0.5, 1.0)  # synchronous: answered once the arm is there
+
+    def there():
+        p = twin_pose(rt)
+        return np.allclose(p[:3], flange[:3, 3], atol=1e-5) and \
+            np.allclose(Rotation.from_rotvec(p[3:]).as_matrix(), flange[:3, :3], atol=1e-5)
+
+    assert there(), (twin_pose(rt), _pose6(flange))
+    assert ctrl.moveJ(q_here.tolist(), 0.5, 1.0, True)  # asynchronous: back, with progress reported
+    assert wait_for(lambda: ctrl.getAsyncOperationProgress() >= 0)
+    assert wait_for(lambda: ctrl.getAsyncOperationProgress() < 0, 10.0)
+    np.testing.assert_allclose(_ur5e_flange(q_here)[:3, 3], twin_pose(rt)[:3], atol=1e-5)
+    assert emu.info["unsupported"] == []
+
+
 def test_pose_within_safety_limits_is_judged_against_the_workspace(controller):
     rt, emu = controller("127.0.0.49")
     ctrl = rtde_control.RTDEControlInterface("127.0.0.49")
