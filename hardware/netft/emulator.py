@@ -2,11 +2,14 @@
 
 Covers: RDT requests (stop, real-time and buffered streaming, sample counts, software bias,
 latch reset accepted; the bias is the mean of the last BIAS_SAMPLES readings, taken here
-rather than by the twin, whose tare() would advance the world), one client at a time (the latest requester), records at the twin's rate
-with rdt_sequence from 1 per stream and ft_sequence from the twin's device clock at
-ft_sample_rate_hz, counts from a calibration, and optionally netftapi2.xml over HTTP.
-Not covered: the box's other settings (filters, output rate: the twin's rate is used),
-thresholds and the latch, TCP and EtherNet/IP interfaces.
+rather than by the twin, whose tare() would advance the world), one client at a time (the latest
+requester), records at the RDT output rate (comrdtrate: the twin's rate over a whole number; the
+twin's rate is the fastest, where the box would go up to 7000 Hz) with rdt_sequence from 1 per
+stream and ft_sequence from the twin's device clock at ft_sample_rate_hz, counts from the active
+configuration's calibration, and optionally the box's web server (`web.py`: `/`, netftapi2.xml,
+netftcalapi.xml, and the CGI settings setcfgsel, comrdtrate, comrdtbsiz, cfgnam/cfgcalsel).
+Not covered: the box's other settings (filters, tool transforms, units other than the
+calibration's: ignored as `web.py` says), thresholds and the latch, TCP and EtherNet/IP interfaces.
 
 Faults (hardware.emulation's vocabulary): stall() (stop sending while still taking requests),
 drop(n) (the next n records are lost), corrupt(n) (the next n datagrams arrive "truncated"),
@@ -29,7 +32,7 @@ from collections import deque
 import numpy as np
 
 from hardware.emulation import Emulator
-from hardware.netft import wire
+from hardware.netft import web, wire
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +40,8 @@ EMULATOR_SETUP = "platform"
 POLL_S = 0.001  # how often the emulator looks for requests and new twin samples
 BIAS_SAMPLES = 32  # the software bias takes the mean of the latest readings, as the twin's tare does
 DEFAULT_CALIBRATION = wire.Calibration(1_000_000.0, 1_000_000.0, "N", "N-m")
+DEFAULT_SERIAL = "FT00001"  # the emulated transducer's calibration serial (calsn)
+MINI40_SI_20_1_RANGES = (20.0, 20.0, 60.0, 1.0, 1.0, 1.0)  # Fx Fy Fz N, Tx Ty Tz N·m (ATI's Mini40 sheet)
 
 
 USUAL_PORTS = {"port": wire.RDT_PORT, "http_port": 80}  # the box's RDT and web server ports
@@ -46,8 +51,10 @@ HTTP_FALLBACK_PORT = 8080  # where binding port 80 is not allowed (not root): sa
 class NetFTEmulator(Emulator):
     """rt: a started RealtimeWorld of the "platform" setup (its rig has the F/T twin).
 
-    http_port: None serves no calibration page; 0 picks a free port (see http_address).
-    records_per_packet: records per datagram in buffered mode (0x0003).
+    http_port: None serves no web pages; 0 picks a free port (see http_address).
+    records_per_packet: records per datagram in buffered mode (0x0003), comrdtbsiz at start.
+    more_calibrations: further stored calibrations (web.StoredCalibration), index 1 on; configuration
+    slot k uses calibration k, so `setting.cgi?setcfgsel=1` switches to the first of them.
     """
 
     DEVICE = "netft"
@@ -56,15 +63,21 @@ class NetFTEmulator(Emulator):
     USUAL_PORTS = USUAL_PORTS
 
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, http_port: int | None = None,
-                 calibration: wire.Calibration = DEFAULT_CALIBRATION, ft_sample_rate_hz: float = 7000.0,
+                 calibration: wire.Calibration = DEFAULT_CALIBRATION, calibration_serial: str = DEFAULT_SERIAL,
+                 max_ratings: tuple[float, ...] = MINI40_SI_20_1_RANGES,
+                 more_calibrations: tuple[web.StoredCalibration, ...] = (), ft_sample_rate_hz: float = 7000.0,
                  records_per_packet: int = 10, drop_every: int = 0, status: int = 0,
+                 product: str = "Net F/T (emulated Mini40)",
                  stall_after_s: float | None = None, disconnect_after_s: float | None = None) -> None:
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
         self.host, self.port, self.http_port = host, port, http_port
-        self.calibration = calibration
         self.ft_sample_rate_hz = float(ft_sample_rate_hz)
-        self.records_per_packet = int(records_per_packet)
         self.drop_every, self.status = int(drop_every), int(status)
+        self._last_counts = (0,) * 6
+        self.web = web.BoxWeb(product, [web.StoredCalibration(calibration_serial, calibration, tuple(max_ratings)),
+                                        *more_calibrations],
+                              rt.rig.ft.cfg.rate_hz, ft_sample_rate_hz, records_per_packet,
+                              status=lambda: self.status, counts=lambda: self._last_counts)
         self.http_address: str | None = None
         self.requests: list[tuple[int, int]] = []  # (command, count) received, for tests
         self._sock: socket.socket | None = None
@@ -75,6 +88,7 @@ class NetFTEmulator(Emulator):
         self._count = 0  # records asked for in this stream (0: endless)
         self._rdt = 0  # rdt_sequence of the last record of this stream
         self._made = 0  # records produced in this stream (dropped ones included)
+        self._taken = 0  # twin samples seen in this stream (the output rate takes every decimation-th)
         self._pending: list[bytes] = []  # buffered-mode records not yet sent
         self._bias = np.zeros(6, np.int64)
         self._recent_raw: deque[np.ndarray] = deque(maxlen=BIAS_SAMPLES)  # unbiased counts, newest last
@@ -110,16 +124,27 @@ class NetFTEmulator(Emulator):
             self._sock.close()
             self._sock = None
 
+    @property
+    def calibration(self) -> wire.Calibration:
+        """The active configuration's calibration (what the records' counts are in)."""
+        return self.web.calibration
+
+    @property
+    def records_per_packet(self) -> int:
+        return self.web.buffer_records
+
     def _handler(self):
-        body = wire.calibration_xml(self.calibration, "Net F/T (emulated Mini40)").encode()
+        box = self.web
 
         class Handler(http.server.BaseHTTPRequestHandler):
             def do_GET(self) -> None:  # noqa: N802 - http.server's name
-                if self.path.split("?")[0] != "/netftapi2.xml":
-                    self.send_error(404)
+                code, content_type, text = box.get(self.path)
+                if code != 200:
+                    self.send_error(code)
                     return
+                body = text.encode()
                 self.send_response(200)
-                self.send_header("Content-Type", "text/xml")
+                self.send_header("Content-Type", content_type)
                 self.send_header("Content-Length", str(len(body)))
                 self.end_headers()
                 self.wfile.write(body)
@@ -162,7 +187,7 @@ class NetFTEmulator(Emulator):
         self.requests.append((command, count))
         if command in (wire.CMD_START_REALTIME, wire.CMD_START_BUFFERED):
             self._client, self._mode, self._count = addr, command, count
-            self._rdt = self._made = 0
+            self._rdt = self._made = self._taken = 0
             self._pending = []
         elif command == wire.CMD_STOP:
             if addr == self._client:
@@ -174,10 +199,16 @@ class NetFTEmulator(Emulator):
             log.warning("netft emulator: unknown command 0x%04x from %s", command, addr)
 
     def _emit(self, w) -> None:
-        raw = np.array(self.calibration.to_counts(w.force_n, w.torque_nm), np.int64)
+        with self.web.lock:
+            cal, decimation = self.web.calibration, self.web.decimation
+        raw = np.array(cal.to_counts(w.force_n, w.torque_nm), np.int64)
         self._recent_raw.append(raw)
+        self._last_counts = tuple(int(c) for c in raw - self._bias)
         if self._mode is None:
             return
+        self._taken += 1
+        if (self._taken - 1) % decimation:
+            return  # between two records at the RDT output rate
         self._made += 1
         self._rdt += 1
         ft_seq = int(round(w.device_t_ns * self.ft_sample_rate_hz / 1e9))

@@ -12,7 +12,8 @@ Fz, Tx, Ty, Tz in counts. Force = counts / counts_per_force, in the box's config
 unit; torque likewise. A buffered datagram is several records back to back.
 
 Calibration: http://<box>/netftapi2.xml carries cfgcpf / cfgcpt (counts per force / torque
-unit) and scfgfu / scfgtu (the unit names).
+unit, whole numbers) and scfgfu / scfgtu (the unit names); the rest of the box's web server is in
+`web.py`.
 """
 
 from __future__ import annotations
@@ -158,10 +159,11 @@ def seq_delta(new: int, old: int) -> int:
 
 
 def calibration_xml(cal: Calibration, product: str = "Net F/T") -> str:
-    """A netftapi2.xml document with the fields clients read (an excerpt of the box's full one)."""
+    """A netftapi2.xml excerpt with the calibration fields (the emulator serves the full page,
+    `web.py`). Counts per unit are written as the box writes them: whole numbers."""
     return ("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<netft>\n"
-            f"<prodname>{product}</prodname>\n<cfgcpf>{cal.counts_per_force:g}</cfgcpf>\n"
-            f"<cfgcpt>{cal.counts_per_torque:g}</cfgcpt>\n<scfgfu>{cal.force_unit}</scfgfu>\n"
+            f"<prodname>{product}</prodname>\n<cfgcpf>{cal.counts_per_force:.0f}</cfgcpf>\n"
+            f"<cfgcpt>{cal.counts_per_torque:.0f}</cfgcpt>\n<scfgfu>{cal.force_unit}</scfgfu>\n"
             f"<scfgtu>{cal.torque_unit}</scfgtu>\n</netft>\n")
 
 

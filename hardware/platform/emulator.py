@@ -1,37 +1,49 @@
 """A GRBL 1.1 controller on a pseudo-terminal, driving the simulated platform of a RealtimeWorld.
 
 What it models (from gnea/grbl 1.1h's source and interface docs):
-- the welcome banner at start and after every soft reset;
+- the welcome banner at start and after every soft reset, then the startup lines (`$N0`, `$N1`:
+  `>line:ok`) when GRBL comes up idle, or `[MSG:'$H'|'$X' to unlock]` when it comes up in alarm;
 - a 128-byte serial receive buffer that the protocol loop empties into its line buffer while it is
-  not waiting on the planner or a dwell; bytes arriving when it is full (a host that does not count
-  characters) are dropped (counted in `rx_overflow_bytes` and logged); real-time bytes `?` `!` `~`
-  Ctrl-X are picked off before it;
+  not waiting on the planner, a dwell or a program pause; bytes arriving when it is full (a host
+  that does not count characters) are dropped (counted in `rx_overflow_bytes` and logged);
+  real-time bytes `?` `!` `~` Ctrl-X, jog cancel 0x85 and the feed overrides 0x90-0x94 are picked
+  off before it; other bytes above 0x7F are thrown away;
 - an 80-character line buffer: a longer line answers `error:11` and the parser goes on with the next;
-- a line parser for G0/G1/G4/G20/G21/G90/G91 (+ G17/G54/G94 accepted), F/X/Y/Z/P/N words, and
-  `$$`, `$#` (coordinate offsets, all zero: no G10/G92 here), `$C` (check mode: lines are parsed,
-  nothing moves; leaving it resets), `$X`, `$H`, `$G`, `$I`, `$`, `$N=value`; each line answers
-  `ok` or `error:N`;
+- G-code blocks as `gcode.py` parses them (G0 G1 G4 G17 G20 G21 G53 G54 G90 G91 G94, M0 M1 M2 M30
+  M3 M4 M5 M8 M9, F N P S T X Y Z); M0 waits for the planner to empty, holds (Hold:0) and answers
+  `ok` after `~`; M2/M30 wait for the planner, reset the modal groups and the overrides, print
+  `[MSG:Pgm End]` and answer `ok`; spindle and coolant are tracked and reported, nothing is wired;
+- `$J=` jogs (state Jog; queued like moves; soft limits answer error:15 and skip the jog; no feed
+  override; 0x85 or `!` cancels: decelerate, flush the queue, Idle);
+- `$$`, `$#` (coordinate offsets, all zero: no G10/G92 here), `$C` (check mode: lines are parsed,
+  nothing moves; leaving it resets), `$X`, `$H`, `$G`, `$I`, `$`, `$N=value`, `$N` and `$Nx=line`
+  (two startup lines, validated by running them), `$SLP` (sleep: only `?` and Ctrl-X until a reset,
+  which comes back in alarm), `$RST=$` / `$RST=#` / `$RST=*` (defaults back, then a reset);
+  each line answers `ok` or `error:N`;
 - a planner queue (16 blocks): queued moves go to the twin one after the other; a line that finds
   the planner full waits (its `ok` with it) as in GRBL;
 - feeds above the axes' max rates ($110-112) are clamped as GRBL's planner does (the nominal rate is
-  limited to min_i(max_rate_i / |u_i|) for the move's unit vector u); G0 runs at that limit;
+  limited to min_i(max_rate_i / |u_i|) for the move's unit vector u); G0 runs at that limit; the
+  feed override (10-200 %) scales G1 feeds within the same limit, also for the move under way;
 - soft limits ($20=1, travel $130-132): a motion target outside the travel box raises ALARM:2 and
   `[MSG:Reset to continue]`; GRBL then ignores all but `?` and Ctrl-X until reset, and comes back
-  in alarm (needs `$X`). (error:15 is GRBL's answer for `$J=` jogs only, which this emulator does not
-  implement.) With soft limits off, a target outside the stage's travel hits the end: ALARM:1;
+  in alarm (needs `$X`). With soft limits off, a target outside the stage's travel hits the end:
+  ALARM:1;
 - feed hold `!` (Run -> Hold:1 while decelerating -> Hold:0), resume `~`, soft reset Ctrl-X: reset
-  while in motion (Run or Hold:1) raises ALARM:3 and leaves GRBL in alarm; from Idle or Hold:0 it
-  does not;
-- status reports `<Idle|MPos:x,y,z|FS:f,0>` with `WCO:` on the first report after a reset and every
-  10th (idle) / 30th (busy) after, `Ov:` on the next.
+  while in motion (Run, Jog or Hold:1) raises ALARM:3 and leaves GRBL in alarm; from Idle or Hold:0
+  it does not;
+- status reports `<Idle|MPos:x,y,z|FS:f,s>` with `WCO:` on the first report after a reset and every
+  10th (idle) / 30th (busy) after, `Ov:` (and `A:` while spindle or coolant is on) on the next and
+  on the report after an override changed.
 
 Coordinates: MPos equals the twin's position (the skin frame). A real GRBL homed at its switches
 reports MPos in [-$13x, 0]; here that box is shifted to end at the stage's workspace_max, i.e.
 travel box = [workspace_max - $13x, workspace_max], so the default travel is the stage's workspace.
 
-Not modelled: `$J=` jogging and jog cancel, G10/G28/G30/G92 offsets, arcs, probing, real homing motion
-(`$H` only clears the alarm: the simulated stage knows its position), overrides, EEPROM timing, the
-500 ms pause GRBL takes after printing an ALARM, baud-rate pacing.
+Not modelled: G10/G28/G30/G92 offsets, arcs, probing (error:20, as unsupported commands), real
+homing motion (`$H` only clears the alarm: the simulated stage knows its position), rapid and
+spindle overrides (0x95-0x9E are taken and ignored: `Ov:` keeps 100 for them), `$I=` build info,
+EEPROM timing, the 500 ms pause GRBL takes after printing an ALARM, baud-rate pacing.
 
 Faults (hardware.emulation's vocabulary): stall() (stops reading and answering: a hung
 controller; resume() ends it), disconnect() (closes the pty master: the host sees the port vanish),
@@ -45,24 +57,35 @@ from __future__ import annotations
 import logging
 import time
 from collections import deque
+from collections.abc import Generator
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from hardware.emulation import Emulator, Pty
 from hardware.interfaces import DeviceError
-from hardware.platform import wire
+from hardware.platform import gcode, wire
 
 log = logging.getLogger(__name__)
 
 EMULATOR_SETUP = "platform"
 
-_ALLOWED_G = {0.0, 1.0, 4.0, 17.0, 20.0, 21.0, 54.0, 90.0, 91.0, 94.0}
-_MODAL_GROUPS = {0.0: "motion", 1.0: "motion", 4.0: "nonmodal", 17.0: "plane", 20.0: "units", 21.0: "units",
-                 54.0: "wcs", 90.0: "distance", 91.0: "distance", 94.0: "feedmode"}
-
-
 _LINE_KEEP = 4 * wire.LINE_BUFFER_SIZE  # raw bytes of a line kept for parsing (beyond: error:11 anyway)
 _NOISE = b"\x00\xff\x13#~garbage\r\n"
+_STARTUP_LINES = 2  # config.h N_STARTUP_LINE
+_Pending = Generator[None, None, bytes]  # a line's execution waiting on the machine; returns its response
+_FEED_OVR_STEP = {wire.FEED_OVR_COARSE_PLUS[0]: 10, wire.FEED_OVR_COARSE_MINUS[0]: -10,
+                  wire.FEED_OVR_FINE_PLUS[0]: 1, wire.FEED_OVR_FINE_MINUS[0]: -1}
+
+
+@dataclass(frozen=True)
+class _Move:
+    """A planner block: machine target (3,) mm, programmed rate and the axes' limit along it (mm/min)."""
+
+    target: np.ndarray
+    rate_mm_min: float
+    limit_mm_min: float
+    kind: str  # "feed" (G1: feed override applies), "rapid" (G0), "jog"
 
 
 class GrblEmulator(Emulator):
@@ -95,7 +118,9 @@ class GrblEmulator(Emulator):
             100: 800.0, 101: 800.0, 102: 800.0, 110: rate, 111: rate, 112: rate,
             120: cfg.max_accel_mm_s2, 121: cfg.max_accel_mm_s2, 122: cfg.max_accel_mm_s2,
             130: travel[0], 131: travel[1], 132: travel[2]}
+        self._default_settings = dict(self.settings)  # this build's defaults.h: what $RST=$ restores
         self._float_settings = {11, 12, 24, 25, 27, 100, 101, 102, 110, 111, 112, 120, 121, 122, 130, 131, 132}
+        self.startup_lines = [""] * _STARTUP_LINES  # $N0, $N1 (EEPROM: kept across resets)
         # counters
         self.rx_overflow_bytes = 0
         self.tx_dropped_bytes = 0
@@ -111,9 +136,7 @@ class GrblEmulator(Emulator):
         # The slave stays open here: GRBL's replies wait in the port for the host to read them.
         self.pty = Pty(hold_slave=True)
         self.path = self.pty.path
-        self._emit(wire.format_banner())
-        if self._state == "Alarm":
-            self._emit(wire.format_feedback("MSG", "'$H'|'$X' to unlock"))
+        self._come_up()
         self._spawn(self._run, "serial")
         return self.path
 
@@ -125,26 +148,47 @@ class GrblEmulator(Emulator):
     def state(self) -> str:
         return self._state
 
+    @property
+    def feed_override(self) -> int:
+        """The feed override, percent."""
+        return self._feed_ovr
+
     # ---- machine state -------------------------------------------------------------------------
     def _reset_state(self, power_up: bool = False) -> None:
         if power_up:
             self._state = "Alarm" if self.start_in_alarm else "Idle"
         self._critical = False  # soft/hard limit alarm: only '?' and Ctrl-X until reset
         self._hold_complete = False
+        self._jog_cancel = False  # a jog cancel decelerating
         self._rx = bytearray()  # the serial receive buffer
         self._line = bytearray()  # the line being assembled from it
         self._line_over = False  # that line ran past _LINE_KEEP bytes
-        self._planner: deque[tuple[np.ndarray, float]] = deque()
-        self._current: tuple[np.ndarray, float] | None = None
-        self._pending_line: bytes | None = None  # a line waiting on the planner or a dwell
-        self._dwell_until: float | None = None
-        self._motion = 0.0
-        self._absolute = True
-        self._unit_mm = 1.0
-        self._feed_mm_min: float | None = None
+        self._planner: deque[_Move] = deque()
+        self._current: _Move | None = None
+        self._waiting: _Pending | None = None
+        self._then = None  # what follows a line's response ($SLP, $RST, leaving $C)
+        self._modal = gcode.Modal()
+        self._outputs = _outputs(self._modal)  # spindle, coolant, rpm as driven (a reset turns them off)
         self._gc_pos: np.ndarray | None = None  # parser position; synced to the machine at first use
+        self._feed_ovr = 100
         self._wco_counter = 0
         self._ovr_counter = 1
+
+    def _come_up(self) -> None:
+        """What GRBL prints after power-up or a reset: the banner, then the alarm lock message or
+        the startup lines."""
+        self._emit(wire.format_banner())
+        if self._state == "Alarm":
+            self._emit(wire.format_feedback("MSG", "'$H'|'$X' to unlock"))
+        else:
+            self._emit(self._run_startup_lines())
+
+    def _run_startup_lines(self) -> bytes:
+        out = b""
+        for line in self.startup_lines:
+            if line:
+                out += b">" + line.encode("ascii") + b":" + _now(self._gcode(line))
+        return out
 
     def _twin_pos(self) -> np.ndarray:
         with self.rt.lock:
@@ -157,6 +201,10 @@ class GrblEmulator(Emulator):
     def _twin_stop(self) -> None:
         with self.rt.lock:
             self.rt.rig.platform.stop()
+
+    def _locked(self) -> bool:
+        """Lines are not read: a critical alarm or sleep (only '?' and Ctrl-X act)."""
+        return self._critical or self._state == "Sleep"
 
     # ---- main loop -----------------------------------------------------------------------------
     def _run(self) -> None:
@@ -201,7 +249,11 @@ class GrblEmulator(Emulator):
         elif b == 0x7E:  # '~'
             self._cycle_start()
         elif b > 0x7F:
-            pass  # extended-ASCII real-time commands (overrides, jog cancel): not modelled
+            if b == wire.JOG_CANCEL[0]:
+                self._cancel_jog()
+            elif b == wire.FEED_OVR_RESET[0] or b in _FEED_OVR_STEP:
+                self._override_feed(b)
+            # any other extended-ASCII byte: thrown away, never buffered (serial.c)
         elif len(self._rx) >= self.rx_buffer_bytes:
             self.rx_overflow_bytes += 1
             if self.rx_overflow_bytes == 1 or self.rx_overflow_bytes % 100 == 0:
@@ -209,7 +261,7 @@ class GrblEmulator(Emulator):
                             "the host is not counting characters", self.rx_buffer_bytes, self.rx_overflow_bytes)
         else:
             self._rx.append(b)
-            if self._pending_line is None and not self._critical:
+            if self._waiting is None and not self._locked():
                 self._parse_lines()  # the protocol loop empties the buffer while it is free
 
     # ---- real-time commands ----------------------------------------------------------------------
@@ -219,21 +271,21 @@ class GrblEmulator(Emulator):
             self._twin_stop()  # GRBL kills the steppers; position may be lost
             self._emit(wire.format_alarm(3))
             self._state = "Alarm"
+        elif self._state == "Sleep":
+            self._state = "Alarm"  # the steppers were off: position is not guaranteed
+        elif self._state != "Alarm":
+            self._state = "Idle"
         self.resets += 1
         self._reset_state()
-        if self._state == "Alarm":
-            self._emit(wire.format_banner())
-            self._emit(wire.format_feedback("MSG", "'$H'|'$X' to unlock"))
-        else:
-            self._state = "Idle"
-            self._emit(wire.format_banner())
+        self._come_up()
 
     def _report_status(self) -> None:
         pos = self._twin_pos() / (25.4 if self.settings[13] else 1.0)
         sub = None
         if self._state == "Hold":
             sub = 0 if self._hold_complete else 1
-        feed = self._current[1] if (self._current is not None and self._state == "Run") else 0.0
+        moving = self._current is not None and self._state in ("Run", "Jog")
+        feed = self._rate(self._current) if moving else 0.0
         busy = self._state in ("Run", "Hold", "Jog", "Home")
         wco = ovr = None
         if self._wco_counter > 0:
@@ -248,14 +300,25 @@ class GrblEmulator(Emulator):
                 self._ovr_counter -= 1
             else:
                 self._ovr_counter = (20 if busy else 10) - 1
-                ovr = (100, 100, 100)
+                ovr = (self._feed_ovr, 100, 100)
+        spindle, coolant, _ = self._outputs
+        accessories = {3: "S", 4: "C"}.get(spindle, "") + ("F" if coolant == 8 else "")
         self.status_reports += 1
-        self._emit(wire.format_status(self._state, sub, pos, feed, 0.0, wco, ovr))
+        self._emit(wire.format_status(self._state, sub, pos, feed, self._spindle_rpm(), wco, ovr, accessories))
+
+    def _spindle_rpm(self) -> float:
+        """The spindle speed GRBL reports: S clamped to [$31, $30] while M3/M4 is on, 0 for S0 or M5."""
+        spindle, _, s = self._outputs
+        if spindle == 5 or s <= 0:
+            return 0.0
+        return float(min(max(s, self.settings[31]), self.settings[30]))
 
     def _feed_hold(self) -> None:
-        if self._state in ("Alarm", "Check"):
+        if self._state in ("Alarm", "Check", "Sleep"):
             return
-        if self._state == "Run":
+        if self._state == "Jog":
+            self._cancel_jog()  # a hold cancels jogging (protocol.c)
+        elif self._state == "Run":
             self._twin_stop()
             self._state, self._hold_complete = "Hold", False
         elif self._state == "Idle":
@@ -270,17 +333,39 @@ class GrblEmulator(Emulator):
             else:
                 self._state = "Idle"
 
-    def _issue(self, block: tuple[np.ndarray, float]) -> None:
-        target, rate = block
+    def _cancel_jog(self) -> None:
+        """0x85: decelerate, flush the queued jogs, then Idle at wherever the stage stopped."""
+        if self._state == "Jog" and not self._jog_cancel:
+            self._twin_stop()
+            self._planner.clear()
+            self._jog_cancel = True
+
+    def _override_feed(self, b: int) -> None:
+        new = 100 if b == wire.FEED_OVR_RESET[0] else self._feed_ovr + _FEED_OVR_STEP[b]
+        new = min(max(new, wire.FEED_OVR_MIN), wire.FEED_OVR_MAX)
+        if new == self._feed_ovr:
+            return
+        self._feed_ovr = new
+        self._ovr_counter = 0  # report the change on the next status report
+        if self._state == "Run" and self._current is not None and self._current.kind == "feed":
+            self._issue(self._current)  # the move under way changes speed
+
+    def _rate(self, move: _Move) -> float:
+        """A move's nominal rate (mm/min): feed moves scaled by the override, all within the axes' limit."""
+        if move.kind == "feed":
+            return min(move.rate_mm_min * self._feed_ovr / 100.0, move.limit_mm_min)
+        return move.rate_mm_min
+
+    def _issue(self, move: _Move) -> None:
         try:
             with self.rt.lock:
-                self.rt.rig.platform.move_to(target, min(rate / 60.0, self._twin_max_speed))
+                self.rt.rig.platform.move_to(move.target, min(self._rate(move) / 60.0, self._twin_max_speed))
         except DeviceError as exc:  # the stage's end of travel: a hard limit
             log.warning("GRBL emulator: hard limit (%s)", exc)
             self._critical_alarm(1)
             return
-        self._current = block
-        self._state = "Run"
+        self._current = move
+        self._state = "Jog" if move.kind == "jog" else "Run"
 
     def _critical_alarm(self, code: int) -> None:
         self._twin_stop()
@@ -293,16 +378,24 @@ class GrblEmulator(Emulator):
 
     # ---- execution -----------------------------------------------------------------------------
     def _step(self) -> None:
-        if self._state == "Run" and not self._twin_moving():
+        if self._state in ("Run", "Jog") and not self._twin_moving():
             self._current = None
-            if self._planner:
+            if self._jog_cancel:
+                self._jog_cancel = False
+                self._gc_pos = None  # the parser takes the position where the jog stopped
+                self._state = "Idle"
+            elif self._planner:
                 self._issue(self._planner.popleft())
             else:
                 self._state = "Idle"
         elif self._state == "Hold" and not self._hold_complete and not self._twin_moving():
             self._hold_complete = True
-        if not self._critical:
+        if not self._locked():
             self._parse_lines()
+
+    def _busy(self) -> bool:
+        """Motion queued or under way (GRBL's protocol_buffer_synchronize waits while this holds)."""
+        return self._current is not None or bool(self._planner) or self._state in ("Run", "Jog")
 
     def _next_line(self) -> tuple[bytes | None, bool]:
         """The next complete line from the receive buffer (None: no line end yet) and whether
@@ -326,27 +419,32 @@ class GrblEmulator(Emulator):
 
     def _parse_lines(self) -> None:
         while True:
-            if self._pending_line is not None:
-                line = self._pending_line
+            if self._waiting is not None:
+                try:
+                    next(self._waiting)
+                    return  # still waiting on the machine
+                except StopIteration as done:
+                    reply = done.value
+                self._waiting = None
             else:
                 line, over = self._next_line()
                 if line is None:
                     return
-                if over:
-                    self._emit(wire.format_error(11))
-                    continue
-            reply = self._execute(line)
-            if reply is None:  # waiting on the planner or a dwell
-                self._pending_line = line
-                return
-            self._pending_line = None
+                reply = wire.format_error(11) if over else self._execute(line)
+                if not isinstance(reply, bytes):
+                    self._waiting = reply
+                    continue  # its execution waits (polled above)
             self._emit(reply)
-            if self._critical:
+            if self._then is not None:
+                then, self._then = self._then, None
+                then()
+            if self._locked():
                 return
 
-    def _execute(self, raw: bytes) -> bytes | None:
-        """One received line -> its response (`ok\\r\\n`/`error:N\\r\\n`, after any push messages),
-        b"" when it raised a critical alarm (no response), None when it must wait."""
+    def _execute(self, raw: bytes) -> bytes | _Pending:
+        """One received line -> its response (`ok\\r\\n`/`error:N\\r\\n`, after any push messages;
+        b"" when it raised a critical alarm: no response), or, when its execution waits on the
+        machine, a generator to poll that returns the response."""
         block, overflow = wire.clean_line(raw)
         if overflow:
             return wire.format_error(11)
@@ -356,32 +454,29 @@ class GrblEmulator(Emulator):
             return self._system_command(block)
         if self._state in ("Alarm", "Jog"):
             return wire.format_error(9)
-        try:
-            return self._gcode(block)
-        except wire.GcodeError as exc:
-            return wire.format_error(exc.code)
+        return self._gcode(block)
 
-    def _system_command(self, block: str) -> bytes:
+    def _system_command(self, block: str) -> bytes | _Pending:
         ok = wire.format_ok()
         if block == "$":
             return wire.format_feedback("HLP", "$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x") + ok
-        if block == "$#":
-            if self._state not in ("Idle", "Alarm"):
+        if block.startswith("$J"):
+            if self._state not in ("Idle", "Jog"):
                 return wire.format_error(8)
-            zero = "0.000,0.000,0.000"
-            out = b"".join(wire.format_feedback(f"G{n}", zero) for n in (54, 55, 56, 57, 58, 59, 28, 30, 92))
-            return out + wire.format_feedback("TLO", "0.000") + wire.format_feedback("PRB", zero + ":0") + ok
+            if not block.startswith("$J="):
+                return wire.format_error(3)
+            return self._jog(block[3:])
         if block == "$C":
-            if self._state == "Check":  # leaving check mode resets GRBL's parser state
-                self.resets += 1
-                self._reset_state()
-                self._state = "Idle"
-                return wire.format_feedback("MSG", "Disabled") + ok + wire.format_banner()
+            if self._state == "Check":  # leaving check mode resets GRBL
+                self._then = self._soft_reset
+                return wire.format_feedback("MSG", "Disabled") + ok
             if self._state != "Idle":
                 return wire.format_error(8)
             self._state = "Check"
             return wire.format_feedback("MSG", "Enabled") + ok
         if block == "$$":
+            if self._state in ("Run", "Hold"):
+                return wire.format_error(8)
             out = b""
             for n, v in sorted(self.settings.items()):
                 val = f"{v:.3f}" if n in self._float_settings else str(int(v))
@@ -392,19 +487,40 @@ class GrblEmulator(Emulator):
                 self._state = "Idle"
                 return wire.format_feedback("MSG", "Caution: Unlocked") + ok
             return ok
+        if block == "$G":
+            return wire.format_feedback("GC", self._modal.report()) + ok
+        # the rest only while Idle or in alarm (system.c)
+        if self._state not in ("Idle", "Alarm"):
+            return wire.format_error(8)
+        if block == "$#":
+            zero = "0.000,0.000,0.000"
+            out = b"".join(wire.format_feedback(f"G{n}", zero) for n in (54, 55, 56, 57, 58, 59, 28, 30, 92))
+            return out + wire.format_feedback("TLO", "0.000") + wire.format_feedback("PRB", zero + ":0") + ok
         if block == "$H":
             if not self.settings[22]:
                 return wire.format_error(5)
-            if self._state not in ("Idle", "Alarm"):
-                return wire.format_error(8)
             self._state = "Idle"  # the simulated stage knows its position: homing is instant
-            return ok
-        if block == "$G":
-            mode = f"G{int(self._motion)} G54 G17 G{21 if self._unit_mm == 1.0 else 20} G{90 if self._absolute else 91}"
-            return wire.format_feedback("GC", f"{mode} G94 M5 M9 T0 F{self._feed_mm_min or 0:.0f} S0") + ok
+            return self._run_startup_lines() + ok
         if block == "$I":
             return (wire.format_feedback("VER", f"{wire.GRBL_VERSION}.20190830:")
                     + wire.format_feedback("OPT", f"V,{self.planner_blocks - 1},{self.rx_buffer_bytes}") + ok)
+        if block.startswith("$S"):
+            if block != "$SLP":
+                return wire.format_error(3)
+            self._then = self._sleep
+            return ok
+        if block.startswith("$R"):
+            if len(block) != 6 or not block.startswith("$RST=") or block[5] not in "$#*":
+                return wire.format_error(3)
+            if block[5] in "$*":
+                self.settings = dict(self._default_settings)
+            if block[5] == "*":
+                self.startup_lines = [""] * _STARTUP_LINES
+            # ('#': the coordinate offsets, G28/G30 positions and probe result: all zero here already)
+            self._then = self._soft_reset
+            return wire.format_feedback("MSG", "Restoring defaults") + ok
+        if block.startswith("$N"):
+            return self._startup_line(block)
         if "=" in block and block[1:].split("=")[0].isdigit():
             num_s, val_s = block[1:].split("=", 1)
             n = int(num_s)
@@ -416,102 +532,152 @@ class GrblEmulator(Emulator):
                 return wire.format_error(2)
             if val < 0:
                 return wire.format_error(4)
-            if self._state not in ("Idle", "Alarm"):
-                return wire.format_error(8)
             if n == 20 and val and not self.settings[22]:
                 return wire.format_error(10)
             self.settings[n] = val
             return ok
         return wire.format_error(3)
 
-    def _gcode(self, block: str) -> bytes | None:
-        words = wire.parse_words(block)
-        groups: dict[str, float] = {}
-        values: dict[str, float] = {}
-        for letter, val in words:
-            if letter == "G":
-                if val not in _ALLOWED_G:
-                    raise wire.GcodeError(20, f"G{val:g}")
-                group = _MODAL_GROUPS[val]
-                if group in groups:
-                    raise wire.GcodeError(21, block)
-                groups[group] = val
-            elif letter in "XYZFPN":
-                if letter in values:
-                    raise wire.GcodeError(25, letter)
-                values[letter] = val
-            else:
-                raise wire.GcodeError(20, f"{letter}{val:g}")
-        unit = {20.0: 25.4, 21.0: 1.0}.get(groups.get("units"), self._unit_mm)
-        absolute = {90.0: True, 91.0: False}.get(groups.get("distance"), self._absolute)
-        motion = groups.get("motion", self._motion)
-        feed = self._feed_mm_min
-        if "F" in values:
-            if values["F"] < 0:
-                raise wire.GcodeError(4, "F")
-            feed = values["F"] * unit
-        axes = [a for a in "XYZ" if a in values]
-        dwell = groups.get("nonmodal") == 4.0
-        if dwell:
-            if "P" not in values:
-                raise wire.GcodeError(28, "G4 needs P")
-            if values["P"] < 0:
-                raise wire.GcodeError(4, "P")
-            if axes and "motion" in groups:
-                raise wire.GcodeError(24, block)
-        target = None
-        if axes and not dwell:
-            if motion == 1.0 and not feed:
-                raise wire.GcodeError(22, block)
-            if self._gc_pos is None:
-                self._gc_pos = self._twin_pos()
-            target = self._gc_pos.copy()
-            for i, a in enumerate("XYZ"):
-                if a in values:
-                    v = values[a] * unit
-                    target[i] = v if absolute else target[i] + v
-            if len(self._planner) + (self._current is not None) >= self.planner_blocks:
-                return None  # planner full: the line waits, its ok with it
-        # the block is valid: commit its modal state
-        self._unit_mm, self._absolute, self._motion, self._feed_mm_min = unit, absolute, motion, feed
-        if dwell:
-            if self._state == "Check":
-                return wire.format_ok()
-            if self._state != "Idle" or self._planner:
-                return None  # G4 waits for the planner to empty
-            now = time.monotonic()
-            if self._dwell_until is None:
-                self._dwell_until = now + values["P"]
-            if now < self._dwell_until:
-                return None
-            self._dwell_until = None
+    def _startup_line(self, block: str) -> bytes | _Pending:
+        """`$N` lists the startup lines; `$Nx=line` runs the line and stores it if it was valid G-code."""
+        if block == "$N":
+            return b"".join(f"$N{i}={line}\r\n".encode("ascii") for i, line in enumerate(self.startup_lines)) \
+                + wire.format_ok()
+        if self._state != "Idle":
+            return wire.format_error(8)
+        num, eq, line = block[2:].partition("=")
+        if not num.isdigit():
+            return wire.format_error(2)
+        if not eq or int(num) >= _STARTUP_LINES:  # (GRBL 1.1h would write past its two EEPROM slots)
+            return wire.format_error(3)
+        def run_then_store() -> _Pending:
+            result = self._gcode(line) if line else wire.format_ok()
+            reply = result if isinstance(result, bytes) else (yield from result)
+            if reply == wire.format_ok():
+                self.startup_lines[int(num)] = line
+            return reply
+
+        return run_then_store()
+
+    def _sleep(self) -> None:
+        """$SLP, after its ok: steppers, spindle and coolant off; only '?' and Ctrl-X until a reset."""
+        self._twin_stop()
+        self._planner.clear()
+        self._current = None
+        self._modal = replace(self._modal, spindle=5, coolant=9)
+        self._set_outputs(_outputs(self._modal))
+        self._state = "Sleep"
+        self._emit(wire.format_feedback("MSG", "Sleeping"))
+
+    def _jog(self, text: str) -> bytes | _Pending:
+        try:
+            blk = gcode.parse_block(text, self._modal, self._parser_pos(), jog=True)
+        except wire.GcodeError as exc:
+            return wire.format_error(exc.code)
+        target = blk.target_mm
+        if self.settings[20] and self._outside_travel(target):
+            return wire.format_error(15)  # the jog is skipped; no alarm (jog.c)
+        return self._plan_when_free(target, blk.feed_mm_min, "jog")
+
+    def _gcode(self, block: str) -> bytes | _Pending:
+        try:
+            blk = gcode.parse_block(block, self._modal, self._parser_pos())
+        except wire.GcodeError as exc:
+            return wire.format_error(exc.code)
+        self._modal = blk.modal
+        if (blk.dwell_s is None and blk.target_mm is None and blk.program_flow is None
+                and (_outputs(blk.modal) == self._outputs or self._state == "Check")):
             return wire.format_ok()
-        if target is not None:
-            if self.settings[20] and np.any((target > self._ws_max + 1e-9) | (target < self._ws_max - self._travel() - 1e-9)):
+        return self._run_block(blk)
+
+    def _parser_pos(self) -> np.ndarray:
+        if self._gc_pos is None:
+            self._gc_pos = self._twin_pos()
+        return self._gc_pos.copy()
+
+    def _outside_travel(self, target: np.ndarray) -> bool:
+        lo = self._ws_max - self._travel()
+        return bool(np.any((target > self._ws_max + 1e-9) | (target < lo - 1e-9)))
+
+    def _run_block(self, blk: gcode.Block) -> _Pending:
+        """A valid block's execution, in GRBL's order: spindle and coolant, dwell, motion, program flow."""
+        check = self._state == "Check"
+        if _outputs(blk.modal) != self._outputs and not check:
+            while self._busy():  # spindle_sync/coolant_sync: switched once the queued moves are done
+                yield
+            self._set_outputs(_outputs(blk.modal))
+        if blk.dwell_s is not None and not check:
+            while self._busy():  # G4 waits for the planner to empty
+                yield
+            until = time.monotonic() + blk.dwell_s
+            while time.monotonic() < until:
+                yield
+        if blk.target_mm is not None:
+            if self.settings[20] and self._outside_travel(blk.target_mm):
                 self._critical_alarm(2)
                 return b""
-            if self._state == "Check":  # parsed, not moved
-                self._gc_pos = target
-            elif self._plan(target, motion):
-                self._gc_pos = target
+            if check:  # parsed, not moved
+                self._gc_pos = blk.target_mm
+            else:
+                yield from self._plan_when_free(blk.target_mm, blk.feed_mm_min, "rapid" if blk.rapid else "feed")
+        if blk.program_flow is None:
+            return wire.format_ok()
+        while self._busy():
+            yield
+        if blk.program_flow == 0:  # M0: a feed hold once the planner is empty; ok after '~'
+            if not check:
+                self._state, self._hold_complete = "Hold", True
+                while self._state == "Hold":
+                    yield
+            return wire.format_ok()
+        self._modal = self._modal.program_end()
+        self._feed_ovr = 100  # RESTORE_OVERRIDES_AFTER_PROGRAM_END (config.h default)
+        if not check:
+            self._wco_counter = 0
+            self._set_outputs(_outputs(self._modal))
+        return wire.format_feedback("MSG", "Pgm End") + wire.format_ok()
+
+    def _plan_when_free(self, target: np.ndarray, rate_mm_min: float, kind: str) -> _Pending:
+        """Queue a line move once the planner has room (GRBL's planner); start it when idle."""
+        while len(self._planner) + (self._current is not None) >= self.planner_blocks:
+            yield
+        delta = target - self._parser_pos()
+        self._gc_pos = target.copy()
+        length = float(np.linalg.norm(delta))
+        if length < 1e-6:
+            return wire.format_ok()  # GRBL plans nothing for a zero-length move
+        u = np.abs(delta) / length
+        max_rate = np.array([self.settings[110], self.settings[111], self.settings[112]], float)
+        limit = float(np.min(max_rate[u > 1e-12] / u[u > 1e-12]))
+        rate = limit if kind == "rapid" else min(rate_mm_min, limit)
+        move = _Move(target.copy(), rate, limit, kind)
+        if self._state in ("Idle", "Jog") and self._current is None and not self._planner:
+            self._issue(move)
+        else:
+            self._planner.append(move)
         return wire.format_ok()
+
+    def _set_outputs(self, outputs: tuple[int, int, float]) -> None:
+        if outputs != self._outputs:
+            self._outputs = outputs
+            self._ovr_counter = 0  # GRBL reports a spindle or coolant change on the next report
 
     def _travel(self) -> np.ndarray:
         return np.array([self.settings[130], self.settings[131], self.settings[132]], float)
 
-    def _plan(self, target: np.ndarray, motion: float) -> bool:
-        """Queue a line move (GRBL's planner); start it at once when idle (auto cycle start)."""
-        delta = target - self._gc_pos
-        length = float(np.linalg.norm(delta))
-        if length < 1e-6:
-            return False  # GRBL plans nothing for a zero-length move
-        u = np.abs(delta) / length
-        max_rate = np.array([self.settings[110], self.settings[111], self.settings[112]], float)
-        limit = float(np.min(max_rate[u > 1e-12] / u[u > 1e-12]))
-        rate = limit if motion == 0.0 else min(self._feed_mm_min, limit)
-        block = (target.copy(), rate)
-        if self._state == "Idle" and self._current is None and not self._planner:
-            self._issue(block)
-        else:
-            self._planner.append(block)
-        return True
+
+def _now(result: bytes | _Pending) -> bytes:
+    """A startup line's response: GRBL runs it to the end before going on (a dwell in one is not
+    waited for here)."""
+    if isinstance(result, bytes):
+        return result
+    try:
+        next(result)
+    except StopIteration as done:
+        return done.value
+    return wire.format_ok()
+
+
+def _outputs(modal: gcode.Modal) -> tuple[int, int, float]:
+    """What the spindle and coolant pins are told: direction, coolant, and the speed while on."""
+    return modal.spindle, modal.coolant, modal.spindle_rpm if modal.spindle != 5 else 0.0

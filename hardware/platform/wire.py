@@ -29,6 +29,15 @@ PLANNER_BLOCKS = 16  # GRBL's look-ahead planner (config.h BLOCK_BUFFER_SIZE on 
 STATUS_QUERY = b"?"
 FEED_HOLD = b"!"
 SOFT_RESET = b"\x18"
+# Extended-ASCII real-time commands (GRBL 1.1 config.h CMD_*); bytes above 0x7F that GRBL does not
+# know are thrown away, never buffered.
+JOG_CANCEL = b"\x85"
+FEED_OVR_RESET = b"\x90"  # feed override back to 100 %
+FEED_OVR_COARSE_PLUS = b"\x91"  # +10 %
+FEED_OVR_COARSE_MINUS = b"\x92"  # -10 %
+FEED_OVR_FINE_PLUS = b"\x93"  # +1 %
+FEED_OVR_FINE_MINUS = b"\x94"  # -1 %
+FEED_OVR_MIN, FEED_OVR_MAX = 10, 200  # config.h MIN/MAX_FEED_RATE_OVERRIDE (percent)
 
 GRBL_VERSION = "1.1h"
 
@@ -391,14 +400,18 @@ def _fmt_rate(v: float) -> str:
 
 
 def format_status(state: str, substate: int | None, mpos, feed_mm_min: float = 0.0, spindle: float = 0.0,
-                  wco=None, overrides: tuple[int, int, int] | None = None) -> bytes:
-    """`<Idle|MPos:0.000,0.000,0.000|FS:0,0[|WCO:...][|Ov:...]>\\r\\n` as GRBL 1.1 prints it."""
+                  wco=None, overrides: tuple[int, int, int] | None = None, accessories: str = "") -> bytes:
+    """`<Idle|MPos:0.000,0.000,0.000|FS:0,0[|WCO:...][|Ov:...[|A:...]]>\\r\\n` as GRBL 1.1 prints it.
+
+    accessories: the `A:` letters (S spindle CW, C CCW, F flood coolant), printed with `Ov:` only."""
     head = state if substate is None else f"{state}:{substate}"
     parts = [head, "MPos:" + ",".join(_num(v) for v in mpos), f"FS:{_fmt_rate(feed_mm_min)},{spindle:.0f}"]
     if wco is not None:
         parts.append("WCO:" + ",".join(_num(v) for v in wco))
     if overrides is not None:
         parts.append("Ov:" + ",".join(str(int(v)) for v in overrides))
+        if accessories:
+            parts.append("A:" + accessories)
     return ("<" + "|".join(parts) + ">\r\n").encode("ascii")
 
 

@@ -14,9 +14,12 @@ client sends (captured in the tests):
     elif not executing: process it (blocking commands finish first); executing = True
                         and signal_done_with_cmd() unless cmd == 255 (stop script)
 
-Commands acted on: moveL (3, synchronous or asynchronous), stopL (33) / stopJ (34), speedL (10),
-speedStop (15), servoStop (16), isSteady (47), setPayload (17), setTcp (29), getTCPOffset (40),
-stop script (255). The TCP offset and payload belong to the running program (a new upload starts
+Commands acted on: moveL (3, synchronous or asynchronous), moveJ (1, likewise: see _joint_move), stopL (33) / stopJ (34), speedL (10),
+servoL (24: the TCP follows the stream of poses, see _command_servo), speedStop (15), servoStop (16), isSteady (47), isPoseWithinSafetyLimits (36: the pose against the
+safety planes, here the twin's workspace box; orientation is not limited), triggerProtectiveStop
+(31: the controller's protective stop, which pauses the program before the command is done),
+getInverseKinematics (30 with qnear, 46 without: the UR5e's closed-form IK, kinematics.py),
+setPayload (17), setTcp (29), getTCPOffset (40), stop script (255). The TCP offset and payload belong to the running program (a new upload starts
 from the installation's, here none); the controller reports the payload on RTDE. Commands that
 only set state the emulator does not model (setWatchdog 35, force-mode damping 20 / gain 21) are
 acknowledged like the script would without effect; any other command is acknowledged and
@@ -32,20 +35,28 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from hardware.ur5e import kinematics
+
 log = logging.getLogger(__name__)
 
 # Command numbers of the control script (ur_rtde 1.6.5, RTDE::RobotCommand::Type).
 CMD_NONE = 0
+CMD_MOVEJ = 1
 CMD_MOVEL = 3
 CMD_SPEEDL = 10
 CMD_SPEED_STOP = 15
 CMD_SERVO_STOP = 16
 CMD_SET_PAYLOAD = 17
+CMD_SERVOL = 24
 CMD_SET_TCP = 29
+CMD_GET_INVERSE_KINEMATICS = 30  # get_inverse_kin(x, qnear, maxPositionError, maxOrientationError)
+CMD_PROTECTIVE_STOP = 31
 CMD_STOPL = 33
 CMD_STOPJ = 34
 CMD_SET_WATCHDOG = 35
+CMD_IS_POSE_WITHIN_SAFETY_LIMITS = 36
 CMD_GET_TCP_OFFSET = 40
+CMD_GET_INVERSE_KINEMATICS_DEFAULT = 46  # get_inverse_kin(x): nearest the current joint positions
 CMD_IS_STEADY = 47
 CMD_STOP_SCRIPT = 255
 # Processed every cycle and answered with "ready", never "done" (the script's list).
@@ -62,16 +73,23 @@ SIGNAL_DONE = 2
 SPEED_HORIZON_S = 2.0
 MAX_HORIZON_ANGLE_RAD = 1.0
 CYCLE_S = 0.002
+# What the controller process knows of the twin (sim.rig.arm): the workspace box (the safety
+# planes) and the speed limits a servo stream is held to.
+ARM_LIMITS = ("workspace_min_m", "workspace_max_m", "max_speed_m_s", "max_accel_m_s2", "max_angular_speed_rad_s")
 
 
 class ArmAccess(Protocol):
-    """The simulated arm as the script reaches it (the emulator takes the world lock)."""
+    """The simulated arm as the script reaches it (the emulator takes the world lock);
+    limits: the twin's ARM_LIMITS by name, or None."""
+
+    limits: dict | None
 
     def move_linear(self, pose6: np.ndarray, speed_m_s: float, accel_m_s2: float,
                     angular_speed_rad_s: float | None, stop_at_workspace: bool = False) -> None: ...
     def stop(self) -> None: ...
     def is_moving(self) -> bool: ...
     def tcp_pose6(self) -> np.ndarray: ...
+    def within_safety_limits(self, pose6: np.ndarray) -> bool: ...
 
 
 class Registers:
@@ -97,12 +115,14 @@ class ToolSettings:
 class ControlScript:
     """One running instance of the uploaded control script.
 
-    arm: access to the twin. regs: the shared registers. Call tick() every 2 ms; `running`
-    turns False once the script ends (stop-script command).
+    arm: access to the twin. regs: the shared registers. protective_stop: the controller's
+    protective stop (URScript protective_stop()). Call tick() every 2 ms; `running` turns False
+    once the script ends (stop-script command).
     """
 
-    def __init__(self, arm: ArmAccess, regs: Registers) -> None:
+    def __init__(self, arm: ArmAccess, regs: Registers, protective_stop: Callable[[], None] | None = None) -> None:
         self.arm, self.regs = arm, regs
+        self._protective_stop = protective_stop
         self.running = True
         self.executing = False
         self.unsupported: list[int] = []
@@ -115,8 +135,10 @@ class ControlScript:
         self._speed_accel = 0.5
         self._pending: Callable[[], bool] | None = None  # blocking command: done when it returns True
         self._speed_renew_in = 0  # cycles until a running speedl's target is renewed
+        self._servo_target: np.ndarray | None = None  # the pose a servoL stream last gave
         self._last_twist: np.ndarray | None = None
         self.tool = ToolSettings()
+        self.actual_q = [0.0] * 6  # what RTDE reports as actual_q (no joint space here: zeros)
         self.speed_fraction = 1.0  # the speed slider, set by the controller (applies to moves commanded after)
         self._reset_async_progress()
         self._signal(SIGNAL_READY)
@@ -188,6 +210,7 @@ class ControlScript:
         self._move_active = False
         self._speeding = False
         self._last_twist = None
+        self._servo_target = None
         self._pending = None
 
     # ---- commands -----------------------------------------------------------------------------
@@ -196,11 +219,15 @@ class ControlScript:
         if cmd != CMD_NONE and (not self.commands or self.commands[-1] != cmd or cmd not in REALTIME_CMDS):
             self.commands.append(cmd)
         r = self.regs
-        if cmd == CMD_MOVEL:
+        if cmd in (CMD_MOVEL, CMD_MOVEJ):
             pose, v, a, is_async = self._pose_in(0), r.input_double[6], r.input_double[7], r.input_int[1]
             self._stop_async_move()
+            self._servo_target = None
             f = self._slider()
-            self.arm.move_linear(pose, v * f, a * f * f, None)
+            if cmd == CMD_MOVEL:
+                self.arm.move_linear(pose, v * f, a * f * f, None)
+            else:  # the registers hold joint angles q, joint speed and acceleration
+                self.arm.move_linear(*self._joint_move(pose, v * f, a * f * f))
             if is_async == 1:
                 self._move_active = True
                 self._write_async_progress(0)
@@ -209,6 +236,7 @@ class ControlScript:
         elif cmd in (CMD_STOPL, CMD_STOPJ):
             is_async = r.input_int[1]
             self._stop_async_move()
+            self._servo_target = None
             self.arm.stop()
             if is_async == 1:
                 self._move_active = True  # stop_thread
@@ -222,13 +250,21 @@ class ControlScript:
                 self._speed_twist = twist
                 self._speeding = True
                 self._command_twist(twist, self._speed_accel)
+        elif cmd == CMD_SERVOL:  # servo_target = get_inverse_kin(pose), then servoj(q, t, lookahead, gain)
+            pose = self._pose_in(0)
+            if self._servo_target is None or not np.array_equal(pose, self._servo_target):
+                self._servo_target = pose
+                self._command_servo(pose, float(r.input_double[8]), float(r.input_double[9]))
         elif cmd in (CMD_SPEED_STOP, CMD_SERVO_STOP):
+            self._servo_target = None
             self._speeding = False
             self._speed_twist = np.zeros(6)
             self.arm.stop()
             self._pending = lambda: not self.arm.is_moving()
         elif cmd == CMD_IS_STEADY:
             r.output_int[1] = 0 if self.arm.is_moving() else 1
+        elif cmd == CMD_IS_POSE_WITHIN_SAFETY_LIMITS:  # is_within_safety_limits(pose)
+            r.output_int[1] = 1 if self.arm.within_safety_limits(self._pose_in(0)) else 0
         elif cmd == CMD_SET_TCP:
             self.tool.tcp_offset = [float(x) for x in r.input_double[0:6]]
         elif cmd == CMD_SET_PAYLOAD:
@@ -236,8 +272,17 @@ class ControlScript:
             cog = [float(x) for x in r.input_double[1:4]]
             if any(cog):  # all zero: the script keeps the current centre of gravity
                 self.tool.payload_cog_m = cog
+        elif cmd in (CMD_GET_INVERSE_KINEMATICS, CMD_GET_INVERSE_KINEMATICS_DEFAULT):
+            # (the closed form is exact: maxPositionError / maxOrientationError have nothing to bound)
+            near = r.input_double[6:12] if cmd == CMD_GET_INVERSE_KINEMATICS else self.actual_q
+            r.output_double[0:6] = self._inverse_kinematics(self._pose_in(0), near).tolist()
         elif cmd == CMD_GET_TCP_OFFSET:
             r.output_double[0:6] = list(self.tool.tcp_offset)
+        elif cmd == CMD_PROTECTIVE_STOP and self._protective_stop is not None:
+            # protective_stop() stops the arm and pauses the program there: the command's done
+            # signal comes only if the program is resumed (the client sees the script not running)
+            self._protective_stop()
+            self._pending = lambda: True
         elif cmd == CMD_STOP_SCRIPT:
             log.info("ur5e emulator: Received stop script!")
             return False
@@ -247,6 +292,41 @@ class ControlScript:
             self.unsupported.append(cmd)
             log.warning("ur5e emulator: control script command %d is not emulated (acknowledged only)", cmd)
         return True
+
+    def _inverse_kinematics(self, tcp_pose6: np.ndarray, q_near) -> np.ndarray:
+        """get_inverse_kin for the active TCP: the flange pose is the TCP pose less the TCP
+        offset. Unreachable: kinematics.NoSolution, a runtime error that ends the program as
+        URControl's "inverse kinematics" error does."""
+        flange = (kinematics.pose6_to_matrix(tcp_pose6)
+                  @ np.linalg.inv(kinematics.pose6_to_matrix(self.tool.tcp_offset)))
+        return kinematics.inverse(kinematics.matrix_to_pose6(flange), q_near)
+
+    def _joint_move(self, q, speed_rad_s: float, accel_rad_s2: float):
+        """moveJ(q) for a twin without joints: a straight move of the TCP to where q puts it
+        (forward kinematics, active TCP), timed like the joint move (the joint that turns
+        furthest at speed_rad_s) within the twin's limits; the path between is straight, not the
+        joint-interpolated arc. Returns move_linear's (pose6, speed, accel, angular speed)."""
+        q = np.asarray(q, float)
+        t_tcp = kinematics.forward(q) @ kinematics.pose6_to_matrix(self.tool.tcp_offset)
+        target = kinematics.matrix_to_pose6(t_tcp)
+        here = np.asarray(self.arm.tcp_pose6(), float)
+        flange_here = kinematics.pose6_to_matrix(here) @ np.linalg.inv(kinematics.pose6_to_matrix(self.tool.tcp_offset))
+        try:
+            q_here = kinematics.inverse(kinematics.matrix_to_pose6(flange_here), q)
+        except kinematics.NoSolution:
+            q_here = q  # (a pose the arm cannot be in: time the move by the TCP alone)
+        lead = float(np.max(np.abs(q - q_here)))
+        dist = float(np.linalg.norm(target[:3] - here[:3]))
+        turn = (Rotation.from_rotvec(target[3:]) * Rotation.from_rotvec(here[3:]).inv()).magnitude()
+        lim = self.arm.limits or {}
+        if lead < 1e-9:
+            scale_m, scale_rad = 1.0, 1.0
+        else:
+            scale_m, scale_rad = dist / lead, turn / lead  # TCP metres / radians per joint radian
+        v = min(max(speed_rad_s * scale_m, 1e-4), lim.get("max_speed_m_s", np.inf))
+        a = min(max(accel_rad_s2 * scale_m, 1e-3), lim.get("max_accel_m_s2", np.inf))
+        w = None if turn < 1e-9 else min(max(speed_rad_s * scale_rad, 1e-4), lim.get("max_angular_speed_rad_s", np.inf))
+        return target, v, a, w
 
     def _slider(self) -> float:
         # Time scaling by the speed slider: speeds scale by f, accelerations by f^2; kept above
@@ -275,6 +355,20 @@ class ControlScript:
         target = _advance(here, v, w, horizon_s)
         self.arm.move_linear(target, max(speed, 1e-4), max(accel, 1e-3), ang if ang > 0 else None,
                              stop_at_workspace=True)
+
+    def _command_servo(self, pose6: np.ndarray, t_s: float, lookahead_s: float) -> None:
+        """servoj follows its target with a lag of about lookahead_time (its smoothing), each
+        target reached over at least t. The twin takes targets: it moves toward each new one at
+        the speed that covers the distance in that time, within the arm's limits; a stream that
+        leads out of the workspace stops on its boundary (the safety planes), as speedL does."""
+        here = np.asarray(self.arm.tcp_pose6(), float)
+        horizon_s = max(t_s, lookahead_s, CYCLE_S)
+        lim = self.arm.limits or {}
+        dist = float(np.linalg.norm(pose6[:3] - here[:3]))
+        turn = (Rotation.from_rotvec(pose6[3:]) * Rotation.from_rotvec(here[3:]).inv()).magnitude()
+        v = min(max(dist / horizon_s, 1e-4), lim.get("max_speed_m_s", np.inf))
+        w = None if turn < 1e-9 else min(max(turn / horizon_s, 1e-4), lim.get("max_angular_speed_rad_s", np.inf))
+        self.arm.move_linear(pose6, v, lim.get("max_accel_m_s2", 1.5), w, stop_at_workspace=True)
 
     def _decelerate(self, here: np.ndarray, accel: float) -> None:
         last = self._last_twist

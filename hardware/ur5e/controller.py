@@ -16,6 +16,7 @@ the world's time when the emulator started). Socket readers run one thread per c
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import socket
@@ -63,8 +64,10 @@ class BridgedArm:
     cycle, commands sent back to it. A command counts as moving until the parent reports it
     applied (the state it pushed before may predate the command)."""
 
-    def __init__(self, conn) -> None:
+    def __init__(self, conn, limits: dict | None = None) -> None:
         self.conn = conn
+        # the twin's ARM_LIMITS (workspace box: the safety planes; speed limits); None: unlimited
+        self.limits = limits
         self._send_lock = threading.Lock()
         self.pose = np.zeros(6)
         self.speed = np.zeros(6)  # TCP twist [v (m/s), w (rad/s)], base frame
@@ -93,6 +96,16 @@ class BridgedArm:
 
     def tcp_pose6(self):
         return self.pose.copy()
+
+    def within_safety_limits(self, pose6) -> bool:
+        """Whether a TCP pose is inside the safety planes (the twin's workspace box)."""
+        p = np.asarray(pose6, float)
+        if p.shape != (6,) or not np.all(np.isfinite(p)):
+            return False
+        if self.limits is None:
+            return True
+        lo, hi = (np.asarray(self.limits[k], float) for k in ("workspace_min_m", "workspace_max_m"))
+        return bool(np.all(p[:3] >= lo) and np.all(p[:3] <= hi))
 
     def on_state(self, t_s: float, pose6, moving: bool, applied_id: int, error: str | None, speed6) -> None:
         """speed6: the twin's TCP twist (its motion state, not a difference of sampled poses: the
@@ -493,7 +506,7 @@ class URController:
                 return
             if self.script is not None:
                 self.script.halt()
-            self.script = ControlScript(self.arm, self.regs)
+            self.script = ControlScript(self.arm, self.regs, protective_stop=self.protective_stop)
             self.runtime_state = RUNTIME_PLAYING
         log.info("ur5e emulator: control script started (%d bytes)", len(program))
 
@@ -690,7 +703,7 @@ def main(argv: list[str]) -> int:
 
     logging.basicConfig(level=logging.WARNING, format="ur5e-controller %(levelname)s %(message)s")
     conn = Connection(int(argv[0]))
-    arm = BridgedArm(conn)
+    arm = BridgedArm(conn, json.loads(argv[3]) if len(argv) > 3 else None)
     ctl = URController(arm, host=argv[1], t0_s=float(argv[2]))
     try:
         where = ctl.start()

@@ -14,6 +14,7 @@ stops the control script commands to `rt.rig.arm`.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import socket
@@ -30,6 +31,7 @@ from scipy.spatial.transform import Rotation
 from hardware.emulation import Emulator
 from hardware.interfaces import DeviceError
 from hardware.ur5e import wire
+from hardware.ur5e.control_script import ARM_LIMITS
 
 log = logging.getLogger(__name__)
 
@@ -78,9 +80,11 @@ class UR5eEmulator(Emulator):
         """Start the controller process and the bridge; returns "host:30004" once it listens."""
         parent, child = socket.socketpair()
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(_ROOT), os.environ.get("PYTHONPATH", "")]))
+        cfg = self.rt.rig.arm.cfg  # its workspace box stands for the controller's safety planes
+        limits = json.dumps({k: getattr(cfg, k) for k in ARM_LIMITS})
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "hardware.ur5e.controller", str(child.fileno()), self.host,
-             repr(float(self.rt.world_time_s()))], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
+             repr(float(self.rt.world_time_s())), limits], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
         child.close()
         self._conn = Connection(parent.detach())
         self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message

@@ -3,12 +3,15 @@
 import socket
 import threading
 import time
+import urllib.error
+import urllib.request
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
 
 from hardware.interfaces import DeviceError
-from hardware.netft import NetFTConfig, NetFTEmulator, NetFTSensor, wire
+from hardware.netft import NetFTConfig, NetFTEmulator, NetFTSensor, web, wire
 from layerskin_exp.config import ConfigError
 from tests.hardware.conftest import start_realtime_world
 
@@ -279,3 +282,51 @@ def test_a_third_party_rdt_client_reads_the_emulator(emulator):
     seqs = [s.rdt_sequence for s in samples]
     assert seqs == sorted(set(seqs))  # (its Python queue may skip samples a slow reader has not taken)
     assert all(abs(f) < 1.0 for s in samples for f in s.force)
+
+
+def http_get(emu, target):
+    with urllib.request.urlopen(f"http://{emu.http_address}{target}", timeout=5) as r:
+        return r.read().decode()
+
+
+def test_the_web_server_serves_pages_and_settings_over_http(emulator):
+    emu = emulator()
+    page = ET.fromstring(http_get(emu, "/netftapi2.xml"))
+    assert int(page.findtext("cfgcpf")) == 1_000_000  # an integer parser reads the right count
+    assert page.findtext("setcfgsel") == "0" and page.findtext("cfgcalsn") == emu.web.calibrations[0].serial
+    assert ET.fromstring(http_get(emu, "/netftcalapi.xml")).findtext("calsn") == page.findtext("cfgcalsn")
+    assert "<html>" in http_get(emu, "/")
+    with pytest.raises(urllib.error.HTTPError, match="404"):
+        http_get(emu, "/nothing.htm")
+
+
+def test_the_rdt_output_rate_follows_comrdtrate(emulator):
+    emu = emulator()
+    http_get(emu, "/comm.cgi?comrdtrate=250")
+    with sensor_for(emu) as ft:
+        w = collect(ft, 60)
+    assert np.all(np.diff([x.seq for x in w]) == 1)  # every record of the slower stream arrives
+    dt_ms = np.diff([x.device_t_ns for x in w]) / 1e6  # one record per 4 twin samples (1 kHz)
+    assert np.all((dt_ms > 3.6) & (dt_ms < 4.4)), dt_ms
+
+
+def test_a_third_party_client_reads_the_configuration_setcfgsel_selects(emulator):
+    pynetft = pytest.importorskip("pynetft")
+    finer = web.StoredCalibration("FT00002", wire.Calibration(4_000_000.0, 8_000_000.0, "N", "N-m"),
+                                  (10.0, 10.0, 30.0, 0.5, 0.5, 0.5))
+    emu = emulator(more_calibrations=(finer,))
+    with sensor_for(emu) as ft:  # configuration 0: 1e6 counts per N
+        before = np.mean([x.force_n for x in collect(ft, 50)], axis=0)
+    http_get(emu, "/setting.cgi?setcfgsel=1")
+    client = pynetft.Client(pynetft.Config(sensor_host="127.0.0.1", rdt_port=emu.port, http_port=emu.http_port))
+    with client:
+        it = client.samples(timeout=2.0)
+        samples = [next(it) for _ in range(50)]
+        health = client.health()
+    cal = health.sensor_configuration.calibration
+    assert (cal.counts_per_force_unit, cal.counts_per_torque_unit) == (4_000_000.0, 8_000_000.0)
+    assert health.fault_code == pynetft.FaultCode.NONE
+    # the records are in the selected calibration's counts: the same unloaded force (the twin's
+    # untared bias, > 0.05 N here) in N either way; a wrong scale would read it 4x off
+    after = np.mean([s.force for s in samples], axis=0)
+    assert np.linalg.norm(before) > 0.05 and np.allclose(after, before, atol=0.01), (before, after)

@@ -155,6 +155,135 @@ def test_tcp_offset_and_payload_are_set_and_read_back(controller):
     assert emu.info["unsupported"] == []
 
 
+def test_a_servol_stream_moves_the_tool_along_it(controller):
+    rt, emu = controller("127.0.0.51")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.51", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.51")
+    controller.clients += [ctrl, recv]
+    start = twin_pose(rt)
+    step = np.array([1e-4, -5e-5, 0.0, 0.0, 0.0, 0.0])  # 0.1 mm in x, -0.05 mm in y per 2 ms
+    for i in range(1, 501):  # 500 x 2 ms, as a lab's servo loop (ur_rtde's own pacing)
+        t0 = ctrl.initPeriod()
+        assert ctrl.servoL((start + i * step).tolist(), 0.5, 0.5, 0.002, 0.1, 300)
+        ctrl.waitPeriod(t0)
+    end = start + 500 * step
+    assert wait_for(lambda: np.allclose(twin_pose(rt), end, atol=1e-5), 5.0), (twin_pose(rt), end)
+    assert ctrl.servoStop()
+    assert np.allclose(recv.getActualTCPPose(), end, atol=1e-3)  # (the pose stream carries sensor noise)
+    assert emu.info["unsupported"] == []
+
+
+def _ur5e_flange(q):
+    """Flange pose (4, 4) of joint angles q: a product of DH transforms with Universal Robots'
+    published UR5e parameters (written here, apart from hardware/ur5e/kinematics.py)."""
+    a, d = (0, -0.425, -0.3922, 0, 0, 0), (0.1625, 0, 0, 0.1333, 0.0997, 0.0996)
+    alpha = (np.pi / 2, 0, 0, np.pi / 2, -np.pi / 2, 0)
+    t = np.eye(4)
+    for i, th in enumerate(q):
+        rz = np.array([[np.cos(th), -np.sin(th), 0, 0], [np.sin(th), np.cos(th), 0, 0], [0, 0, 1, d[i]], [0, 0, 0, 1]])
+        rx = np.array([[1, 0, 0, a[i]], [0, np.cos(alpha[i]), -np.sin(alpha[i]), 0],
+                       [0, np.sin(alpha[i]), np.cos(alpha[i]), 0], [0, 0, 0, 1]])
+        t = t @ rz @ rx
+    return t
+
+
+def _pose6(t):
+    from scipy.spatial.transform import Rotation
+    return np.concatenate((t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_rotvec())).tolist()
+
+
+def test_inverse_kinematics_is_the_ur5e_s(controller):
+    rt, emu = controller("127.0.0.52")
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.52")
+    controller.clients.append(ctrl)
+    q_true = np.array([0.3, -1.2, 1.5, -1.9, -1.57, 0.4])  # elbow up, wrist down: a working posture
+    flange = _ur5e_flange(q_true)
+    # with qnear: the solution nearest it (of the eight the arm has for this pose)
+    q = ctrl.getInverseKinematics(_pose6(flange), (q_true + 0.05).tolist(), 1e-10, 1e-10)
+    np.testing.assert_allclose(q, q_true, atol=1e-6)
+    other = ctrl.getInverseKinematics(_pose6(flange), (q_true + [0, 0, -3.0, 0, 0, 0]).tolist(), 1e-10, 1e-10)
+    assert not np.allclose(other, q_true, atol=1e-3)  # elbow down: another solution...
+    np.testing.assert_allclose(_ur5e_flange(other), flange, atol=1e-9)  # ...of the same pose
+    # without: nearest the current joint positions; any answer puts the flange on the pose
+    np.testing.assert_allclose(_ur5e_flange(ctrl.getInverseKinematics(_pose6(flange))), flange, atol=1e-9)
+    # the active TCP counts: the pose asked for is the TCP's
+    tcp = [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]
+    assert ctrl.setTcp(tcp)
+    tcp_pose = flange @ np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.1], [0, 0, 0, 1.0]])
+    q = ctrl.getInverseKinematics(_pose6(tcp_pose), (q_true + 0.05).tolist(), 1e-10, 1e-10)
+    np.testing.assert_allclose(q, q_true, atol=1e-6)
+    assert emu.info["unsupported"] == []
+    # out of reach: get_inverse_kin is a runtime error that ends the control program (the client
+    # then finds the script not running and answers nothing)
+    assert ctrl.getInverseKinematics([5.0, 0.0, 0.3, 0.0, 3.14, 0.0]) == []
+    assert not ctrl.isProgramRunning()
+    assert emu.wait_info(lambda i: i["runtime_state"] == wire.RUNTIME_STOPPED)
+
+
+def test_movej_moves_the_tool_to_where_the_joints_put_it(controller):
+    from scipy.spatial.transform import Rotation
+
+    rt, emu = controller("127.0.0.53")
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.53")
+    controller.clients.append(ctrl)
+    q_here = np.array(ctrl.getInverseKinematics(twin_pose(rt).tolist(), [0, -1.57, 1.57, -1.57, -1.57, 0], 0, 0))
+    q = q_here + [0.3, -0.1, 0.15, 0.0, 0.0, 0.2]
+    flange = _ur5e_flange(q)
+    assert ctrl.moveJ(q.tolist(), 0.5, 1.0)  # synchronous: answered once the arm is there
+
+    def there():
+        p = twin_pose(rt)
+        return np.allclose(p[:3], flange[:3, 3], atol=1e-5) and \
+            np.allclose(Rotation.from_rotvec(p[3:]).as_matrix(), flange[:3, :3], atol=1e-5)
+
+    assert there(), (twin_pose(rt), _pose6(flange))
+    assert ctrl.moveJ(q_here.tolist(), 0.5, 1.0, True)  # asynchronous: back, with progress reported
+    assert wait_for(lambda: ctrl.getAsyncOperationProgress() >= 0)
+    assert wait_for(lambda: ctrl.getAsyncOperationProgress() < 0, 10.0)
+    np.testing.assert_allclose(_ur5e_flange(q_here)[:3, 3], twin_pose(rt)[:3], atol=1e-5)
+    assert emu.info["unsupported"] == []
+
+
+def test_pose_within_safety_limits_is_judged_against_the_workspace(controller):
+    rt, emu = controller("127.0.0.49")
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.49")
+    controller.clients.append(ctrl)
+    with rt.lock:
+        lo, hi = (np.asarray(b, float) for b in (rt.rig.arm.cfg.workspace_min_m, rt.rig.arm.cfg.workspace_max_m))
+    here = twin_pose(rt)
+    assert ctrl.isPoseWithinSafetyLimits(here.tolist())
+    assert not ctrl.isPoseWithinSafetyLimits([5.0, 0.0, 0.3, 0.0, 3.14, 0.0])  # 5 m away
+    for axis in range(3):  # just past each plane of the box, the rest of the pose unchanged
+        for bound, step in ((hi, 1e-3), (lo, -1e-3)):
+            pose = here.copy()
+            pose[axis] = bound[axis] + step
+            assert not ctrl.isPoseWithinSafetyLimits(pose.tolist()), (axis, pose)
+            pose[axis] = bound[axis] - step
+            assert ctrl.isPoseWithinSafetyLimits(pose.tolist()), (axis, pose)
+    assert emu.info["unsupported"] == []
+
+
+def test_trigger_protective_stop_stops_the_arm_and_changes_the_safety_mode(controller):
+    rt, emu = controller("127.0.0.50")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.50", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.50")
+    dash = dashboard_client.DashboardClient("127.0.0.50")
+    dash.connect()
+    controller.clients += [ctrl, recv, dash]
+    assert recv.getSafetyMode() == wire.SAFETY_MODE_NORMAL and not recv.isProtectiveStopped()
+    assert ctrl.speedL([0.02, 0.0, 0.0, 0.0, 0.0, 0.0], 0.5, 0.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed()[0] > 0.019)
+    result = ctrl.triggerProtectiveStop()
+    # protective_stop() pauses the control program before the command's done signal; the client
+    # then finds the script not running (it answers False, as on a controller whose program paused)
+    assert wait_for(lambda: recv.isProtectiveStopped() and recv.getSafetyMode() == wire.SAFETY_MODE_PROTECTIVE_STOP)
+    assert wait_for(lambda: recv.getActualTCPSpeed() == [0.0] * 6)
+    assert dash.safetymode().endswith("PROTECTIVE_STOP") and not ctrl.isProgramRunning()
+    assert emu.info["unsupported"] == [] and result is False
+    dash.unlockProtectiveStop()
+    assert wait_for(lambda: recv.getSafetyMode() == wire.SAFETY_MODE_NORMAL and not recv.isProtectiveStopped())
+
+
 def test_dashboard_answers_as_the_dashboard_server(controller):
     rt, emu = controller("127.0.0.44")
     recv = rtde_receive.RTDEReceiveInterface("127.0.0.44", 500)
