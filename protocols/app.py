@@ -4,6 +4,11 @@ Exit codes: 0 done; 2 configuration refused (nothing connected, nothing written)
 error, a refused motion or a timeout stopped the run (motion stopped, trial file closed
 "aborted: ..."); 130 Ctrl-C, 143 SIGTERM (same; SIGTERM is what SLURM and process managers
 send). Rerunning the same command resumes.
+
+Ctrl-C and SIGTERM take one path: the first asks the control loop to stop at its next tick (a
+safe point); a second one, or for SIGTERM `STOP_GRACE_S` without a tick (a wait on a device, a
+connection being set up), stops the run at once where it is. Either way the trial in progress is
+closed "aborted".
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from protocols.runner import (
     TrialConflictError,
     check_termination,
     request_termination,
+    terminate_now,
     termination_pending,
 )
 
@@ -39,6 +45,10 @@ log = logging.getLogger(__name__)
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
+# SIGTERM has no second press: a request no control tick has acted on by then (three ticks at the
+# slowest control_period_s) is acted on at once. A process manager follows SIGTERM with SIGKILL
+# after a few seconds, which leaves no closed file.
+STOP_GRACE_S = 0.3
 
 
 def refuse_renamed(argv: list[str], renamed: dict[str, str]) -> None:
@@ -79,8 +89,20 @@ def refuse_shared_files(argv: list[str]) -> None:
         seen[files] = job
 
 
+_grace: list[threading.Timer] = []
+
+
 def _on_sigterm(signum, frame) -> None:
-    request_termination("terminated (SIGTERM)")  # acted on at the control loop's next tick (a safe point)
+    """First SIGTERM: stop at the next tick; a second one, or STOP_GRACE_S without a tick: at once."""
+    if termination_pending():
+        terminate_now()
+        return
+    request_termination("terminated (SIGTERM)")
+    # this handler again, through a real signal to the main thread: a blocking wait there returns
+    timer = threading.Timer(STOP_GRACE_S, signal.pthread_kill, (threading.main_thread().ident, signal.SIGTERM))
+    timer.daemon = True
+    timer.start()
+    _grace.append(timer)
 
 
 def _on_sigint(signum, frame) -> None:
@@ -104,6 +126,8 @@ def _sigterm_as_exception():
     finally:
         signal.signal(signal.SIGTERM, previous[0])
         signal.signal(signal.SIGINT, previous[1])
+        while _grace:
+            _grace.pop().cancel()
 
 
 def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object],
@@ -137,6 +161,11 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
 def _run_connected(cfg: DictConfig, rig, typed, body):
     try:
         rig.connect()
+    except (Terminated, KeyboardInterrupt) as e:  # while a device was still connecting: nothing written
+        rig.disconnect()
+        why = str(e) or "interrupted (Ctrl-C)"
+        print(f"{why} while connecting: nothing was recorded; rerun the same command to start", file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED if "Ctrl-C" in why else EXIT_TERMINATED)
     except Exception as e:  # noqa: BLE001 - any failure to connect ends the run before motion
         rig.disconnect()
         print(f"error: could not connect the {rig.backend} rig: {one_line(e)}", file=sys.stderr)

@@ -52,6 +52,18 @@ HARD = {
 # A 424 Hz rig: a loop faster than 1 ms drains nothing new; slower than 100 ms misses stops.
 CONTROL_PERIOD_S = (1e-3, 0.1)
 TRIAL_TIMEOUT_S = (1.0, 3600.0)
+# Ceilings of the counts a config sets, checked before any device connects: a few zeros too many
+# otherwise plan a campaign that would run for years, held in memory before its first trial.
+# Session files are named posNNN (three digits); 1000 positions is ten times the study's 100.
+MAX_POSITIONS = 1000
+# Per position and kind (the study: 5 presses, 4 slides); a hundred presses on one spot measure
+# the wear of the cover there, not the sensor.
+MAX_REPEATS = 100
+# Contact is confirmed over this many frames while the jaws close on: 100 frames (0.24 s at
+# 424 Hz) already add ~5 mm of closure at 20 mm/s to the commanded grip depth.
+MAX_CONSECUTIVE_FRAMES = 100
+# What both layers read at full scale: a higher contact threshold is never crossed.
+MAX_SKIN_SUM_COUNTS = len(rig.LAYERS) * rig.N_TAXELS**2 * rig.ADC_MAX
 
 
 def _check_data_root(data_root: str) -> None:
@@ -83,6 +95,10 @@ def _check_finite(node, prefix: str = "", skip: tuple[str, ...] = ("hardware", "
         elif isinstance(value, list | tuple):
             require(all(math.isfinite(v) for v in value if isinstance(v, float)), key, value,
                     "must hold finite numbers")
+
+
+def _check_count(key: str, value: int, low: int, ceiling: int, why: str) -> None:
+    require(low <= value <= ceiling, key, value, f"must be in [{low}, {ceiling}] ({why})")
 
 
 def _check_duration(key: str, value: float, timeout_s: float) -> None:
@@ -179,7 +195,8 @@ class PositionsConfig:
 
     def __post_init__(self) -> None:
         require(self.layout in ("random", "grid"), "positions.layout", self.layout, "use 'random' or 'grid'")
-        require(self.count > 0, "positions.count", self.count, "must be a positive number of positions")
+        _check_count("positions.count", self.count, 1, MAX_POSITIONS,
+                     "files are named posNNN; run a larger campaign as several data_roots")
         require(0 <= self.margin_mm < rig.SENSING_HALF_WIDTH_MM, "positions.margin_mm", self.margin_mm,
                 f"must be in [0, {rig.SENSING_HALF_WIDTH_MM}) mm")
 
@@ -206,7 +223,6 @@ class PressConfig:
     hold_s: float = 0.2
 
     def __post_init__(self) -> None:
-        require(self.repeats >= 0, "press.repeats", self.repeats, "must be >= 0")
         require(self.target_normal_n > 0, "press.target_normal_n", self.target_normal_n, "must be > 0 N")
         require(self.speed_mm_s > 0, "press.speed_mm_s", self.speed_mm_s, "must be > 0")
         require(self.load_speed_mm_s > 0, "press.load_speed_mm_s", self.load_speed_mm_s, "must be > 0")
@@ -249,8 +265,8 @@ class ForceCalibrationConfig:
 
     def __post_init__(self) -> None:
         s = self.safety
-        require(self.press.repeats >= 0, "press.repeats", self.press.repeats, "must be >= 0")
-        require(self.slide.repeats >= 0, "slide.repeats", self.slide.repeats, "must be >= 0")
+        for key, value in (("press.repeats", self.press.repeats), ("slide.repeats", self.slide.repeats)):
+            _check_count(key, value, 0, MAX_REPEATS, "repeats on one spot wear the cover there; add positions instead")
         require(self.press.repeats + self.slide.repeats > 0, "press.repeats", self.press.repeats,
                 "press.repeats + slide.repeats must be > 0")
         require(0 < self.press.target_normal_n < s.max_normal_force_n, "press.target_normal_n",
@@ -427,8 +443,10 @@ class GripDepthConfig:
         require(self.grip_depth <= reach_mm, "grip_depth", self.grip_depth,
                 f"cannot be reached: even with contact at approach.start_opening_mm={a.start_opening_mm} the jaws "
                 f"stop at approach.min_opening_mm={a.min_opening_mm} ({reach_mm:g} mm of closure at most)")
-        require(a.threshold_counts > 0, "approach.threshold_counts", a.threshold_counts, "must be > 0 counts")
-        require(a.consecutive_frames >= 1, "approach.consecutive_frames", a.consecutive_frames, "must be >= 1")
+        _check_count("approach.threshold_counts", a.threshold_counts, 1, MAX_SKIN_SUM_COUNTS,
+                     "counts summed over both layers; full scale is never exceeded")
+        _check_count("approach.consecutive_frames", a.consecutive_frames, 1, MAX_CONSECUTIVE_FRAMES,
+                     "the jaws close on while contact is confirmed")
         for key, value in (("approach.speed_mm_s", a.speed_mm_s), ("close.speed_mm_s", self.close.speed_mm_s),
                            ("release.speed_mm_s", self.release.speed_mm_s)):
             _check_speed(key, value, s.max_gripper_speed_mm_s, "safety.max_gripper_speed_mm_s")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 import time
 
 import numpy as np
@@ -134,6 +135,9 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     ("protocols.force_calibration", "sim.spacer.modulus=20", "renamed to sim.spacer.modulus_kpa"),
     ("protocols.force_calibration", "-m sim.cover.thickness=0.2,0.3", "renamed to sim.cover.thickness_mm"),
     ("protocols.grip_depth", "-m save_images=true,false", "would write the same session files"),
+    # issue 31: counts with no ceiling ran for years (and ignored SIGTERM while planning)
+    ("protocols.force_calibration", "positions.count=1000000000", "positions.count=1000000000: must be in [1, 1000]"),
+    ("protocols.force_calibration", "press.repeats=100000000", "press.repeats=100000000: must be in [0, 100]"),
 ])
 def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
     r = run_cli(app, [*override.split(), f"data_root={tmp_path}/data", *hydra_dirs], tmp_path)
@@ -261,6 +265,32 @@ def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs
             proc.kill()
     (partial,) = data.glob("force_calibration/*/*.partial")  # the trial in progress, closed at a tick
     assert load_session(partial, warn=False).outcome == outcome
+
+
+def test_sigterm_while_a_device_is_still_connecting_ends_the_run(tmp_path, hydra_dirs):
+    # A stalled platform never sends its banner: connecting waits up to connect_timeout_s (60 s),
+    # outside any control tick. SIGTERM ends it without waiting for the timeout (the measured
+    # figure is in the commit message; the deadline here only has to hold on a loaded machine).
+    data = tmp_path / "data"
+    args = ["hardware=loopback", "+hardware.faults.platform.stall_after_s=0", "hardware.platform.connect_timeout_s=60",
+            "positions.count=1", "press.repeats=1", "slide.repeats=0", f"data_root={data}", "progress=false",
+            *hydra_dirs]
+    proc = popen_cli("protocols.force_calibration", args, tmp_path, stderr=subprocess.PIPE)
+    job_log = tmp_path / "out" / "force_calibration.log"
+    try:
+        deadline = time.monotonic() + 200
+        # the F/T box connects just before the platform: from then on the run waits on the platform
+        while proc.poll() is None and time.monotonic() < deadline and \
+                "ft: streaming" not in (job_log.read_text() if job_log.is_file() else ""):
+            time.sleep(0.01)
+        assert proc.poll() is None, "the run ended before the signal could be sent"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 143
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "terminated (SIGTERM) while connecting" in proc.stderr.read()
+    assert not list(data.glob("**/*.mcap*"))
 
 
 def test_second_run_on_a_trial_in_progress_refuses_naming_the_other(tmp_path, hydra_dirs):

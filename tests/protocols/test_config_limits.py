@@ -47,6 +47,15 @@ from tests.protocols.conftest import compose_app
     ("force_calibration", ["approach.contact_force_n=inf"], r"approach\.contact_force_n=inf"),
     ("force_calibration", ["hardware=loopback", "+hardware.faults.skin_board.stalls=[[1.0,nan]]"],
      r"hardware\.faults\.skin_board\.stalls"),
+    # issue 31: counts that planned a campaign of years (1.4 GB of plan before the first trial)
+    ("force_calibration", ["positions.count=1000000000"], r"positions\.count=1000000000: must be in \[1, 1000\]"),
+    ("force_calibration", ["positions.count=0"], r"positions\.count=0: must be in \[1, 1000\]"),
+    ("force_calibration", ["press.repeats=100000000"], r"press\.repeats=100000000: must be in \[0, 100\]"),
+    ("force_calibration", ["slide.repeats=100000000"], r"slide\.repeats=100000000: must be in \[0, 100\]"),
+    ("force_calibration", ["press.repeats=-1"], r"press\.repeats=-1: must be in \[0, 100\]"),
+    ("grip_depth", ["approach.consecutive_frames=1000000000"], r"approach\.consecutive_frames=1000000000: must be in"),
+    ("grip_depth", ["approach.threshold_counts=1000000000"],
+     r"approach\.threshold_counts=1000000000: must be in \[1, 2096640\]"),
 ])
 def test_refused_at_validation(app, overrides, key):
     with pytest.raises(ConfigError, match=key if "\\" in key else key.replace(".", r"\.")):
