@@ -22,7 +22,7 @@ from omegaconf import MISSING
 import hardware.config  # noqa: F401
 import layerskin_exp.sim.config  # noqa: F401
 from layerskin_exp import rig
-from layerskin_exp.config import require
+from layerskin_exp.config import require, require_seed
 
 # Hard ceilings no config can raise: what the skin, the platform, the UR5e and the Hand-E can do
 # safely on this rig. Checked when the config is validated, before any device connects.
@@ -64,6 +64,12 @@ MAX_REPEATS = 100
 MAX_CONSECUTIVE_FRAMES = 100
 # What both layers read at full scale: a higher contact threshold is never crossed.
 MAX_SKIN_SUM_COUNTS = len(rig.LAYERS) * rig.N_TAXELS**2 * rig.ADC_MAX
+# The study ran 7 trials per grip depth and motion; a trial index past 999 is a typo (1000 trials of
+# one condition are ~33 h of arm motion), and past 2**32 it would draw another trial's numbers.
+MAX_TRIAL = 999
+# The skin baseline averages the frames of approach.baseline_s; with fewer, its noise (or, with
+# none, a baseline of 0 counts) decides when contact is "detected".
+MIN_BASELINE_FRAMES = 5
 
 
 def _check_data_root(data_root: str) -> None:
@@ -99,6 +105,19 @@ def _check_finite(node, prefix: str = "", skip: tuple[str, ...] = ("hardware", "
 
 def _check_count(key: str, value: int, low: int, ceiling: int, why: str) -> None:
     require(low <= value <= ceiling, key, value, f"must be in [{low}, {ceiling}] ({why})")
+
+
+def _check_live_port(port: int) -> None:
+    require(port == 0 or 1024 <= port <= 65535, "live_port", port,
+            "must be a TCP port in [1024, 65535] (lower ones need root), or 0 for any free port")
+
+
+def _check_motion_time(key: str, speed: float, waypoints: list[float], unit: str, timeout_s: float) -> None:
+    """The trajectory, from the start through every waypoint at `speed`, fits in the trial's time."""
+    path = sum(abs(b - a) for a, b in zip([0.0, *waypoints], waypoints, strict=False))
+    require(path / speed <= timeout_s, key, speed,
+            f"{path:g} {unit} of waypoints at this speed take {path / speed:.3g} s, more than "
+            f"trial_timeout_s={timeout_s:g}; raise the speed (or trial_timeout_s)")
 
 
 def _check_duration(key: str, value: float, timeout_s: float) -> None:
@@ -298,6 +317,8 @@ class ForceCalibrationConfig:
         require(TRIAL_TIMEOUT_S[0] <= self.trial_timeout_s <= TRIAL_TIMEOUT_S[1], "trial_timeout_s",
                 self.trial_timeout_s, f"must be in [{TRIAL_TIMEOUT_S[0]}, {TRIAL_TIMEOUT_S[1]}] s")
         _check_duration("press.hold_s", self.press.hold_s, self.trial_timeout_s)
+        require_seed("seed", self.seed)
+        _check_live_port(self.live_port)
         _check_finite(self)
         _check_fault_devices(self.hardware, "platform")
         _check_data_root(self.data_root)
@@ -428,7 +449,8 @@ class GripDepthConfig:
                 "must be an estimator artifact file (the report writes out/models/T-s5.pt), or null")
         require(0 < self.grip_depth <= s.max_grip_depth_mm, "grip_depth", self.grip_depth,
                 f"must be > 0 mm and at most safety.max_grip_depth_mm={s.max_grip_depth_mm}")
-        require(self.trial >= 0, "trial", self.trial, "must be a trial index >= 0")
+        require(0 <= self.trial <= MAX_TRIAL, "trial", self.trial,
+                f"must be a trial index in [0, {MAX_TRIAL}] (the study ran 7 per grip depth and motion)")
         a = self.approach
         stroke_mm = HARD["gripper_stroke_mm"]
         require(0 <= a.min_opening_mm < stroke_mm, "approach.min_opening_mm", a.min_opening_mm,
@@ -477,6 +499,20 @@ class GripDepthConfig:
         for key, value in (("hold_s", self.hold_s), ("close.settle_s", self.close.settle_s),
                            ("approach.baseline_s", a.baseline_s)):
             _check_duration(key, value, self.trial_timeout_s)
+        min_baseline_s = MIN_BASELINE_FRAMES * self.skin.frame_period_ms / 1000.0
+        require(a.baseline_s >= min_baseline_s, "approach.baseline_s", a.baseline_s,
+                f"must be >= {min_baseline_s:g} s ({MIN_BASELINE_FRAMES} skin frames of "
+                f"skin.frame_period_ms={self.skin.frame_period_ms:g}): the baseline averages them, and with none it is "
+                "0 counts and contact is detected at once")
+        # the motion that runs fits in the trial (the other one may need a longer trial_timeout_s)
+        if self.trajectory.motion == "translation":
+            _check_motion_time("trajectory.translation.speed_mm_s", tr.speed_mm_s, tr.waypoints_mm, "mm",
+                               self.trial_timeout_s)
+        else:
+            _check_motion_time("trajectory.torsion.speed_deg_s", to.speed_deg_s, to.waypoints_deg, "deg",
+                               self.trial_timeout_s)
+        require_seed("seed", self.seed)
+        _check_live_port(self.live_port)
         _check_finite(self)
         _check_fault_devices(self.hardware, "gripper")
         _check_data_root(self.data_root)

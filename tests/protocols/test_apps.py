@@ -138,6 +138,15 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     # issue 31: counts with no ceiling ran for years (and ignored SIGTERM while planning)
     ("protocols.force_calibration", "positions.count=1000000000", "positions.count=1000000000: must be in [1, 1000]"),
     ("protocols.force_calibration", "press.repeats=100000000", "press.repeats=100000000: must be in [0, 100]"),
+    # issue 31: a raw OverflowError, a .partial mid-trial, contact "detected" at once, seeds and
+    # trial indices out of the generators' 32 bits
+    ("protocols.grip_depth", "live_port=99999", "live_port=99999: must be a TCP port"),
+    ("protocols.grip_depth", "live_port=-1", "live_port=-1: must be a TCP port"),
+    ("protocols.grip_depth", "trajectory.translation.speed_mm_s=1e-300", "speed_mm_s=1e-300: 20 mm of waypoints"),
+    ("protocols.grip_depth", "approach.baseline_s=0", "approach.baseline_s=0.0: must be >= 0.0118 s"),
+    ("protocols.grip_depth", "seed=-1", "seed=-1: must be an integer in [0, 4294967295]"),
+    ("protocols.force_calibration", "seed=99999999999999999999", "seed=99999999999999999999: must be an integer"),
+    ("protocols.grip_depth", "trial=99999999999999999999", "trial=99999999999999999999: must be a trial index"),
 ])
 def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
     r = run_cli(app, [*override.split(), f"data_root={tmp_path}/data", *hydra_dirs], tmp_path)
