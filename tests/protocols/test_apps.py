@@ -183,6 +183,25 @@ def test_sweep_over_a_protocol_key_keeps_every_combination_and_resumes_once(tmp_
     assert [f.stat().st_mtime_ns for f in files] == stamps
 
 
+def test_a_failing_sweep_job_does_not_stop_the_others(tmp_path, hydra_dirs):
+    # The first job's two holds (2 x 1.9 s) outlast trial_timeout_s=4 s of rig clock: it times out.
+    # The next job still runs, both outcomes are in the progress log, the command exits 1.
+    data = tmp_path / "data"
+    tiny = [a for a in TINY_GRIP if not a.startswith("hold_s=")]
+    args = ["-m", "hold_s=1.9,0.1", "trial_timeout_s=4", *tiny, f"data_root={data}", "progress=false", *hydra_dirs]
+    r = run_cli("protocols.grip_depth", args, tmp_path)
+    assert r.returncode == 1, r.stderr[-3000:]
+    progress = [json.loads(ln) for ln in (tmp_path / "multirun" / "sweep_progress.jsonl").read_text().splitlines()]
+    assert [(p["job"], p["ok"]) for p in progress] == [(0, False), (1, True)]
+    assert "trial_timeout_s=4" in progress[0]["error"] and "hold_s=1.9" in progress[0]["overrides"]
+    assert "multirun done: 1 ran, 0 already complete, 1 failed" in r.stdout
+    assert "failed: job 0 (hold_s=1.9" in r.stdout and "trial_timeout_s=4" in r.stdout
+    (partial,) = data.glob("grip_depth/*/*.mcap.partial")
+    assert load_session(partial, warn=False).outcome.startswith("aborted: the trial outlasted trial_timeout_s=4")
+    (done,) = data.glob("grip_depth/*/*.mcap")
+    assert load_session(done, warn=False).complete
+
+
 def test_design_sweep_writes_one_set_of_files_per_value(tmp_path, hydra_dirs):
     # The README's design sweep: each spacer modulus gets its own folder, none is skipped.
     data = tmp_path / "data"
