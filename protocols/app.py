@@ -147,7 +147,8 @@ def _on_sigterm(signum, frame) -> None:
 def _on_sigint(signum, frame) -> None:
     """First Ctrl-C: stop at the next tick, closing the trial cleanly; a second one: at once."""
     if termination_pending():
-        raise KeyboardInterrupt
+        terminate_now()
+        return
     request_termination("interrupted (Ctrl-C)")
     print("stopping at the next control tick (Ctrl-C again to stop at once)", file=sys.stderr, flush=True)
 
@@ -163,10 +164,15 @@ def _sigterm_as_exception():
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous[0])
-        signal.signal(signal.SIGINT, previous[1])
         while _grace:
             _grace.pop().cancel()
+        if termination_pending():
+            # The run stopped on a signal and the process is on its way out: a further Ctrl-C (a
+            # double press) or SIGTERM would only cut short what is left, closing devices and the
+            # exit hooks (tqdm's among them), with a raw KeyboardInterrupt traceback or exit -2.
+            previous = signal.SIG_IGN, signal.SIG_IGN
+        signal.signal(signal.SIGTERM, previous[0])
+        signal.signal(signal.SIGINT, previous[1])
 
 
 def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object],

@@ -295,6 +295,38 @@ def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs
     assert load_session(partial, warn=False).outcome == outcome
 
 
+def test_ctrl_c_pressed_again_while_the_run_winds_down_is_ignored(tmp_path, hydra_dirs):
+    # Ctrl-C inside the first press closes the trial aborted; Ctrl-C pressed again and again (every
+    # 5 ms) from then until the process is gone lands while the devices disconnect and the exit
+    # hooks (tqdm's) run: ignored, no raw KeyboardInterrupt traceback, no death by SIGINT (-2).
+    data = tmp_path / "data"
+    args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", "press.hold_s=15", f"data_root={data}",
+            *hydra_dirs]  # progress bars on: tqdm's exit hook is there
+    proc = popen_cli("protocols.force_calibration", args, tmp_path, stderr=subprocess.PIPE)
+    job_log = tmp_path / "out" / "force_calibration.log"
+    try:
+        deadline = time.monotonic() + 200
+        while not list(data.glob("force_calibration/*/*press*.partial")) and proc.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert proc.poll() is None, "the campaign ended before the signal could be sent"
+        proc.send_signal(signal.SIGINT)
+        while proc.poll() is None and time.monotonic() < deadline and \
+                "pos000_press0 aborted" not in (job_log.read_text() if job_log.is_file() else ""):
+            time.sleep(0.002)
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.005)
+        assert proc.wait(timeout=10) == 130
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    stderr = proc.stderr.read()
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr[-3000:]
+    (partial,) = data.glob("force_calibration/*/*.partial")
+    assert load_session(partial, warn=False).outcome == "aborted: interrupted (Ctrl-C)"
+
+
 def test_sigterm_while_a_device_is_still_connecting_ends_the_run(tmp_path, hydra_dirs):
     # A stalled platform never sends its banner: connecting waits up to connect_timeout_s (60 s),
     # outside any control tick. SIGTERM ends it without waiting for the timeout (the measured
