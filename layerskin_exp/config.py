@@ -47,6 +47,18 @@ def require(ok: bool, key: str, value, what: str) -> None:
         raise ConfigError(f"{key}={value!r}: {what}")
 
 
+# Seeds reach numpy's generators 32 bits wide (`seed & 0xFFFFFFFF`): a larger seed would silently
+# repeat the draws of a smaller one.
+SEED_MAX = 2**32 - 1
+
+
+def require_seed(key: str, seed) -> None:
+    """Range check of a seed setting: an integer in [0, SEED_MAX]."""
+    require(isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed <= SEED_MAX, key, seed,
+            f"must be an integer in [0, {SEED_MAX}] (the random generators take 32 bits of a seed; a larger one "
+            "would repeat a smaller one's draws)")
+
+
 # Keys that once repeated a fact of the rig or moved: key -> what to do instead. Each schema
 # module retires its own keys (`retire`); `compose` and the command lines refuse them up front.
 RETIRED_KEYS: dict[str, str] = {}

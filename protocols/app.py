@@ -3,7 +3,13 @@
 Exit codes: 0 done; 2 configuration refused (nothing connected, nothing written); 1 a device
 error, a refused motion or a timeout stopped the run (motion stopped, trial file closed
 "aborted: ..."); 130 Ctrl-C, 143 SIGTERM (same; SIGTERM is what SLURM and process managers
-send). Rerunning the same command resumes.
+send). Rerunning the same command resumes. In a multirun a job that fails is recorded and the
+next one runs (`sweep_job`); the command then exits 1.
+
+Ctrl-C and SIGTERM take one path: the first asks the control loop to stop at its next tick (a
+safe point); a second one, or for SIGTERM `STOP_GRACE_S` without a tick (a wait on a device, a
+connection being set up), stops the run at once where it is. Either way the trial in progress is
+closed "aborted".
 """
 
 from __future__ import annotations
@@ -29,16 +35,22 @@ from protocols.runner import (
     TrialConflictError,
     check_termination,
     request_termination,
+    terminate_now,
     termination_pending,
 )
 
-__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files", "run_app"]
+__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files", "run_app",
+           "sweep_job"]
 
 log = logging.getLogger(__name__)
 
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
+# SIGTERM has no second press: a request no control tick has acted on by then (three ticks at the
+# slowest control_period_s) is acted on at once. A process manager follows SIGTERM with SIGKILL
+# after a few seconds, which leaves no closed file.
+STOP_GRACE_S = 0.3
 
 
 def refuse_renamed(argv: list[str], renamed: dict[str, str]) -> None:
@@ -79,14 +91,64 @@ def refuse_shared_files(argv: list[str]) -> None:
         seen[files] = job
 
 
+class JobFailed(SystemExit):
+    """The run failed with exit code EXIT_FAILED; `reason` is the one line it printed."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(EXIT_FAILED)
+        self.reason = reason
+
+
+def _fail(reason: str) -> None:
+    print(f"error: {reason}", file=sys.stderr)
+    raise JobFailed(reason)
+
+
+def sweep_job(task: Callable[[], dict]) -> dict:
+    """task() as one Hydra job. In a multirun a job that fails (a device error, a timeout, a
+    refusal, an exception) returns {"failed": True, "error": ..., "exit_code": ...} instead of
+    ending the sweep: the progress log records it, the next job runs, and the command exits
+    non-zero after the summary (protocols.progress). Ctrl-C and SIGTERM still end the sweep."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    if HydraConfig.get().mode != RunMode.MULTIRUN:
+        return task()
+    try:
+        return task()
+    except SystemExit as e:
+        if e.code in (EXIT_INTERRUPTED, EXIT_TERMINATED):
+            raise
+        code = e.code
+        reason = getattr(e, "reason", None) or ("configuration refused" if code == EXIT_CONFIG else f"exit {code}")
+    except Exception as e:  # noqa: BLE001 - any failure of one job is that job's outcome
+        log.exception("job failed")
+        code, reason = EXIT_FAILED, f"{type(e).__name__}: {one_line(e)}"
+        print(f"error: {reason}", file=sys.stderr)
+    return {"failed": True, "error": reason, "exit_code": code, "summary": f"failed: {reason}"}
+
+
+_grace: list[threading.Timer] = []
+
+
 def _on_sigterm(signum, frame) -> None:
-    request_termination("terminated (SIGTERM)")  # acted on at the control loop's next tick (a safe point)
+    """First SIGTERM: stop at the next tick; a second one, or STOP_GRACE_S without a tick: at once."""
+    if termination_pending():
+        terminate_now()
+        return
+    request_termination("terminated (SIGTERM)")
+    # this handler again, through a real signal to the main thread: a blocking wait there returns
+    timer = threading.Timer(STOP_GRACE_S, signal.pthread_kill, (threading.main_thread().ident, signal.SIGTERM))
+    timer.daemon = True
+    timer.start()
+    _grace.append(timer)
 
 
 def _on_sigint(signum, frame) -> None:
     """First Ctrl-C: stop at the next tick, closing the trial cleanly; a second one: at once."""
     if termination_pending():
-        raise KeyboardInterrupt
+        terminate_now()
+        return
     request_termination("interrupted (Ctrl-C)")
     print("stopping at the next control tick (Ctrl-C again to stop at once)", file=sys.stderr, flush=True)
 
@@ -102,6 +164,13 @@ def _sigterm_as_exception():
     try:
         yield
     finally:
+        while _grace:
+            _grace.pop().cancel()
+        if termination_pending():
+            # The run stopped on a signal and the process is on its way out: a further Ctrl-C (a
+            # double press) or SIGTERM would only cut short what is left, closing devices and the
+            # exit hooks (tqdm's among them), with a raw KeyboardInterrupt traceback or exit -2.
+            previous = signal.SIG_IGN, signal.SIG_IGN
         signal.signal(signal.SIGTERM, previous[0])
         signal.signal(signal.SIGINT, previous[1])
 
@@ -128,8 +197,7 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
         refuse(e)
     except DeviceError as e:
         log.error("device error before connecting: %s", one_line(e))
-        print(f"error: {one_line(e)}", file=sys.stderr)
-        sys.exit(EXIT_FAILED)
+        _fail(one_line(e))
     with _sigterm_as_exception():
         return _run_connected(cfg, rig, typed, body)
 
@@ -137,10 +205,14 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
 def _run_connected(cfg: DictConfig, rig, typed, body):
     try:
         rig.connect()
+    except (Terminated, KeyboardInterrupt) as e:  # while a device was still connecting: nothing written
+        rig.disconnect()
+        why = str(e) or "interrupted (Ctrl-C)"
+        print(f"{why} while connecting: nothing was recorded; rerun the same command to start", file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED if "Ctrl-C" in why else EXIT_TERMINATED)
     except Exception as e:  # noqa: BLE001 - any failure to connect ends the run before motion
         rig.disconnect()
-        print(f"error: could not connect the {rig.backend} rig: {one_line(e)}", file=sys.stderr)
-        sys.exit(EXIT_FAILED)
+        _fail(f"could not connect the {rig.backend} rig: {one_line(e)}")
     sys.audit("layerskin_exp.rig_connected", rig.backend)  # from here on the devices stream
     if not rig.clock.is_virtual:
         # Everything built so far (modules, configs, drivers) leaves the garbage collector's reach:
@@ -183,19 +255,16 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     except TrialConflictError as e:  # a complete trial of another identity is in the way: left untouched
         rig.stop_motion()
         log.error("run refused: %s", one_line(e))
-        print(f"error: {one_line(e)}", file=sys.stderr)
-        sys.exit(EXIT_FAILED)
+        _fail(one_line(e))
     except SessionInUseError as e:  # another run holds this trial's file: nothing was written here
         rig.stop_motion()
         log.error("run refused: %s", one_line(e))
-        print(f"error: {one_line(e)}", file=sys.stderr)
-        sys.exit(EXIT_FAILED)
+        _fail(one_line(e))
     except Exception as e:
         rig.stop_motion()
         log.error("run stopped: %s: %s", type(e).__name__, one_line(e))
-        print(f"error: {type(e).__name__}: {one_line(e)} (motion stopped, the trial file is marked aborted; "
-              "rerun the same command to resume)", file=sys.stderr)
-        sys.exit(EXIT_FAILED)
+        _fail(f"{type(e).__name__}: {one_line(e)} (motion stopped, the trial file is marked aborted; "
+              "rerun the same command to resume)")
     finally:
         rig.stop_motion()
         rig.disconnect()

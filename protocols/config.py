@@ -22,7 +22,7 @@ from omegaconf import MISSING
 import hardware.config  # noqa: F401
 import layerskin_exp.sim.config  # noqa: F401
 from layerskin_exp import rig
-from layerskin_exp.config import require
+from layerskin_exp.config import require, require_seed
 
 # Hard ceilings no config can raise: what the skin, the platform, the UR5e and the Hand-E can do
 # safely on this rig. Checked when the config is validated, before any device connects.
@@ -52,6 +52,24 @@ HARD = {
 # A 424 Hz rig: a loop faster than 1 ms drains nothing new; slower than 100 ms misses stops.
 CONTROL_PERIOD_S = (1e-3, 0.1)
 TRIAL_TIMEOUT_S = (1.0, 3600.0)
+# Ceilings of the counts a config sets, checked before any device connects: a few zeros too many
+# otherwise plan a campaign that would run for years, held in memory before its first trial.
+# Session files are named posNNN (three digits); 1000 positions is ten times the study's 100.
+MAX_POSITIONS = 1000
+# Per position and kind (the study: 5 presses, 4 slides); a hundred presses on one spot measure
+# the wear of the cover there, not the sensor.
+MAX_REPEATS = 100
+# Contact is confirmed over this many frames while the jaws close on: 100 frames (0.24 s at
+# 424 Hz) already add ~5 mm of closure at 20 mm/s to the commanded grip depth.
+MAX_CONSECUTIVE_FRAMES = 100
+# What both layers read at full scale: a higher contact threshold is never crossed.
+MAX_SKIN_SUM_COUNTS = len(rig.LAYERS) * rig.N_TAXELS**2 * rig.ADC_MAX
+# The study ran 7 trials per grip depth and motion; a trial index past 999 is a typo (1000 trials of
+# one condition are ~33 h of arm motion), and past 2**32 it would draw another trial's numbers.
+MAX_TRIAL = 999
+# The skin baseline averages the frames of approach.baseline_s; with fewer, its noise (or, with
+# none, a baseline of 0 counts) decides when contact is "detected".
+MIN_BASELINE_FRAMES = 5
 
 
 def _check_data_root(data_root: str) -> None:
@@ -83,6 +101,23 @@ def _check_finite(node, prefix: str = "", skip: tuple[str, ...] = ("hardware", "
         elif isinstance(value, list | tuple):
             require(all(math.isfinite(v) for v in value if isinstance(v, float)), key, value,
                     "must hold finite numbers")
+
+
+def _check_count(key: str, value: int, low: int, ceiling: int, why: str) -> None:
+    require(low <= value <= ceiling, key, value, f"must be in [{low}, {ceiling}] ({why})")
+
+
+def _check_live_port(port: int) -> None:
+    require(port == 0 or 1024 <= port <= 65535, "live_port", port,
+            "must be a TCP port in [1024, 65535] (lower ones need root), or 0 for any free port")
+
+
+def _check_motion_time(key: str, speed: float, waypoints: list[float], unit: str, timeout_s: float) -> None:
+    """The trajectory, from the start through every waypoint at `speed`, fits in the trial's time."""
+    path = sum(abs(b - a) for a, b in zip([0.0, *waypoints], waypoints, strict=False))
+    require(path / speed <= timeout_s, key, speed,
+            f"{path:g} {unit} of waypoints at this speed take {path / speed:.3g} s, more than "
+            f"trial_timeout_s={timeout_s:g}; raise the speed (or trial_timeout_s)")
 
 
 def _check_duration(key: str, value: float, timeout_s: float) -> None:
@@ -179,7 +214,8 @@ class PositionsConfig:
 
     def __post_init__(self) -> None:
         require(self.layout in ("random", "grid"), "positions.layout", self.layout, "use 'random' or 'grid'")
-        require(self.count > 0, "positions.count", self.count, "must be a positive number of positions")
+        _check_count("positions.count", self.count, 1, MAX_POSITIONS,
+                     "files are named posNNN; run a larger campaign as several data_roots")
         require(0 <= self.margin_mm < rig.SENSING_HALF_WIDTH_MM, "positions.margin_mm", self.margin_mm,
                 f"must be in [0, {rig.SENSING_HALF_WIDTH_MM}) mm")
 
@@ -206,7 +242,6 @@ class PressConfig:
     hold_s: float = 0.2
 
     def __post_init__(self) -> None:
-        require(self.repeats >= 0, "press.repeats", self.repeats, "must be >= 0")
         require(self.target_normal_n > 0, "press.target_normal_n", self.target_normal_n, "must be > 0 N")
         require(self.speed_mm_s > 0, "press.speed_mm_s", self.speed_mm_s, "must be > 0")
         require(self.load_speed_mm_s > 0, "press.load_speed_mm_s", self.load_speed_mm_s, "must be > 0")
@@ -249,8 +284,8 @@ class ForceCalibrationConfig:
 
     def __post_init__(self) -> None:
         s = self.safety
-        require(self.press.repeats >= 0, "press.repeats", self.press.repeats, "must be >= 0")
-        require(self.slide.repeats >= 0, "slide.repeats", self.slide.repeats, "must be >= 0")
+        for key, value in (("press.repeats", self.press.repeats), ("slide.repeats", self.slide.repeats)):
+            _check_count(key, value, 0, MAX_REPEATS, "repeats on one spot wear the cover there; add positions instead")
         require(self.press.repeats + self.slide.repeats > 0, "press.repeats", self.press.repeats,
                 "press.repeats + slide.repeats must be > 0")
         require(0 < self.press.target_normal_n < s.max_normal_force_n, "press.target_normal_n",
@@ -282,6 +317,8 @@ class ForceCalibrationConfig:
         require(TRIAL_TIMEOUT_S[0] <= self.trial_timeout_s <= TRIAL_TIMEOUT_S[1], "trial_timeout_s",
                 self.trial_timeout_s, f"must be in [{TRIAL_TIMEOUT_S[0]}, {TRIAL_TIMEOUT_S[1]}] s")
         _check_duration("press.hold_s", self.press.hold_s, self.trial_timeout_s)
+        require_seed("seed", self.seed)
+        _check_live_port(self.live_port)
         _check_finite(self)
         _check_fault_devices(self.hardware, "platform")
         _check_data_root(self.data_root)
@@ -412,7 +449,8 @@ class GripDepthConfig:
                 "must be an estimator artifact file (the report writes out/models/T-s5.pt), or null")
         require(0 < self.grip_depth <= s.max_grip_depth_mm, "grip_depth", self.grip_depth,
                 f"must be > 0 mm and at most safety.max_grip_depth_mm={s.max_grip_depth_mm}")
-        require(self.trial >= 0, "trial", self.trial, "must be a trial index >= 0")
+        require(0 <= self.trial <= MAX_TRIAL, "trial", self.trial,
+                f"must be a trial index in [0, {MAX_TRIAL}] (the study ran 7 per grip depth and motion)")
         a = self.approach
         stroke_mm = HARD["gripper_stroke_mm"]
         require(0 <= a.min_opening_mm < stroke_mm, "approach.min_opening_mm", a.min_opening_mm,
@@ -427,8 +465,10 @@ class GripDepthConfig:
         require(self.grip_depth <= reach_mm, "grip_depth", self.grip_depth,
                 f"cannot be reached: even with contact at approach.start_opening_mm={a.start_opening_mm} the jaws "
                 f"stop at approach.min_opening_mm={a.min_opening_mm} ({reach_mm:g} mm of closure at most)")
-        require(a.threshold_counts > 0, "approach.threshold_counts", a.threshold_counts, "must be > 0 counts")
-        require(a.consecutive_frames >= 1, "approach.consecutive_frames", a.consecutive_frames, "must be >= 1")
+        _check_count("approach.threshold_counts", a.threshold_counts, 1, MAX_SKIN_SUM_COUNTS,
+                     "counts summed over both layers; full scale is never exceeded")
+        _check_count("approach.consecutive_frames", a.consecutive_frames, 1, MAX_CONSECUTIVE_FRAMES,
+                     "the jaws close on while contact is confirmed")
         for key, value in (("approach.speed_mm_s", a.speed_mm_s), ("close.speed_mm_s", self.close.speed_mm_s),
                            ("release.speed_mm_s", self.release.speed_mm_s)):
             _check_speed(key, value, s.max_gripper_speed_mm_s, "safety.max_gripper_speed_mm_s")
@@ -459,6 +499,20 @@ class GripDepthConfig:
         for key, value in (("hold_s", self.hold_s), ("close.settle_s", self.close.settle_s),
                            ("approach.baseline_s", a.baseline_s)):
             _check_duration(key, value, self.trial_timeout_s)
+        min_baseline_s = MIN_BASELINE_FRAMES * self.skin.frame_period_ms / 1000.0
+        require(a.baseline_s >= min_baseline_s, "approach.baseline_s", a.baseline_s,
+                f"must be >= {min_baseline_s:g} s ({MIN_BASELINE_FRAMES} skin frames of "
+                f"skin.frame_period_ms={self.skin.frame_period_ms:g}): the baseline averages them, and with none it is "
+                "0 counts and contact is detected at once")
+        # the motion that runs fits in the trial (the other one may need a longer trial_timeout_s)
+        if self.trajectory.motion == "translation":
+            _check_motion_time("trajectory.translation.speed_mm_s", tr.speed_mm_s, tr.waypoints_mm, "mm",
+                               self.trial_timeout_s)
+        else:
+            _check_motion_time("trajectory.torsion.speed_deg_s", to.speed_deg_s, to.waypoints_deg, "deg",
+                               self.trial_timeout_s)
+        require_seed("seed", self.seed)
+        _check_live_port(self.live_port)
         _check_finite(self)
         _check_fault_devices(self.hardware, "gripper")
         _check_data_root(self.data_root)

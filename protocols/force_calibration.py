@@ -9,12 +9,16 @@ from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
 from layerskin_exp.config import CONF_DIR
-from protocols.app import preflight, refuse_shared_files, run_app
+from protocols.app import preflight, refuse_shared_files, run_app, sweep_job
 from protocols.calibration import run_campaign
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="force_calibration")
 def main(cfg: DictConfig) -> dict:
+    return sweep_job(lambda: _campaign(cfg))
+
+
+def _campaign(cfg: DictConfig) -> dict:
     results = run_app(cfg, "platform", run_campaign)
     return {"summary": f"{len(results)} trials run", "trials": [r.as_dict() for r in results]}
 

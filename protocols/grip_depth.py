@@ -9,13 +9,17 @@ from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
 from layerskin_exp.config import CONF_DIR
-from protocols.app import preflight, refuse_renamed, refuse_shared_files, run_app
+from protocols.app import preflight, refuse_renamed, refuse_shared_files, run_app, sweep_job
 from protocols.config import RENAMED_KEYS
 from protocols.grip import prepare_grip, run_grip_trial
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="grip_depth")
 def main(cfg: DictConfig) -> dict:
+    return sweep_job(lambda: _trial(cfg))
+
+
+def _trial(cfg: DictConfig) -> dict:
     result = run_app(cfg, "gripper", run_grip_trial, prepare_grip)
     print(result.summary(), flush=True)
     return {**result.as_dict(), "summary": result.summary()}

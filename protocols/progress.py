@@ -3,7 +3,9 @@
 A Hydra callback (configured under `hydra.callbacks` in both primary configs): at the start of a
 multirun it counts the jobs and notes the start time in the sweep folder; after each job (in
 whatever process or node ran it) it appends the job's result to `sweep_progress.jsonl` there and
-prints one progress line (done/left, ETA) plus the trial summary; at the end it prints a tally.
+prints one progress line (done/left, ETA) plus the trial summary; at the end it prints a tally
+and each failed job's overrides and reason, and ends the command with exit 1 if any job failed or
+never reported (a failing job does not stop the others: protocols.app.sweep_job records its failure).
 Works the same with the basic, joblib and SLURM launchers (the sweep folder is shared). Each
 multirun has its own id in the plan, so a reused sweep folder (the same sweep run again) counts
 only this run's jobs, each once: no negative "not reported", no bar past its total.
@@ -85,11 +87,14 @@ class SweepProgress(Callback):
             plan = json.loads((sweep / PLAN_FILE).read_text())
         except (OSError, ValueError):
             return
-        ok = job_return.status == JobStatus.COMPLETED
-        value = job_return._return_value if ok else None
+        completed = job_return.status == JobStatus.COMPLETED
+        value = job_return._return_value if completed else None
+        value = value if isinstance(value, dict) else None
+        ok = completed and not (value or {}).get("failed")  # a failed job returns its failure (sweep_job)
+        error = None if ok else (value or {}).get("error") or \
+            f"{type(job_return._return_value).__name__}: {job_return._return_value}"
         record = {"run": plan.get("run"), "job": int(config.hydra.job.num), "ok": ok,
-                  "result": value if isinstance(value, dict) else None,
-                  "error": None if ok else f"{type(job_return._return_value).__name__}: {job_return._return_value}"}
+                  "overrides": list(config.hydra.overrides.task), "result": value, "error": error}
         with open(sweep / LOG_FILE, "a") as f:  # one short line per append: safe across processes
             f.write(json.dumps(record, default=str) + "\n")
         jobs = _this_run(sweep, plan.get("run"))
@@ -113,3 +118,9 @@ class SweepProgress(Callback):
         print(f"multirun done: {tally['ran']} ran, {tally['skipped']} already complete, {tally['failed']} failed"
               + (f", {left} not reported" if left else "")
               + f" ({math.ceil(time.time() - plan['t0_unix_s'])} s)", flush=True)
+        failed = [r for _, r in sorted(jobs.items()) if not r.get("ok")]
+        for r in failed:
+            print(f"  failed: job {r.get('job')} ({' '.join(r.get('overrides') or [])}): {r.get('error')}", flush=True)
+        # Hydra would exit 0: the command's status says a job failed, or never reported (killed)
+        if failed or left:
+            raise SystemExit(1)

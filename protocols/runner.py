@@ -72,13 +72,16 @@ class Terminated(BaseException):
 
 
 _termination: list[str] = []
+_raised: list[bool] = []  # Terminated was raised once: the run is closing its trial and exiting
 
 
 def request_termination(reason: str = "terminated (SIGTERM)") -> None:
     """Ask the running protocol to stop (safe from a signal handler: it only records the
     request). The control loop raises Terminated at its next tick (and run_trial before a trial
-    starts), so the trial file is closed "aborted" at a safe point, never in the middle of a write."""
+    starts), so the trial file is closed "aborted" at a safe point, never in the middle of a write;
+    `terminate_now` is the last resort where no tick comes."""
     if not _termination:
+        _raised.clear()
         _termination.append(reason)
 
 
@@ -88,7 +91,16 @@ def termination_pending() -> bool:
 
 def check_termination() -> None:
     if _termination:
+        _raised.append(True)
         raise Terminated(_termination[0])
+
+
+def terminate_now() -> None:
+    """Raise Terminated here, wherever the run is (a signal handler's last resort when no tick
+    acted on the request: a wait on a device, a long computation), unless it was raised already
+    and the run is closing its trial: that cleanup is not cut short."""
+    if _termination and not _raised:
+        check_termination()
 
 
 def complete_session(path: Path):

@@ -71,6 +71,14 @@ def async_status(word: int) -> tuple[bool, int]:
 # ur_rtde clients left behind when their controller hung (see UR5eArm._close_clients)
 _ABANDONED: list = []
 
+
+def _require_streaming(recv) -> None:
+    """A controller that takes the RTDE connection but sends no data: the receive client gives up
+    (~2.5 s, not connected), while the control client would loop reconnecting for ever inside its
+    constructor, holding the interpreter lock (no timeout, no signal could end the process)."""
+    if not recv.isConnected():
+        raise ConnectionError("the controller accepted the RTDE connection but sends no data (stalled)")
+
 class UR5eArm(Arm):
     """The UR5e through ur_rtde. See the module docstring for how moves are commanded."""
 
@@ -110,6 +118,7 @@ class UR5eArm(Arm):
         def open_clients() -> None:
             try:
                 result["recv"] = rtde_receive.RTDEReceiveInterface(host, cfg.rtde_frequency_hz)
+                _require_streaming(result["recv"])
                 result["ctrl"] = rtde_control.RTDEControlInterface(host)
             except Exception as exc:  # noqa: BLE001 - reported below with the address
                 result["error"] = exc
@@ -295,6 +304,7 @@ class UR5eArm(Arm):
                 _quiet(self._recv.disconnect)
             try:
                 self._recv = rtde_receive.RTDEReceiveInterface(self.cfg.host, self.cfg.rtde_frequency_hz)
+                _require_streaming(self._recv)
                 self._ctrl = rtde_control.RTDEControlInterface(self.cfg.host)
                 self._read_state()
                 self._set_tool()

@@ -16,7 +16,7 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
-from layerskin_exp.config import require, retire
+from layerskin_exp.config import require, require_seed, retire
 from layerskin_exp.sim.rig_config import RigConfig
 
 
@@ -265,8 +265,7 @@ class SimConfig:
     rig: RigConfig = field(default_factory=RigConfig)
 
     def __post_init__(self) -> None:
-        require(isinstance(self.seed, int) and self.seed >= 0, "sim.seed", self.seed,
-                "must be a non-negative integer")
+        require_seed("sim.seed", self.seed)
 
 
 @dataclass

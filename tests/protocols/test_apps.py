@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 import time
 
 import numpy as np
@@ -134,6 +135,18 @@ def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
     ("protocols.force_calibration", "sim.spacer.modulus=20", "renamed to sim.spacer.modulus_kpa"),
     ("protocols.force_calibration", "-m sim.cover.thickness=0.2,0.3", "renamed to sim.cover.thickness_mm"),
     ("protocols.grip_depth", "-m save_images=true,false", "would write the same session files"),
+    # issue 31: counts with no ceiling ran for years (and ignored SIGTERM while planning)
+    ("protocols.force_calibration", "positions.count=1000000000", "positions.count=1000000000: must be in [1, 1000]"),
+    ("protocols.force_calibration", "press.repeats=100000000", "press.repeats=100000000: must be in [0, 100]"),
+    # issue 31: a raw OverflowError, a .partial mid-trial, contact "detected" at once, seeds and
+    # trial indices out of the generators' 32 bits
+    ("protocols.grip_depth", "live_port=99999", "live_port=99999: must be a TCP port"),
+    ("protocols.grip_depth", "live_port=-1", "live_port=-1: must be a TCP port"),
+    ("protocols.grip_depth", "trajectory.translation.speed_mm_s=1e-300", "speed_mm_s=1e-300: 20 mm of waypoints"),
+    ("protocols.grip_depth", "approach.baseline_s=0", "approach.baseline_s=0.0: must be >= 0.0118 s"),
+    ("protocols.grip_depth", "seed=-1", "seed=-1: must be an integer in [0, 4294967295]"),
+    ("protocols.force_calibration", "seed=99999999999999999999", "seed=99999999999999999999: must be an integer"),
+    ("protocols.grip_depth", "trial=99999999999999999999", "trial=99999999999999999999: must be a trial index"),
 ])
 def test_bad_config_refused_before_anything(tmp_path, hydra_dirs, app, override, key):
     r = run_cli(app, [*override.split(), f"data_root={tmp_path}/data", *hydra_dirs], tmp_path)
@@ -168,6 +181,25 @@ def test_sweep_over_a_protocol_key_keeps_every_combination_and_resumes_once(tmp_
     assert r2.returncode == 0 and "0 ran, 2 already complete, 0 failed" in r2.stdout, r2.stdout[-2000:]
     assert "not reported" not in r2.stdout and "3/2" not in r2.stdout and "4/2" not in r2.stdout
     assert [f.stat().st_mtime_ns for f in files] == stamps
+
+
+def test_a_failing_sweep_job_does_not_stop_the_others(tmp_path, hydra_dirs):
+    # The first job's two holds (2 x 1.9 s) outlast trial_timeout_s=4 s of rig clock: it times out.
+    # The next job still runs, both outcomes are in the progress log, the command exits 1.
+    data = tmp_path / "data"
+    tiny = [a for a in TINY_GRIP if not a.startswith("hold_s=")]
+    args = ["-m", "hold_s=1.9,0.1", "trial_timeout_s=4", *tiny, f"data_root={data}", "progress=false", *hydra_dirs]
+    r = run_cli("protocols.grip_depth", args, tmp_path)
+    assert r.returncode == 1, r.stderr[-3000:]
+    progress = [json.loads(ln) for ln in (tmp_path / "multirun" / "sweep_progress.jsonl").read_text().splitlines()]
+    assert [(p["job"], p["ok"]) for p in progress] == [(0, False), (1, True)]
+    assert "trial_timeout_s=4" in progress[0]["error"] and "hold_s=1.9" in progress[0]["overrides"]
+    assert "multirun done: 1 ran, 0 already complete, 1 failed" in r.stdout
+    assert "failed: job 0 (hold_s=1.9" in r.stdout and "trial_timeout_s=4" in r.stdout
+    (partial,) = data.glob("grip_depth/*/*.mcap.partial")
+    assert load_session(partial, warn=False).outcome.startswith("aborted: the trial outlasted trial_timeout_s=4")
+    (done,) = data.glob("grip_depth/*/*.mcap")
+    assert load_session(done, warn=False).complete
 
 
 def test_design_sweep_writes_one_set_of_files_per_value(tmp_path, hydra_dirs):
@@ -261,6 +293,64 @@ def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs
             proc.kill()
     (partial,) = data.glob("force_calibration/*/*.partial")  # the trial in progress, closed at a tick
     assert load_session(partial, warn=False).outcome == outcome
+
+
+def test_ctrl_c_pressed_again_while_the_run_winds_down_is_ignored(tmp_path, hydra_dirs):
+    # Ctrl-C inside the first press closes the trial aborted; Ctrl-C pressed again and again (every
+    # 5 ms) from then until the process is gone lands while the devices disconnect and the exit
+    # hooks (tqdm's) run: ignored, no raw KeyboardInterrupt traceback, no death by SIGINT (-2).
+    data = tmp_path / "data"
+    args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", "press.hold_s=15", f"data_root={data}",
+            *hydra_dirs]  # progress bars on: tqdm's exit hook is there
+    proc = popen_cli("protocols.force_calibration", args, tmp_path, stderr=subprocess.PIPE)
+    job_log = tmp_path / "out" / "force_calibration.log"
+    try:
+        deadline = time.monotonic() + 200
+        while not list(data.glob("force_calibration/*/*press*.partial")) and proc.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert proc.poll() is None, "the campaign ended before the signal could be sent"
+        proc.send_signal(signal.SIGINT)
+        while proc.poll() is None and time.monotonic() < deadline and \
+                "pos000_press0 aborted" not in (job_log.read_text() if job_log.is_file() else ""):
+            time.sleep(0.002)
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.005)
+        assert proc.wait(timeout=10) == 130
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    stderr = proc.stderr.read()
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr[-3000:]
+    (partial,) = data.glob("force_calibration/*/*.partial")
+    assert load_session(partial, warn=False).outcome == "aborted: interrupted (Ctrl-C)"
+
+
+def test_sigterm_while_a_device_is_still_connecting_ends_the_run(tmp_path, hydra_dirs):
+    # A stalled platform never sends its banner: connecting waits up to connect_timeout_s (60 s),
+    # outside any control tick. SIGTERM ends it without waiting for the timeout (the measured
+    # figure is in the commit message; the deadline here only has to hold on a loaded machine).
+    data = tmp_path / "data"
+    args = ["hardware=loopback", "+hardware.faults.platform.stall_after_s=0", "hardware.platform.connect_timeout_s=60",
+            "positions.count=1", "press.repeats=1", "slide.repeats=0", f"data_root={data}", "progress=false",
+            *hydra_dirs]
+    proc = popen_cli("protocols.force_calibration", args, tmp_path, stderr=subprocess.PIPE)
+    job_log = tmp_path / "out" / "force_calibration.log"
+    try:
+        deadline = time.monotonic() + 200
+        # the F/T box connects just before the platform: from then on the run waits on the platform
+        while proc.poll() is None and time.monotonic() < deadline and \
+                "ft: streaming" not in (job_log.read_text() if job_log.is_file() else ""):
+            time.sleep(0.01)
+        assert proc.poll() is None, "the run ended before the signal could be sent"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 143
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "terminated (SIGTERM) while connecting" in proc.stderr.read()
+    assert not list(data.glob("**/*.mcap*"))
 
 
 def test_second_run_on_a_trial_in_progress_refuses_naming_the_other(tmp_path, hydra_dirs):

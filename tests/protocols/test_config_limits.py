@@ -47,6 +47,29 @@ from tests.protocols.conftest import compose_app
     ("force_calibration", ["approach.contact_force_n=inf"], r"approach\.contact_force_n=inf"),
     ("force_calibration", ["hardware=loopback", "+hardware.faults.skin_board.stalls=[[1.0,nan]]"],
      r"hardware\.faults\.skin_board\.stalls"),
+    # issue 31: counts that planned a campaign of years (1.4 GB of plan before the first trial)
+    ("force_calibration", ["positions.count=1000000000"], r"positions\.count=1000000000: must be in \[1, 1000\]"),
+    ("force_calibration", ["positions.count=0"], r"positions\.count=0: must be in \[1, 1000\]"),
+    ("force_calibration", ["press.repeats=100000000"], r"press\.repeats=100000000: must be in \[0, 100\]"),
+    ("force_calibration", ["slide.repeats=100000000"], r"slide\.repeats=100000000: must be in \[0, 100\]"),
+    ("force_calibration", ["press.repeats=-1"], r"press\.repeats=-1: must be in \[0, 100\]"),
+    ("grip_depth", ["approach.consecutive_frames=1000000000"], r"approach\.consecutive_frames=1000000000: must be in"),
+    ("grip_depth", ["approach.threshold_counts=1000000000"],
+     r"approach\.threshold_counts=1000000000: must be in \[1, 2096640\]"),
+    # issue 31: values that passed validation and failed later or gave wrong data
+    ("grip_depth", ["live_port=99999"], r"live_port=99999: must be a TCP port in \[1024, 65535\]"),
+    ("grip_depth", ["live_port=-1"], r"live_port=-1: must be a TCP port"),
+    ("force_calibration", ["live_port=99999"], r"live_port=99999: must be a TCP port"),
+    ("grip_depth", ["trajectory.translation.speed_mm_s=1e-300"],
+     r"trajectory\.translation\.speed_mm_s=1e-300: 20 mm of waypoints at this speed take 2e\+301 s"),
+    ("grip_depth", ["trajectory=torsion", "trajectory.torsion.speed_deg_s=0.1"],
+     r"trajectory\.torsion\.speed_deg_s=0\.1: 100 deg"),
+    ("grip_depth", ["approach.baseline_s=0"], r"approach\.baseline_s=0\.0: must be >= 0\.0118 s \(5 skin frames"),
+    ("grip_depth", ["seed=-1"], r"seed=-1: must be an integer in \[0, 4294967295\]"),
+    ("grip_depth", ["seed=99999999999999999999"], r"seed=99999999999999999999: must be an integer in"),
+    ("force_calibration", ["seed=-1"], r"seed=-1: must be an integer in \[0, 4294967295\]"),
+    ("force_calibration", ["sim.seed=4294967296"], r"sim\.seed=4294967296: must be an integer in"),
+    ("grip_depth", ["trial=99999999999999999999"], r"trial=99999999999999999999: must be a trial index in \[0, 999\]"),
 ])
 def test_refused_at_validation(app, overrides, key):
     with pytest.raises(ConfigError, match=key if "\\" in key else key.replace(".", r"\.")):
@@ -97,3 +120,7 @@ def test_defaults_and_study_settings_pass():
     for depth in (6, 9, 12, 15):
         compose_app("grip_depth", [f"grip_depth={depth}", "trajectory=torsion"])
     compose_app("force_calibration", [])
+    # the edges of the ranges above are accepted
+    compose_app("grip_depth", ["live_port=0", "seed=4294967295", "trial=999", "approach.baseline_s=0.0118"])
+    compose_app("grip_depth", ["trial_timeout_s=30"])  # translation in 10 s; torsion would need 67 s
+    compose_app("force_calibration", ["live_port=65535", "positions.count=1000", "press.repeats=100"])

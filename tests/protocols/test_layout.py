@@ -121,7 +121,9 @@ def test_a_reused_sweep_folder_counts_this_runs_jobs_once(tmp_path, capsys):
     old = [{"run": "first", "job": j, "ok": True, "result": {"skipped": False}} for j in (0, 1)]
     new = [{"run": "second", "job": 0, "ok": True, "result": {"skipped": True}}] * 2  # reported twice
     (tmp_path / LOG_FILE).write_text("".join(json.dumps(r) + "\n" for r in old + new))
-    SweepProgress().on_multirun_end(OmegaConf.create({"hydra": {"sweep": {"dir": str(tmp_path)}}}))
+    with pytest.raises(SystemExit) as end:  # a job that never reported may have been killed
+        SweepProgress().on_multirun_end(OmegaConf.create({"hydra": {"sweep": {"dir": str(tmp_path)}}}))
+    assert end.value.code == 1
     out = capsys.readouterr().out
     assert "0 ran, 1 already complete, 0 failed, 1 not reported" in out
 

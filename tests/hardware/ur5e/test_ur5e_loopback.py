@@ -177,6 +177,17 @@ def test_no_controller_is_a_clear_error():
     assert not arm.is_connected
 
 
+@pytest.mark.timeout(120, method="thread")  # a regression hangs holding the interpreter lock
+def test_controller_that_sends_nothing_is_a_clear_error(realtime_world):
+    # Connections accepted, no RTDE data from the start: the control client's constructor would
+    # loop reconnecting for ever, holding the interpreter lock (issue 31). The driver stops first.
+    with UR5eEmulator(realtime_world("gripper"), host="127.0.0.36", stall_after_s=0):
+        arm = UR5eArm(UR5eConfig(host="127.0.0.36"))
+        with pytest.raises(DeviceError, match=r"127\.0\.0\.36.*sends no data \(stalled\)"):
+            arm.connect()
+        assert not arm.is_connected
+
+
 def test_config_validates():
     from layerskin_exp.config import ConfigError
 
