@@ -106,7 +106,7 @@ def test_sensitivity_bands_sit_beside_the_study_in_markdown_and_json(campaign, t
     assert rows["slide_fz_at_shear_n"]["ours"] == c["slide_loads"]["fz_at_shear_n"] is not None
     md = (tmp_path / "out" / "report.md").read_text()
     part = md[md.index("### Simulator sensitivity bands"):]
-    assert "not measurement noise" in part and "conf/sim/brackets.yaml" in part
+    assert "not measurement noise" in part and "layerskin_exp/sim/brackets.yaml" in part
     assert ("| inter-layer shift at 2 N shear (mm) | 2.2 (Sec. IV-A" in part
             and f"| {rows['cop_shift_at_2n_mm']['ours']:.3g} (this section) | 1 .. 1.5 |" in part)
     # a study value outside the band is said in words, one inside too; no verdict

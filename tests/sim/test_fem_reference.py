@@ -183,7 +183,7 @@ def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, 
     """A fast model that matched the FEM exactly (at the band's centre) would fail the check
     under the injected error: the fast value moves by more than the tolerance (difference
     metrics) or by a factor outside [lo, hi] (ratio metrics), at one load at least. Which error
-    each metric catches is what conf/sim/fem_tolerances.yaml and validate's notes say."""
+    each metric catches is what layerskin_exp/sim/fem_reference/tolerances.yaml and validate's notes say."""
     patch, hook, metrics = INJECTIONS[error]
     if patch is not None:
         patch(monkeypatch)
