@@ -25,6 +25,7 @@ from layerskin_exp.config import ConfigError, validate
 from layerskin_exp.log import SessionInUseError
 from layerskin_exp.provenance import provenance
 from protocols.runner import (
+    RUN_FILES,
     Terminated,
     TrialConflictError,
     check_termination,
@@ -109,7 +110,8 @@ def _sigterm_as_exception():
 def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object],
             prepare: Callable[[object], None] | None = None):
     """Validate, run prepare(typed_cfg) when given, build and connect the rig, run
-    body(typed_cfg, rig, metadata), always stop and disconnect.
+    body(typed_cfg, rig, metadata), always stop and disconnect; a run that connected ends by
+    printing where its session files went and how many it wrote (however it ended).
 
     Nothing moves before every device is connected and the config validated. Whatever a run
     would import or load lazily belongs before the devices connect (here or in `prepare`): an
@@ -118,6 +120,7 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
     """
     from hardware import build_rig  # the backends import heavy optional drivers
 
+    RUN_FILES.reset()  # the jobs of a multirun may share this process
     try:
         typed = validate(cfg)
         tqdm.get_lock()  # tqdm makes its lock, importing multiprocessing, at its first bar
@@ -199,6 +202,7 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     finally:
         rig.stop_motion()
         rig.disconnect()
+        print(RUN_FILES.line(), flush=True)
         if live is not None:
             if finished and getattr(typed, "live_hold", False):
                 live.hold(termination_pending)  # Ctrl-C or SIGTERM ends it

@@ -17,7 +17,6 @@ from protocols.grip import prepare_grip, run_grip_trial
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="grip_depth")
 def main(cfg: DictConfig) -> dict:
     result = run_app(cfg, "gripper", run_grip_trial, prepare_grip)
-    print(result.summary(), flush=True)
     return {**result.as_dict(), "summary": result.summary()}
 
 

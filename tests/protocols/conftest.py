@@ -34,10 +34,10 @@ def run_cli(module: str, args: list[str], cwd: Path, **kw) -> subprocess.Complet
                           text=True, timeout=240, **kw)
 
 
-def popen_cli(module: str, args: list[str], cwd: Path) -> subprocess.Popen:
+def popen_cli(module: str, args: list[str], cwd: Path, stdout=subprocess.DEVNULL) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.Popen([sys.executable, "-m", module, *args], cwd=cwd, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=stdout, stderr=subprocess.DEVNULL)
 
 
 def design_dir(protocol_root: Path) -> Path:
