@@ -32,7 +32,7 @@ from tqdm.auto import tqdm
 
 from analysis import study
 from analysis.config import AnalysisConfig, ReportConfig
-from analysis.markdown import json_safe, write_markdown
+from analysis.markdown import counted, json_safe, write_markdown
 from analysis.sections import characterisation as characterisation_section
 from analysis.sections import force as force_section
 from analysis.sections import slip as slip_section
@@ -242,7 +242,7 @@ def main(cfg: DictConfig) -> None:
         print(f"error: {problem}", file=sys.stderr)
         sys.exit(EXIT_CONFIG)
     res = Analysis(rc, _hydra_preset()).run()
-    print(f"report written to {Path(rc.out) / 'report.md'} ({len(res['skipped'])} section(s) skipped)")
+    print(f"report written to {Path(rc.out) / 'report.md'} ({counted(len(res['skipped']), 'section')} skipped)")
 
 
 def _check_command_line(argv: list[str]) -> None:
