@@ -39,7 +39,7 @@ from analysis.sections import slip as slip_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import Campaign, load_campaign, sessions_problem
 from layerskin_exp.cli import CONF_DIR as _CONF_DIR
-from layerskin_exp.cli import EXIT_CONFIG, preflight, refuse
+from layerskin_exp.cli import EXIT_CONFIG, answer_help, preflight, refuse
 from layerskin_exp.config import SkinConfig, validate
 from layerskin_exp.estimation.cnn import CnnGruForceModel, default_torch_threads
 from layerskin_exp.estimation.preprocess import Preprocessor
@@ -257,6 +257,7 @@ def _check_command_line(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
+    answer_help("report", sys.argv[1:])
     _check_command_line(sys.argv[1:])
     preflight("report", sys.argv[1:])
     main()

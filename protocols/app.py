@@ -17,23 +17,12 @@ import threading
 from collections.abc import Callable
 
 from omegaconf import DictConfig, OmegaConf
-from tqdm.auto import tqdm
 
-from hardware.interfaces import DeviceError
-from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, refuse
+from layerskin_exp.cli import EXIT_CONFIG, answer_help, expand_sweep, one_line, preflight, refuse
 from layerskin_exp.config import ConfigError, validate
-from layerskin_exp.log import SessionInUseError
-from layerskin_exp.provenance import provenance
-from protocols.runner import (
-    RUN_FILES,
-    Terminated,
-    TrialConflictError,
-    check_termination,
-    request_termination,
-    termination_pending,
-)
 
-__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files", "run_app"]
+__all__ = ["EXIT_CONFIG", "answer_help", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files",
+           "run_app"]
 
 log = logging.getLogger(__name__)
 
@@ -81,11 +70,15 @@ def refuse_shared_files(argv: list[str]) -> None:
 
 
 def _on_sigterm(signum, frame) -> None:
+    from protocols.runner import request_termination  # loaded by run_app before the handler is set
+
     request_termination("terminated (SIGTERM)")  # acted on at the control loop's next tick (a safe point)
 
 
 def _on_sigint(signum, frame) -> None:
     """First Ctrl-C: stop at the next tick, closing the trial cleanly; a second one: at once."""
+    from protocols.runner import request_termination, termination_pending  # loaded by run_app
+
     if termination_pending():
         raise KeyboardInterrupt
     request_termination("interrupted (Ctrl-C)")
@@ -116,9 +109,15 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
     Nothing moves before every device is connected and the config validated. Whatever a run
     would import or load lazily belongs before the devices connect (here or in `prepare`): an
     import holds the interpreter lock for much of its body, and the loopback emulators run in
-    this process against 50 ms stream deadlines (tests/protocols/test_late_imports.py).
+    this process against 50 ms stream deadlines (tests/protocols/test_late_imports.py). The
+    modules a run needs are imported here, not with this module: the command line's checks and
+    `--help` import it too, and answer without them.
     """
+    from tqdm.auto import tqdm
+
     from hardware import build_rig  # the backends import heavy optional drivers
+    from hardware.interfaces import DeviceError
+    from protocols.runner import RUN_FILES
 
     RUN_FILES.reset()  # the jobs of a multirun may share this process
     try:
@@ -138,6 +137,16 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
 
 
 def _run_connected(cfg: DictConfig, rig, typed, body):
+    from layerskin_exp.log import SessionInUseError
+    from layerskin_exp.provenance import provenance
+    from protocols.runner import (
+        RUN_FILES,
+        Terminated,
+        TrialConflictError,
+        check_termination,
+        termination_pending,
+    )
+
     try:
         rig.connect()
     except Exception as e:  # noqa: BLE001 - any failure to connect ends the run before motion
