@@ -181,13 +181,12 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         return result
     except KeyboardInterrupt:
         rig.stop_motion()
-        print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
-              "to resume", file=sys.stderr)
+        print(f"interrupted: motion stopped, {RUN_FILES.stop_note()}; rerun the same command to resume",
+              file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
     except Terminated as e:
         rig.stop_motion()
-        print(f"{e}: motion stopped, the current trial is marked aborted; rerun the same command to resume",
-              file=sys.stderr)
+        print(f"{e}: motion stopped, {RUN_FILES.stop_note()}; rerun the same command to resume", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED if "Ctrl-C" in str(e) else EXIT_TERMINATED)
     except ConfigError as e:
         rig.stop_motion()
@@ -205,7 +204,7 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     except Exception as e:
         rig.stop_motion()
         log.error("run stopped: %s: %s", type(e).__name__, one_line(e))
-        print(f"error: {type(e).__name__}: {one_line(e)} (motion stopped, the trial file is marked aborted; "
+        print(f"error: {type(e).__name__}: {one_line(e)} (motion stopped, {RUN_FILES.stop_note()}; "
               "rerun the same command to resume)", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     finally:

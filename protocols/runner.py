@@ -113,6 +113,12 @@ class RunFiles:
         else:
             self.already_complete += 1
 
+    def stop_note(self) -> str:
+        """What a run stopped early left of its trial in progress, for the line that says it stopped."""
+        if self.interrupted:
+            return f"the trial in progress is kept as {self.interrupted[-1].name} (aborted)"
+        return "no trial was in progress" if self.folder is not None else "no trial had started, nothing was written"
+
     def line(self) -> str:
         if self.folder is None:
             return "no session file written"

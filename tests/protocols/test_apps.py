@@ -293,3 +293,35 @@ def test_second_run_on_a_trial_in_progress_refuses_naming_the_other(tmp_path, hy
         holder.close("aborted: test")
     assert r.returncode == 1
     assert f"pid {os.getpid()}" in r.stderr and "marked aborted" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("when", ["before any trial", "during a trial"])
+def test_a_stop_says_what_it_left_of_the_trial_in_progress(tmp_path, monkeypatch, capsys, when):
+    """Ctrl-C before the first trial leaves nothing and says so; during one, it names the .partial."""
+    from protocols.app import EXIT_INTERRUPTED, run_app
+    from protocols.runner import run_trial
+    from tests.protocols.fake_rig import platform_rig
+
+    monkeypatch.setattr("hardware.build_rig", lambda cfg, setup: platform_rig())
+    cfg, _ = compose_app("force_calibration", [*TINY_CALIBRATION, f"data_root={tmp_path}"])
+
+    def interrupted(log):
+        raise KeyboardInterrupt
+
+    def body(typed, rig, metadata):
+        if when == "during a trial":
+            run_trial(rig, tmp_path / "d" / "pos000_press0.mcap", {}, metadata, interrupted)
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as stop:
+        run_app(cfg, "platform", body)
+    assert stop.value.code == EXIT_INTERRUPTED
+    out, err = capsys.readouterr()
+    if when == "before any trial":
+        assert err.strip() == ("interrupted: motion stopped, no trial had started, nothing was written; rerun the "
+                               "same command to resume")
+        assert out.splitlines()[-1] == "no session file written"
+    else:
+        assert err.strip() == ("interrupted: motion stopped, the trial in progress is kept as "
+                               "pos000_press0.mcap.partial (aborted); rerun the same command to resume")
+        assert (tmp_path / "d" / "pos000_press0.mcap.partial").is_file()
