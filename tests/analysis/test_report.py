@@ -148,3 +148,15 @@ def test_a_missing_screening_result_is_refused_before_anything_runs(campaign, tm
     assert r.returncode == 2, r.stderr[-2000:]
     assert r.stderr.strip().count("\n") == 0 and f"sensitivity={nope}: no such file" in r.stderr
     assert not (out / "results.json").exists() and not (out / "report.md").exists()
+
+
+def test_help_opens_with_what_the_report_does(monkeypatch, capsys):
+    from analysis.cli import report
+
+    monkeypatch.setattr(sys, "argv", ["lsx-report", "--help", "sessions=somewhere"])
+    with pytest.raises(SystemExit) as done:
+        report()
+    assert done.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("python -m analysis.report [key=value ...]: ")
+    assert "sessions=somewhere: the session files" in out and "\nsessions: somewhere\n" in out
