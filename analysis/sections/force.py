@@ -30,7 +30,7 @@ GAIN_RESAMPLES = 999
 GAIN_CONFIDENCE = 0.95
 # Fewer test trials than this and the gain's interval is undefined, not printed: n trials give
 # only C(2n-1, n) distinct resamples (35 for 4, 92378 for 10), and the R² of a resample of two or
-# three trials, whose reference barely varies, takes any value (4 test trials gave [-2.5, +8291]).
+# three trials, whose reference barely varies, can take any value.
 GAIN_MIN_TEST_TRIALS = 10
 
 
