@@ -23,6 +23,7 @@ import numpy as np
 from scipy.stats import bootstrap, linregress
 
 from analysis.config import CharacterizationConfig
+from analysis.markdown import counted
 
 
 @dataclass
@@ -62,7 +63,7 @@ def uniformity(presses: list[PressTrial], cfg: CharacterizationConfig) -> dict:
     means = np.array([np.mean(v) for v in by_pos.values()])
     out = {"matched_load_n": cfg.matched_load_n, "n_positions": int(means.size)}
     if means.size < 3:
-        return {**out, "cv": None, "reason": f"{means.size} position(s) reached {cfg.matched_load_n} N; need >= 3"}
+        return {**out, "cv": None, "reason": f"{counted(means.size, 'position')} reached {cfg.matched_load_n} N; need >= 3"}
     ci = bootstrap((means,), _cv, n_resamples=cfg.n_bootstrap, confidence_level=cfg.confidence,
                    method="percentile", random_state=np.random.default_rng(cfg.seed)).confidence_interval
     return {**out, "cv": float(_cv(means)), "ci_low": float(ci.low), "ci_high": float(ci.high)}

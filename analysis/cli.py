@@ -6,9 +6,12 @@ import sys
 
 
 def report() -> None:
-    """Refuse a bad command line as a whole, then let Hydra run the report."""
+    """Answer --help, refuse a bad command line as a whole, then let Hydra run the report."""
+    import analysis.config  # noqa: F401 - the report's schemas, for --help without the analysis stack
+    from layerskin_exp.cli import answer_help, preflight
+
+    answer_help("report", sys.argv[1:])
     from analysis import report as r
-    from layerskin_exp.cli import preflight
 
     r._check_command_line(sys.argv[1:])
     preflight("report", sys.argv[1:])

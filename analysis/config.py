@@ -69,7 +69,7 @@ class AnalysisConfig:
 
 @dataclass
 class ReportConfig:
-    sessions: str = "data/sessions"
+    sessions: str = "data"  # the protocols' data_root: a run's sessions are reported without sessions=
     out: str = "outputs/report"
     # A sensitivity screening result (`python -m analysis.sensitivity out=FILE`): the characterisation
     # section shows its bands over the simulator's brackets beside the study. None: no bands.

@@ -37,7 +37,7 @@ Per design and bracket (definitions; every number is measured on the campaign's 
   superficial layer alone.
 - position CV: characterization.uniformity at 2 N (the report's definition).
 A ranking is stated only where it holds in every bracket; the brackets and the measurement that
-would settle each are in conf/sim/brackets.yaml.
+would settle each are in layerskin_exp/sim/brackets.yaml.
 """
 
 from __future__ import annotations
@@ -57,13 +57,12 @@ from analysis.config import CharacterizationConfig
 from analysis.markdown import json_safe
 from analysis.metrics import r2_score
 from analysis.run_info import convergence_caveats, training_state
-from layerskin_exp.cli import CONF_DIR
 from layerskin_exp.config import ConfigError, retired_message
 from layerskin_exp.estimation.config import CnnConfig, PreprocessConfig
 from layerskin_exp.estimation.linear import LinearForceModel, linear_features
 from layerskin_exp.features import two_layer_features
+from layerskin_exp.sim.config import BRACKETS_FILE
 
-BRACKETS_FILE = CONF_DIR / "sim" / "brackets.yaml"
 STUDY_DESIGN = "study"
 # The headline outcomes a designer ranks by: key in the outcome dict, label, larger is better.
 RANKED = (("shift_per_n_mm", "shift per newton at the slides' preload (mm/N)", True), ("shear_high_n", "shear range top (N)", True),
@@ -618,7 +617,7 @@ def run(cfg: DesignMapConfig) -> dict:
     brackets_doc = OmegaConf.to_container(OmegaConf.load(BRACKETS_FILE)) if BRACKETS_FILE.is_file() else {}
     from dataclasses import asdict
 
-    result = {"sweep_dir": str(sweep), "map": build_map(outcomes), "brackets_file": "conf/sim/brackets.yaml",
+    result = {"sweep_dir": str(sweep), "map": build_map(outcomes), "brackets_file": "layerskin_exp/sim/brackets.yaml",
               "folds": cfg.folds, "cnn": asdict(cfg.cnn) if cfg.ts5 else None}
     figures = []
     if cfg.figures:

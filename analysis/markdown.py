@@ -22,6 +22,11 @@ def json_safe(x):
     return x
 
 
+def counted(n: int, noun: str) -> str:
+    """'1 trial', '4 trials': a count with its noun, in the report's sentences."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def _f(x, nd=3) -> str:
     return "–" if x is None else f"{x:.{nd}f}"
 
@@ -88,12 +93,14 @@ def _study_ranges(s) -> str:
 
 
 def _gain_cell(g) -> str:
-    """'+0.484 [+0.279, +0.757]'; '–' where the gain or its interval is undefined (NaN / None)."""
+    """'+0.484 [+0.279, +0.757]'; '+0.484 [interval undefined]' with too few test trials for one."""
     def one(x):
         return "–" if x is None or x != x else f"{x:+.3f}"
     if not g:
         return "–"
     gain, lo, hi = g
+    if lo is None or lo != lo or hi is None or hi != hi:
+        return f"{one(gain)} [interval undefined]"
     return f"{one(gain)} [{one(lo)}, {one(hi)}]"
 
 
@@ -114,9 +121,10 @@ def _force(r, s) -> list[str]:
     cnns = [m for m in models if m in gains and m != "confidence"]
     if cnns:
         pct = round(100 * gains["confidence"])
+        n_test, n_min = r.get("force_split", {}).get("test_trials"), gains.get("min_test_trials")
         lines += ["", f"Gain over the linear baseline, R² difference with its {pct} % interval (bootstrap over "
-                  f"the {r.get('force_split', {}).get('test_trials')} test trials; an interval holding 0 is not "
-                  "resolved by this test set):", "", "| axis | " + " | ".join(f"{m} − linear" for m in cnns) + " |",
+                  f"the {n_test} test trials; an interval holding 0 is not resolved by this test set"
+                  + (f"; below {n_min} test trials the interval is undefined" if n_min else "") + "):", "", "| axis | " + " | ".join(f"{m} − linear" for m in cnns) + " |",
                   "|---|" + "---|" * len(cnns)]
         for ax in ("Fx", "Fy", "Fz"):
             lines.append(f"| {ax} | " + " | ".join(_gain_cell(gains[m].get(ax)) for m in cnns) + " |")

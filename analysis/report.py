@@ -1,4 +1,4 @@
-"""`python -m analysis.report sessions=DIR out=DIR [analysis=demo|default|paper] [sensitivity=FILE]`
+"""`python -m analysis.report [sessions=DIR] out=DIR [analysis=demo|default|paper] [sensitivity=FILE]`
 
 Turns a folder of session files into the study's tables and figures, ours beside the study's:
 out/results.json, out/predictions.npz, out/report.md, out/config.yaml (the resolved config), out/*.png,
@@ -10,6 +10,8 @@ A missing input (no calibration campaign, no shear trials, no grip sessions, no 
 the sections that need it with the reason in results.json and report.md. `sensitivity=FILE` (a
 `python -m analysis.sensitivity out=FILE` result) adds the simulator's bands over its brackets to
 the characterisation section; a missing or unreadable file is refused before anything runs.
+`sessions=` defaults to `data`, where the protocols write; a folder without a session file is
+refused (exit 2), naming it.
 """
 
 from __future__ import annotations
@@ -30,14 +32,14 @@ from tqdm.auto import tqdm
 
 from analysis import study
 from analysis.config import AnalysisConfig, ReportConfig
-from analysis.markdown import json_safe, write_markdown
+from analysis.markdown import counted, json_safe, write_markdown
 from analysis.sections import characterisation as characterisation_section
 from analysis.sections import force as force_section
 from analysis.sections import slip as slip_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import Campaign, load_campaign, sessions_problem
 from layerskin_exp.cli import CONF_DIR as _CONF_DIR
-from layerskin_exp.cli import EXIT_CONFIG, preflight, refuse
+from layerskin_exp.cli import EXIT_CONFIG, answer_help, preflight, refuse
 from layerskin_exp.config import SkinConfig, validate
 from layerskin_exp.estimation.cnn import CnnGruForceModel, default_torch_threads
 from layerskin_exp.estimation.preprocess import Preprocessor
@@ -205,6 +207,17 @@ def _hydra_preset() -> str | None:
     return HydraConfig.get().runtime.choices.get("analysis") if HydraConfig.initialized() else None
 
 
+def _sessions_problem(sessions) -> str:
+    """Why the command line cannot report `sessions=` ('' if it can): unreadable, or a folder with
+    no session file under it (the library's run_report still writes a report of nothing)."""
+    problem = sessions_problem(sessions)
+    p = Path(sessions)
+    if not problem and p.is_dir() and next(p.rglob("*.mcap"), None) is None:
+        problem = (f"sessions={sessions}: no session files (*.mcap) under {p.resolve()}; point sessions= at the "
+                   "data_root a protocol wrote to (default data)")
+    return problem
+
+
 def _out_problem(out) -> str:
     """Why out= cannot hold the report ('' if it can); creates the folder."""
     try:
@@ -224,12 +237,12 @@ def main(cfg: DictConfig) -> None:
         rc: ReportConfig = validate(cfg)
     except ValueError as e:
         refuse(e)
-    problem = sessions_problem(rc.sessions) or _out_problem(rc.out)
+    problem = _sessions_problem(rc.sessions) or _out_problem(rc.out)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         sys.exit(EXIT_CONFIG)
     res = Analysis(rc, _hydra_preset()).run()
-    print(f"report written to {Path(rc.out) / 'report.md'} ({len(res['skipped'])} section(s) skipped)")
+    print(f"report written to {Path(rc.out) / 'report.md'} ({counted(len(res['skipped']), 'section')} skipped)")
 
 
 def _check_command_line(argv: list[str]) -> None:
@@ -237,13 +250,14 @@ def _check_command_line(argv: list[str]) -> None:
     its run folder under out= first and would fail there with a traceback)."""
     for arg in argv:
         key, _, value = arg.partition("=")
-        problem = {"sessions": sessions_problem, "out": _out_problem}.get(key.lstrip("+"), lambda v: "")(value)
+        problem = {"sessions": _sessions_problem, "out": _out_problem}.get(key.lstrip("+"), lambda v: "")(value)
         if problem:
             print(f"error: {problem}", file=sys.stderr)
             sys.exit(EXIT_CONFIG)
 
 
 if __name__ == "__main__":
+    answer_help("report", sys.argv[1:])
     _check_command_line(sys.argv[1:])
     preflight("report", sys.argv[1:])
     main()

@@ -1,6 +1,6 @@
 """`python -m analysis.sensitivity [size=quick] [trajectories=R] [out=FILE] [params=[a,b]]`
 
-Screens the simulated bench's uncertain parameters (their brackets: conf/sim/brackets.yaml) with
+Screens the simulated bench's uncertain parameters (their brackets: layerskin_exp/sim/brackets.yaml) with
 SALib's Morris method and prints which headline outcomes move and by how much.
 
 Each Morris sample is a short calibration campaign on the simulated rig (`size`: default 3
@@ -31,9 +31,8 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from layerskin_exp.config import CONF_DIR
+from layerskin_exp.sim.config import BRACKETS_FILE
 
-BRACKETS_FILE = CONF_DIR / "sim" / "brackets.yaml"  # conf/ in a checkout, layerskin_exp/conf installed
 SIZES = {  # campaign per Morris sample
     "default": ["positions.count=3", "press.repeats=2", "slide.repeats=2"],
     "quick": ["positions.count=2", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05"],
@@ -66,7 +65,7 @@ class SensitivityConfig:
 
 
 def load_brackets(path=BRACKETS_FILE) -> dict:
-    """{key: entry} of conf/sim/brackets.yaml."""
+    """{key: entry} of layerskin_exp/sim/brackets.yaml."""
     return dict(OmegaConf.to_container(OmegaConf.load(path))["parameters"])
 
 
@@ -179,7 +178,7 @@ def screen(cfg: SensitivityConfig, progress=print) -> dict:
             progress(f"sample {i + 1}/{len(X)} ({time.perf_counter() - t0:.0f} s): {' '.join(ov)}")
     return {"size": cfg.size, "campaign": SIZES[cfg.size], "trajectories": cfg.trajectories,
             "num_levels": cfg.num_levels, "seed": cfg.seed, "problem": prob,
-            "brackets_file": "conf/sim/brackets.yaml" if Path(cfg.brackets) == BRACKETS_FILE else str(cfg.brackets), "wall_s": time.perf_counter() - t0,
+            "brackets_file": "layerskin_exp/sim/brackets.yaml" if Path(cfg.brackets) == BRACKETS_FILE else str(cfg.brackets), "wall_s": time.perf_counter() - t0,
             "outcomes": {k: {"label": lab, "unit": u} for k, (lab, u) in OUTCOMES.items()},
             "morris": analyse(prob, X, Y, cfg.num_levels, cfg.seed), "samples": samples}
 

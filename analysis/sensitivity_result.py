@@ -14,7 +14,7 @@ from pathlib import Path
 from layerskin_exp.config import ConfigError
 
 PRODUCE = "`python -m analysis.sensitivity out=FILE`"
-HOW_TO = (f"{PRODUCE} screens the brackets of conf/sim/brackets.yaml (minutes on 2 cores; `size=quick` "
+HOW_TO = (f"{PRODUCE} screens the brackets of layerskin_exp/sim/brackets.yaml (minutes on 2 cores; `size=quick` "
           "for a first look); pass the file to the report as `sensitivity=FILE`")
 
 

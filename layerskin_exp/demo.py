@@ -94,8 +94,12 @@ def force_summary(results_path: Path) -> str:
     for m in models:
         if m in gains:
             pct = round(100 * gains["confidence"])
-            lines.append(f"{m} minus linear, R² ({pct} % CI over the {r['force_split']['test_trials']} test trials): "
-                         + ", ".join(f"{ax} {_signed(g)} [{_signed(lo)}, {_signed(hi)}]" for ax, (g, lo, hi) in gains[m].items()))
+            n_test, n_min = r["force_split"]["test_trials"], gains.get("min_test_trials")
+            lines.append(f"{m} minus linear, R² ({pct} % CI over the {n_test} test trials"
+                         + (f"; undefined below {n_min}" if n_min else "") + "): "
+                         + ", ".join(f"{ax} {_signed(g)} " + ("[undefined]" if lo is None or hi is None
+                                                              else f"[{_signed(lo)}, {_signed(hi)}]")
+                                     for ax, (g, lo, hi) in gains[m].items()))
     for m, t in training.items():
         verdict = ("converged" if t.get("converged") else "NOT CONVERGED: " + "; ".join(t.get("caveats", [])))
         lines.append(f"{m}: {t['epochs']}/{t['max_epochs']} epochs, best at {t['best_epoch']}, "

@@ -23,24 +23,12 @@ import threading
 from collections.abc import Callable
 
 from omegaconf import DictConfig, OmegaConf
-from tqdm.auto import tqdm
 
-from hardware.interfaces import DeviceError
-from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, preflight, refuse
+from layerskin_exp.cli import EXIT_CONFIG, answer_help, expand_sweep, one_line, preflight, refuse
 from layerskin_exp.config import ConfigError, validate
-from layerskin_exp.log import SessionInUseError
-from layerskin_exp.provenance import provenance
-from protocols.runner import (
-    Terminated,
-    TrialConflictError,
-    check_termination,
-    request_termination,
-    terminate_now,
-    termination_pending,
-)
 
-__all__ = ["EXIT_CONFIG", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files", "run_app",
-           "sweep_job"]
+__all__ = ["EXIT_CONFIG", "answer_help", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files",
+           "run_app", "sweep_job"]
 
 log = logging.getLogger(__name__)
 
@@ -133,6 +121,8 @@ _grace: list[threading.Timer] = []
 
 def _on_sigterm(signum, frame) -> None:
     """First SIGTERM: stop at the next tick; a second one, or STOP_GRACE_S without a tick: at once."""
+    from protocols.runner import request_termination, terminate_now, termination_pending  # loaded by run_app
+
     if termination_pending():
         terminate_now()
         return
@@ -146,6 +136,8 @@ def _on_sigterm(signum, frame) -> None:
 
 def _on_sigint(signum, frame) -> None:
     """First Ctrl-C: stop at the next tick, closing the trial cleanly; a second one: at once."""
+    from protocols.runner import request_termination, terminate_now, termination_pending  # loaded by run_app
+
     if termination_pending():
         terminate_now()
         return
@@ -164,6 +156,8 @@ def _sigterm_as_exception():
     try:
         yield
     finally:
+        from protocols.runner import termination_pending  # loaded by run_app
+
         while _grace:
             _grace.pop().cancel()
         if termination_pending():
@@ -178,15 +172,23 @@ def _sigterm_as_exception():
 def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], object],
             prepare: Callable[[object], None] | None = None):
     """Validate, run prepare(typed_cfg) when given, build and connect the rig, run
-    body(typed_cfg, rig, metadata), always stop and disconnect.
+    body(typed_cfg, rig, metadata), always stop and disconnect; a run that connected ends by
+    printing where its session files went and how many it wrote (however it ended).
 
     Nothing moves before every device is connected and the config validated. Whatever a run
     would import or load lazily belongs before the devices connect (here or in `prepare`): an
     import holds the interpreter lock for much of its body, and the loopback emulators run in
-    this process against 50 ms stream deadlines (tests/protocols/test_late_imports.py).
+    this process against 50 ms stream deadlines (tests/protocols/test_late_imports.py). The
+    modules a run needs are imported here, not with this module: the command line's checks and
+    `--help` import it too, and answer without them.
     """
-    from hardware import build_rig  # the backends import heavy optional drivers
+    from tqdm.auto import tqdm
 
+    from hardware import build_rig  # the backends import heavy optional drivers
+    from hardware.interfaces import DeviceError
+    from protocols.runner import RUN_FILES
+
+    RUN_FILES.reset()  # the jobs of a multirun may share this process
     try:
         typed = validate(cfg)
         tqdm.get_lock()  # tqdm makes its lock, importing multiprocessing, at its first bar
@@ -203,6 +205,16 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
 
 
 def _run_connected(cfg: DictConfig, rig, typed, body):
+    from layerskin_exp.log import SessionInUseError
+    from layerskin_exp.provenance import provenance
+    from protocols.runner import (
+        RUN_FILES,
+        Terminated,
+        TrialConflictError,
+        check_termination,
+        termination_pending,
+    )
+
     try:
         rig.connect()
     except (Terminated, KeyboardInterrupt) as e:  # while a device was still connecting: nothing written
@@ -241,13 +253,12 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         return result
     except KeyboardInterrupt:
         rig.stop_motion()
-        print("interrupted: motion stopped, the current trial is marked aborted; rerun the same command "
-              "to resume", file=sys.stderr)
+        print(f"interrupted: motion stopped, {RUN_FILES.stop_note()}; rerun the same command to resume",
+              file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
     except Terminated as e:
         rig.stop_motion()
-        print(f"{e}: motion stopped, the current trial is marked aborted; rerun the same command to resume",
-              file=sys.stderr)
+        print(f"{e}: motion stopped, {RUN_FILES.stop_note()}; rerun the same command to resume", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED if "Ctrl-C" in str(e) else EXIT_TERMINATED)
     except ConfigError as e:
         rig.stop_motion()
@@ -263,11 +274,12 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     except Exception as e:
         rig.stop_motion()
         log.error("run stopped: %s: %s", type(e).__name__, one_line(e))
-        _fail(f"{type(e).__name__}: {one_line(e)} (motion stopped, the trial file is marked aborted; "
+        _fail(f"{type(e).__name__}: {one_line(e)} (motion stopped, {RUN_FILES.stop_note()}; "
               "rerun the same command to resume)")
     finally:
         rig.stop_motion()
         rig.disconnect()
+        print(RUN_FILES.line(), flush=True)
         if live is not None:
             if finished and getattr(typed, "live_hold", False):
                 live.hold(termination_pending)  # Ctrl-C or SIGTERM ends it

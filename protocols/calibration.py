@@ -25,7 +25,7 @@ from layerskin_exp.rig import SENSING_HALF_WIDTH_MM
 from protocols.config import ForceCalibrationConfig, PositionsConfig
 from protocols.identity import design_id, trial_identity, write_manifest
 from protocols.loop import ControlLoop
-from protocols.runner import TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
+from protocols.runner import RUN_FILES, TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
 from protocols.safety import Safety
 from protocols.stops import (
     DEPTH_LIMIT,
@@ -290,7 +290,12 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=Non
     trials = plan_trials(cfg)
     identity = {t.name: trial_identity(metadata["config"], t.labels) for t in trials}
     # trial_is_complete refuses a conflicting file: before the first trial, not half-way through
-    todo = [t for t in trials if not trial_is_complete(root / f"{t.name}.mcap", identity[t.name])]
+    todo = []
+    for t in trials:
+        if trial_is_complete(root / f"{t.name}.mcap", identity[t.name]):
+            RUN_FILES.record(root / f"{t.name}.mcap", "already_complete")
+        else:
+            todo.append(t)
     if todo:
         write_manifest(root, metadata["config"])
     results: list[TrialResult] = []

@@ -9,8 +9,7 @@ from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
 from layerskin_exp.config import CONF_DIR
-from protocols.app import preflight, refuse_shared_files, run_app, sweep_job
-from protocols.calibration import run_campaign
+from protocols.app import answer_help, preflight, refuse_shared_files, run_app, sweep_job
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="force_calibration")
@@ -19,12 +18,15 @@ def main(cfg: DictConfig) -> dict:
 
 
 def _campaign(cfg: DictConfig) -> dict:
+    from protocols.calibration import run_campaign  # not for --help or a refused command line
+
     results = run_app(cfg, "platform", run_campaign)
     return {"summary": f"{len(results)} trials run", "trials": [r.as_dict() for r in results]}
 
 
 def cli() -> None:
-    """Console script: refuse a bad command line as a whole, then let Hydra run it."""
+    """Console script: answer --help, refuse a bad command line as a whole, then let Hydra run it."""
+    answer_help("force_calibration", sys.argv[1:])
     preflight("force_calibration", sys.argv[1:])
     refuse_shared_files(sys.argv[1:])
     main()

@@ -227,5 +227,7 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) ->
     meta = {**metadata, "protocol": PROTOCOL, "plan": labels}
     path = trial_path(cfg, metadata["config"])
     write_manifest(path.parent, metadata["config"])
-    return run_trial(rig, path, labels, meta, body,
-                     identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live)
+    result = run_trial(rig, path, labels, meta, body,
+                       identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live)
+    print(result.summary(), flush=True)
+    return result

@@ -9,9 +9,8 @@ from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
 from layerskin_exp.config import CONF_DIR
-from protocols.app import preflight, refuse_renamed, refuse_shared_files, run_app, sweep_job
+from protocols.app import answer_help, preflight, refuse_renamed, refuse_shared_files, run_app, sweep_job
 from protocols.config import RENAMED_KEYS
-from protocols.grip import prepare_grip, run_grip_trial
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="grip_depth")
@@ -20,13 +19,15 @@ def main(cfg: DictConfig) -> dict:
 
 
 def _trial(cfg: DictConfig) -> dict:
+    from protocols.grip import prepare_grip, run_grip_trial  # not for --help or a refused command line
+
     result = run_app(cfg, "gripper", run_grip_trial, prepare_grip)
-    print(result.summary(), flush=True)
     return {**result.as_dict(), "summary": result.summary()}
 
 
 def cli() -> None:
-    """Console script: refuse a bad command line as a whole, then let Hydra run it."""
+    """Console script: answer --help, refuse a bad command line as a whole, then let Hydra run it."""
+    answer_help("grip_depth", sys.argv[1:])
     refuse_renamed(sys.argv[1:], RENAMED_KEYS)
     preflight("grip_depth", sys.argv[1:])
     refuse_shared_files(sys.argv[1:])

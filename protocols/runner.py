@@ -103,6 +103,49 @@ def terminate_now() -> None:
         check_termination()
 
 
+@dataclass
+class RunFiles:
+    """The session files one protocol run wrote, for the line it ends with (protocols.app)."""
+
+    folder: Path | None = None
+    written: int = 0  # complete, under their final names
+    interrupted: list[Path] = field(default_factory=list)  # closed aborted, kept as <name>.mcap.partial
+    already_complete: int = 0
+
+    def reset(self) -> None:
+        self.folder, self.written, self.interrupted, self.already_complete = None, 0, [], 0
+
+    def record(self, path: Path, how: str) -> None:
+        """how: "written", "interrupted" (path: the .partial) or "already_complete"."""
+        self.folder = path.parent
+        if how == "written":
+            self.written += 1
+        elif how == "interrupted":
+            self.interrupted.append(path)
+        else:
+            self.already_complete += 1
+
+    def stop_note(self) -> str:
+        """What a run stopped early left of its trial in progress, for the line that says it stopped."""
+        if self.interrupted:
+            return f"the trial in progress is kept as {self.interrupted[-1].name} (aborted)"
+        return "no trial was in progress" if self.folder is not None else "no trial had started, nothing was written"
+
+    def line(self) -> str:
+        if self.folder is None:
+            return "no session file written"
+        s = f"{self.written} session file{'' if self.written == 1 else 's'} written to {self.folder}"
+        if self.interrupted:
+            s += f", {len(self.interrupted)} interrupted (kept as .mcap.partial; a rerun runs it again)"
+        if self.already_complete:
+            s += f"; {self.already_complete} already complete there"
+        return s
+
+
+# What the current run wrote: reset by protocols.app when a run starts, filled by run_trial.
+RUN_FILES = RunFiles()
+
+
 def complete_session(path: Path):
     """The session at `path` when it is a readable, undamaged, complete trial, else None."""
     if not path.is_file():
@@ -297,6 +340,7 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         note = _missing_views(existing.metadata.get("config") or {}, metadata.get("config") or {})
         if note:
             log.warning("trial %s is already complete (%s); it is not run again", name, note)
+        RUN_FILES.record(path, "already_complete")
         return TrialResult(name, labels, str(path), existing.outcome, skipped=True,
                            extra={"note": note} if note else {})
     if identity is not None:
@@ -324,10 +368,12 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
         writer.close(f"aborted: {reason}")
+        RUN_FILES.record(tmp, "interrupted")
         log.warning("trial %s aborted: %s (kept as %s)", name, reason, tmp)
         raise
     outcome = outcome_after(trial.safety_trip)
     writer.close(outcome, move_to=path)  # renamed under the writer's lock, fsynced
+    RUN_FILES.record(path, "written")
     result = TrialResult(name, labels, str(path), outcome, duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
                          peak_fz_n=trial.peak_fz_n, peak_shear_n=trial.peak_shear_n,
                          stop_reason=trial.stop_reason)

@@ -56,6 +56,8 @@ def test_wheel_contents(installed):
     assert "layerskin_exp/py.typed" in names
     ref = "layerskin_exp/sim/fem_reference/reference/"
     assert {ref + "bonded.npz", ref + "summary.json"} <= set(names)  # the FEM reference the validation reads
+    # files read by path that are no config choice, kept beside their readers rather than in conf/
+    assert {"layerskin_exp/sim/brackets.yaml", "layerskin_exp/sim/fem_reference/tolerances.yaml"} <= set(names)
     assert any(n.endswith("licenses/LICENSE") for n in names)
     entry = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
     for script in ("lsx-calibrate", "lsx-grip", "lsx-report", "lsx-log", "lsx-live"):

@@ -11,6 +11,7 @@ from scipy.stats import bootstrap
 from tqdm.auto import tqdm
 
 from analysis import study
+from analysis.markdown import counted
 from analysis.metrics import mae, r2_score
 from analysis.run_info import convergence_caveats, force_ranges, training_state
 from layerskin_exp.estimation.artifact import Estimator
@@ -27,6 +28,10 @@ log = logging.getLogger("analysis.report")
 AXES = ("Fx", "Fy", "Fz")
 GAIN_RESAMPLES = 999
 GAIN_CONFIDENCE = 0.95
+# Fewer test trials than this and the gain's interval is undefined, not printed: n trials give
+# only C(2n-1, n) distinct resamples (35 for 4, 92378 for 10), and the R² of a resample of two or
+# three trials, whose reference barely varies, can take any value.
+GAIN_MIN_TEST_TRIALS = 10
 
 
 def r2_gain_ci(y: np.ndarray, pred: np.ndarray, base: np.ndarray, trial: np.ndarray,
@@ -35,8 +40,9 @@ def r2_gain_ci(y: np.ndarray, pred: np.ndarray, base: np.ndarray, trial: np.ndar
 
     y, pred, base (N, 3) N on the test frames; trial (N,) ids. Trials, not frames, are resampled
     (frames of a trial are not independent), and both models see the same resample. Returns axis ->
-    [gain, ci_low, ci_high] (the interval NaN with fewer than two test trials). On a few dozen test trials the interval is wide: a gain whose interval
-    holds 0 is not resolved by this test set.
+    [gain, ci_low, ci_high], the interval NaN (undefined) below GAIN_MIN_TEST_TRIALS test trials. On
+    a few dozen test trials the interval is wide: a gain whose interval holds 0 is not resolved by
+    this test set.
     """
     ids, inv = np.unique(np.asarray(trial), return_inverse=True)
     frames = [np.flatnonzero(inv == i) for i in range(len(ids))]
@@ -45,7 +51,7 @@ def r2_gain_ci(y: np.ndarray, pred: np.ndarray, base: np.ndarray, trial: np.ndar
         rows = np.concatenate([frames[int(i)] for i in picked])
         return r2_score(y[rows], pred[rows]) - r2_score(y[rows], base[rows])
 
-    if len(ids) < 2:  # one test trial: nothing to resample, the interval is undefined
+    if len(ids) < GAIN_MIN_TEST_TRIALS:
         g = gain(np.arange(len(ids)))
         return {ax: [float(g[i]), float("nan"), float("nan")] for i, ax in enumerate(AXES)}
     ci = bootstrap((np.arange(len(ids)),), gain, vectorized=False, n_resamples=GAIN_RESAMPLES,
@@ -76,7 +82,7 @@ def force(run: Analysis) -> None:
     sp = a.split
     tr, va, te = split_trials(trial, (sp.train, sp.val, sp.test), sp.seed)
     if len(te) == 0 or len(tr) == 0:
-        run.skip("force", f"{len(np.unique(trial))} calibration trial(s): too few for a 70/15/15 split")
+        run.skip("force", f"{counted(len(np.unique(trial)), 'calibration trial')}: too few for a 70/15/15 split")
         return
     m_tr, m_va, m_te = np.isin(trial, tr), np.isin(trial, va), np.isin(trial, te)
     phi = linear_features(f["dc"], f["p_s"], f["p_d"])
@@ -103,7 +109,7 @@ def force(run: Analysis) -> None:
         r2, err = r2_score(y[m_te], p), mae(y[m_te], p)
         results["force"][name] = {ax: {"r2": r2[i], "mae": err[i]} for i, ax in enumerate(AXES)}
     results["force_gain_over_linear"] = {
-        "confidence": GAIN_CONFIDENCE, "resampled": "test trials",
+        "confidence": GAIN_CONFIDENCE, "resampled": "test trials", "min_test_trials": GAIN_MIN_TEST_TRIALS,
         **{k: r2_gain_ci(y[m_te], p, preds["linear"], trial[m_te], sp.seed) for k, p in preds.items() if k != "linear"}}
     results["force_split"] = {"train_trials": len(tr), "val_trials": len(va), "test_trials": len(te),
                               "test_frames": int(m_te.sum()), "seed": sp.seed}

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from analysis import study
+from analysis.markdown import counted
 from analysis.sections.tracking import representative
 from analysis.tracking import unwrap_angle
 from layerskin_exp.estimation.artifact import CAUSAL_CUES, Estimator
@@ -54,7 +55,7 @@ def slip(run: Analysis) -> None:
     for motion in ("translation", "torsion"):
         idx = [i for i, t in enumerate(grip) if t.motion == motion and t.vision_t_s.size > 1]
         if len(idx) < 2:
-            run.skip(f"slip.{motion}", f"{len(idx)} {motion} trial(s) with marker poses; LOTO needs 2")
+            run.skip(f"slip.{motion}", f"{counted(len(idx), motion + ' trial')} with marker poses; LOTO needs 2")
             continue
         truths = {i: vision_slip_events(grip[i].vision_t_s, grip[i].vision_sig, sc) for i in idx}
         det = SlipDetector.from_config(sc, fs_nominal)

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from analysis import study
+from analysis.markdown import counted
 from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
 
 if TYPE_CHECKING:
@@ -28,7 +29,7 @@ def tracking(run: Analysis) -> None:
                        and np.all(np.isfinite(getattr(t, ref_key)))]
                 if len(idx) < 2:
                     run.skip(f"tracking.{motion}.{layer}.{g:g}",
-                             f"{len(idx)} trial(s) with a {ref_key.split('_')[0]} reference; LOTO needs 2")
+                             f"{counted(len(idx), 'trial')} with the {ref_key.split('_')[0]} reference; LOTO needs 2")
                     continue
                 trials = []
                 for i in idx:

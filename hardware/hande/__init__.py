@@ -5,6 +5,15 @@ hardware.hande.emulator.HandEEmulator: the URCap socket on loopback backed by th
 """
 
 from hardware.hande.config import HandEConfig
-from hardware.hande.driver import HandEGripper
 
 __all__ = ["HandEConfig", "HandEGripper"]
+
+
+def __getattr__(name: str):
+    """The driver and the rest load at first use: Hydra's schemas import this package's config,
+    which runs this file first, and `--help` must not wait for what they import."""
+    if name == "HandEGripper":
+        from hardware.hande import driver
+
+        return getattr(driver, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

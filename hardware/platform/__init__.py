@@ -5,6 +5,15 @@ hardware.platform.emulator.GrblEmulator: GRBL on a pseudo-terminal backed by the
 """
 
 from hardware.platform.config import GrblPlatformConfig
-from hardware.platform.driver import GrblPlatform
 
 __all__ = ["GrblPlatform", "GrblPlatformConfig"]
+
+
+def __getattr__(name: str):
+    """The driver and the rest load at first use: Hydra's schemas import this package's config,
+    which runs this file first, and `--help` must not wait for what they import."""
+    if name == "GrblPlatform":
+        from hardware.platform import driver
+
+        return getattr(driver, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

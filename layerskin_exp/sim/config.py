@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from hydra.core.config_store import ConfigStore
@@ -18,6 +19,10 @@ from omegaconf import MISSING
 
 from layerskin_exp.config import require, require_seed, retire
 from layerskin_exp.sim.rig_config import RigConfig
+
+# The bracket or source of each outcome-moving parameter of the simulated bench, read by the
+# sensitivity screen and the design map. Kept out of conf/sim/: it is no `sim=` choice.
+BRACKETS_FILE = Path(__file__).resolve().with_name("brackets.yaml")
 
 
 def _positive(value: float, key: str, what: str = "must be > 0") -> None:

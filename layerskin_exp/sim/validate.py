@@ -8,7 +8,7 @@ closed form, a bound, or the finite-element reference (`layerskin_exp.sim.fem_re
 The checks run on the skin model itself (no protocol). A check never encodes a study outcome or
 a protocol outcome (stop-reason fractions, force maxima): those are printed below the table as
 results, with the inter-layer shift, effective heights and position spread read from counts
-after the readout. The FEM comparison's tolerances are fixed in conf/sim/fem_tolerances.yaml.
+after the readout. The FEM comparison's tolerances are fixed in layerskin_exp/sim/fem_reference/tolerances.yaml.
 Every check takes `model_sim`, the design the simulated side is built from (default: `sim`): the
 tests inject an error there (a perturbed parameter, a disabled mechanism) and see the check fail.
 """
@@ -335,7 +335,7 @@ FEM_CATCHES = {
 
 
 def fem_checks(sim: SimConfig, model_sim: SimConfig | None = None, bounds=None) -> tuple[list[Check], dict]:
-    """The fast model against the FEM reference, within conf/sim/fem_tolerances.yaml."""
+    """The fast model against the FEM reference, within layerskin_exp/sim/fem_reference/tolerances.yaml."""
     from layerskin_exp.sim.fem_reference import compare as fc
 
     hook = None

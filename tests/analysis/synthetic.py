@@ -157,7 +157,7 @@ def write_sensitivity_result(path) -> Path:
               "grip_preload_n": {**entry(4.0, 9.0, (0.0, 0.0, 4.5)), "missing": 2}}
     result = {"size": "quick", "campaign": ["positions.count=2"], "trajectories": 2, "num_levels": 4, "seed": 0,
               "problem": {"num_vars": 3, "names": names, "bounds": [[0, 1], [0.6, 1.2], [0.5, 2.0]]},
-              "brackets_file": "conf/sim/brackets.yaml", "wall_s": 1.0,
+              "brackets_file": "layerskin_exp/sim/brackets.yaml", "wall_s": 1.0,
               "outcomes": {k: {"label": lab, "unit": u} for k, (lab, u) in OUTCOMES.items()},
               "morris": morris, "samples": [{"overrides": [], "outcomes": {}} for _ in range(8)]}
     Path(path).write_text(json.dumps(result))

@@ -50,3 +50,33 @@ def test_the_demo_prints_the_gain_with_its_interval(tmp_path):
     (tmp_path / "results.json").write_text(json.dumps(r))
     text = force_summary(tmp_path / "results.json")
     assert "95 % CI over the 43 test trials" in text and "Fy +0.200 [+0.050, +0.300]" in text
+
+
+def test_below_the_stated_minimum_of_test_trials_the_interval_is_undefined(tmp_path):
+    from analysis import study
+    from analysis.markdown import json_safe, write_markdown
+    from analysis.sections.force import GAIN_MIN_TEST_TRIALS
+
+    rng, trial, y = _trials(n_trials=GAIN_MIN_TEST_TRIALS - 1)
+    base, pred = y + 0.5 * rng.normal(size=y.shape), y + 0.2 * rng.normal(size=y.shape)
+    few = r2_gain_ci(y, pred, base, trial)
+    for i, (gain, lo, hi) in enumerate(few.values()):
+        assert gain == r2_score(y, pred)[i] - r2_score(y, base)[i]  # the gain itself is still given
+        assert np.isnan(lo) and np.isnan(hi)
+    more = np.repeat(np.arange(GAIN_MIN_TEST_TRIALS), 4)
+    assert all(np.isfinite(v).all() for v in r2_gain_ci(y[:len(more)], pred[:len(more)], base[:len(more)],
+                                                           more).values())
+    # what the report and the demo print: the gain, the interval said undefined, the minimum stated
+    r = json_safe({"study": study.ALL, "force_split": {"test_trials": GAIN_MIN_TEST_TRIALS - 1},
+                   "force": {m: {ax: {"r2": 0.5, "mae": 0.1} for ax in few} for m in ("linear", "T-s5")},
+                   "force_gain_over_linear": {"confidence": 0.95, "min_test_trials": GAIN_MIN_TEST_TRIALS,
+                                              "T-s5": few},
+                   "force_training": {}})
+    write_markdown(tmp_path / "report.md", r, [])
+    md = (tmp_path / "report.md").read_text()
+    gx = few["Fx"][0]
+    assert f"| Fx | {gx:+.3f} [interval undefined] |" in md
+    assert f"below {GAIN_MIN_TEST_TRIALS} test trials the interval is undefined" in md
+    (tmp_path / "results.json").write_text(json.dumps(r))
+    text = force_summary(tmp_path / "results.json")
+    assert f"Fx {gx:+.3f} [undefined]" in text and f"undefined below {GAIN_MIN_TEST_TRIALS}" in text

@@ -106,7 +106,7 @@ def test_sensitivity_bands_sit_beside_the_study_in_markdown_and_json(campaign, t
     assert rows["slide_fz_at_shear_n"]["ours"] == c["slide_loads"]["fz_at_shear_n"] is not None
     md = (tmp_path / "out" / "report.md").read_text()
     part = md[md.index("### Simulator sensitivity bands"):]
-    assert "not measurement noise" in part and "conf/sim/brackets.yaml" in part
+    assert "not measurement noise" in part and "layerskin_exp/sim/brackets.yaml" in part
     assert ("| inter-layer shift at 2 N shear (mm) | 2.2 (Sec. IV-A" in part
             and f"| {rows['cop_shift_at_2n_mm']['ours']:.3g} (this section) | 1 .. 1.5 |" in part)
     # a study value outside the band is said in words, one inside too; no verdict
@@ -148,3 +148,15 @@ def test_a_missing_screening_result_is_refused_before_anything_runs(campaign, tm
     assert r.returncode == 2, r.stderr[-2000:]
     assert r.stderr.strip().count("\n") == 0 and f"sensitivity={nope}: no such file" in r.stderr
     assert not (out / "results.json").exists() and not (out / "report.md").exists()
+
+
+def test_help_opens_with_what_the_report_does(monkeypatch, capsys):
+    from analysis.cli import report
+
+    monkeypatch.setattr(sys, "argv", ["lsx-report", "--help", "sessions=somewhere"])
+    with pytest.raises(SystemExit) as done:
+        report()
+    assert done.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("python -m analysis.report [key=value ...]: ")
+    assert "sessions=somewhere: the session files" in out and "\nsessions: somewhere\n" in out

@@ -3,6 +3,7 @@ reason, and carries on; a trial present twice is used once; sessions= may be one
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -124,3 +125,28 @@ def test_bad_sessions_or_out_is_one_line_exit_2(tmp_path):
                            cwd=Path(__file__).parents[2])
         assert r.returncode == 2, r.stderr[-2000:]
         assert "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0 and "error:" in r.stderr
+
+
+def test_the_report_reads_by_default_where_the_protocols_write():
+    import protocols.config  # noqa: F401 - the protocols' schemas, as their apps store them
+    from analysis.config import ReportConfig
+    from layerskin_exp.config import compose
+
+    report = compose("report").sessions
+    assert report == ReportConfig().sessions
+    assert report == compose("force_calibration").data_root == compose("grip_depth").data_root
+
+
+def test_an_empty_or_missing_sessions_folder_is_refused_naming_it(tmp_path):
+    """A report of nothing is refused (exit 2, one line naming the folder); nothing is written."""
+    empty = tmp_path / "empty"
+    (empty / "grip_depth").mkdir(parents=True)
+    (empty / "grip_depth" / "g9_translation_t0.mcap.partial").write_bytes(b"")  # an interrupted trial only
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])}
+    for args, folder in (([f"out={tmp_path / 'o1'}"], "sessions=data"),  # the default; no data/ in cwd
+                         ([f"sessions={empty}", f"out={tmp_path / 'o2'}"], f"sessions={empty}")):
+        r = subprocess.run([sys.executable, "-m", "analysis.report", *args], capture_output=True, text=True,
+                           cwd=tmp_path, env=env)
+        assert r.returncode == 2, r.stderr[-2000:]
+        assert r.stderr.strip().count("\n") == 0 and r.stderr.startswith(f"error: {folder}:"), r.stderr
+        assert not list(tmp_path.rglob("report.md")) and not list(tmp_path.rglob("results.json"))

@@ -55,3 +55,18 @@ def test_loto_recovers_scale_offset_and_pools_out_of_fold_metrics():
     assert res["r2"] > 0.999
     assert res["mae"] < 0.03
     assert len(res["predictions"]) == 6
+
+
+def test_a_skipped_tracking_group_reads_as_english():
+    from types import SimpleNamespace
+
+    from analysis.sections.tracking import tracking
+
+    nan = np.full(3, np.nan)
+    grip = [SimpleNamespace(motion="translation", grip_depth_mm=6.0, arm_ref=np.zeros(3), vision_ref=nan)]
+    skipped = {}
+    run = SimpleNamespace(camp=SimpleNamespace(grip=grip), grip_features=lambda: [None], results={}, ts5=None,
+                          a=SimpleNamespace(figures=False), skip=lambda key, reason: skipped.__setitem__(key, reason))
+    tracking(run)
+    assert skipped["tracking.translation.deep.6"] == "1 trial with the arm reference; LOTO needs 2"
+    assert skipped["tracking.translation.superficial.6"] == "0 trials with the vision reference; LOTO needs 2"

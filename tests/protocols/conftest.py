@@ -34,10 +34,11 @@ def run_cli(module: str, args: list[str], cwd: Path, **kw) -> subprocess.Complet
                           text=True, timeout=240, **kw)
 
 
-def popen_cli(module: str, args: list[str], cwd: Path, stderr=subprocess.DEVNULL) -> subprocess.Popen:
+def popen_cli(module: str, args: list[str], cwd: Path, stdout=subprocess.DEVNULL,
+              stderr=subprocess.DEVNULL) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.Popen([sys.executable, "-m", module, *args], cwd=cwd, env=env,
-                            stdout=subprocess.DEVNULL, stderr=stderr, text=True)
+                            stdout=stdout, stderr=stderr, text=True)
 
 
 def design_dir(protocol_root: Path) -> Path:

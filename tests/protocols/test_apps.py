@@ -38,6 +38,7 @@ def test_calibration_cli_writes_labelled_trials(tmp_path, hydra_dirs):
         assert load_session(f, warn=False).metadata["backend"] == "sim"
     for trial in plan:
         check_calibration_session(load_session(folder / f"{trial.name}.mcap", warn=False), trial, typed)
+    assert r.stdout.splitlines()[-1] == f"{len(plan)} session files written to {folder}"  # where they went
 
 
 def check_calibration_session(s, trial, typed, rate_tol: float = 0.05) -> None:
@@ -94,6 +95,8 @@ def test_resume_after_sigkill_runs_each_trial_once(tmp_path, hydra_dirs):
     for t in plan:  # the resumed run planned the same trials (directions, offsets)
         s = load_session(folder / f"{t.name}.mcap", warn=False)
         assert s.complete and s.labels == t.labels
+    assert r.stdout.splitlines()[-1] == (f"{len(plan) - len(done_before)} session files written to {folder}; "
+                                         f"{len(done_before)} already complete there")
 
 
 def test_force_guard_on_the_sim_stops_at_the_first_sample_over(tmp_path):
@@ -181,6 +184,9 @@ def test_sweep_over_a_protocol_key_keeps_every_combination_and_resumes_once(tmp_
     assert r2.returncode == 0 and "0 ran, 2 already complete, 0 failed" in r2.stdout, r2.stdout[-2000:]
     assert "not reported" not in r2.stdout and "3/2" not in r2.stdout and "4/2" not in r2.stdout
     assert [f.stat().st_mtime_ns for f in files] == stamps
+    for f in files:  # each job of the sweep ends with its own count, not the sweep's so far
+        assert f"\n1 session file written to {f.parent}\n" in r.stdout
+        assert f"\n0 session files written to {f.parent}; 1 already complete there\n" in r2.stdout
 
 
 def test_a_failing_sweep_job_does_not_stop_the_others(tmp_path, hydra_dirs):
@@ -279,7 +285,7 @@ def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs
     # inside the first press
     args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", "press.hold_s=15", f"data_root={data}",
             "progress=false", *hydra_dirs]
-    proc = popen_cli("protocols.force_calibration", args, tmp_path)
+    proc = popen_cli("protocols.force_calibration", args, tmp_path, stdout=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 200
         while not list(data.glob("force_calibration/*/*press*.partial")) and proc.poll() is None \
@@ -287,12 +293,15 @@ def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs
             time.sleep(0.005)
         assert proc.poll() is None, "the campaign ended before the signal could be sent"
         proc.send_signal(sig)
-        assert proc.wait(timeout=60) == code
+        stdout = proc.communicate(timeout=60)[0]
+        assert proc.returncode == code
     finally:
         if proc.poll() is None:
             proc.kill()
     (partial,) = data.glob("force_calibration/*/*.partial")  # the trial in progress, closed at a tick
     assert load_session(partial, warn=False).outcome == outcome
+    assert stdout.splitlines()[-1] == (f"0 session files written to {partial.parent}, 1 interrupted (kept as "
+                                       ".mcap.partial; a rerun runs it again)")
 
 
 def test_ctrl_c_pressed_again_while_the_run_winds_down_is_ignored(tmp_path, hydra_dirs):
@@ -373,3 +382,35 @@ def test_second_run_on_a_trial_in_progress_refuses_naming_the_other(tmp_path, hy
         holder.close("aborted: test")
     assert r.returncode == 1
     assert f"pid {os.getpid()}" in r.stderr and "marked aborted" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("when", ["before any trial", "during a trial"])
+def test_a_stop_says_what_it_left_of_the_trial_in_progress(tmp_path, monkeypatch, capsys, when):
+    """Ctrl-C before the first trial leaves nothing and says so; during one, it names the .partial."""
+    from protocols.app import EXIT_INTERRUPTED, run_app
+    from protocols.runner import run_trial
+    from tests.protocols.fake_rig import platform_rig
+
+    monkeypatch.setattr("hardware.build_rig", lambda cfg, setup: platform_rig())
+    cfg, _ = compose_app("force_calibration", [*TINY_CALIBRATION, f"data_root={tmp_path}"])
+
+    def interrupted(log):
+        raise KeyboardInterrupt
+
+    def body(typed, rig, metadata):
+        if when == "during a trial":
+            run_trial(rig, tmp_path / "d" / "pos000_press0.mcap", {}, metadata, interrupted)
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as stop:
+        run_app(cfg, "platform", body)
+    assert stop.value.code == EXIT_INTERRUPTED
+    out, err = capsys.readouterr()
+    if when == "before any trial":
+        assert err.strip() == ("interrupted: motion stopped, no trial had started, nothing was written; rerun the "
+                               "same command to resume")
+        assert out.splitlines()[-1] == "no session file written"
+    else:
+        assert err.strip() == ("interrupted: motion stopped, the trial in progress is kept as "
+                               "pos000_press0.mcap.partial (aborted); rerun the same command to resume")
+        assert (tmp_path / "d" / "pos000_press0.mcap.partial").is_file()

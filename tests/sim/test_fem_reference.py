@@ -131,7 +131,7 @@ def _stiff_sheet(fsim):
 
 # physical error -> (how it is injected: a monkeypatch or a design hook, the metrics that must see it)
 INJECTIONS = {
-    # With the bands widened by the reference's own mesh error (conf/sim/fem_tolerances.yaml,
+    # With the bands widened by the reference's own mesh error (fem_reference/tolerances.yaml,
     # discretisation), two rows no longer see an error alone: the peak superficial pressure moves
     # 1.46-1.55x under the fixed cover width (band up to 1.59x) and the effective height 0.64-0.77x
     # under the 10x stiff lattice (band down to 0.52x); contact width and tangential stiffness do.
@@ -159,7 +159,7 @@ def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, 
     """A fast model that matched the FEM exactly (at the band's centre) would fail the check
     under the injected error: the fast value moves by more than the tolerance (difference
     metrics) or by a factor outside [lo, hi] (ratio metrics), at one load at least. Which error
-    each metric catches is what conf/sim/fem_tolerances.yaml and validate's notes say."""
+    each metric catches is what layerskin_exp/sim/fem_reference/tolerances.yaml and validate's notes say."""
     patch, hook, metrics = INJECTIONS[error]
     if patch is not None:
         patch(monkeypatch)

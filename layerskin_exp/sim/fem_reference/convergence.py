@@ -3,7 +3,7 @@ coarse, default and fine meshes (`python -m layerskin_exp.sim.fem_reference --re
 
 A quantity is converged when it changes by less than REL_TOL (positions: by less than POS_TOL_MM)
 between the two finest meshes. One that is not carries its measured change into the comparison
-as a discretisation error: conf/sim/fem_tolerances.yaml's `discretisation:` widens that metric's
+as a discretisation error: layerskin_exp/sim/fem_reference/tolerances.yaml's `discretisation:` widens that metric's
 band by it, and `uncovered` lists every quantity that is neither converged nor so covered.
 """
 

@@ -1,0 +1,84 @@
+"""How soon the protocols' command line answers: `python -m protocols.grip_depth --help`, a refused
+override (`grip_depth=abc`, exit 2) and `--cfg job`, each a fresh process timed by its wall clock,
+against a bare `python -c pass` in the same run (the interpreter's own start).
+
+Target (issue 32): each under 1.5 s on 2 cores. Before the heavy imports moved to where they are
+used, --help took 6.5-7.3 s and imported 1,106 modules (numba, cv2, scipy, mcap, foxglove): the
+schemas reached `layerskin_exp.vision`'s numba kernels through `hardware.camera`'s package file, and
+Hydra's own --help copied the whole config repository for each of ~100 config groups it listed.
+The module count and any heavy module still imported come from one `-X importtime` run.
+
+    python -m benchmarks.cli_help                 # 5 runs of each, median and best
+    python -m benchmarks.cli_help --repo /tmp/old-checkout   # another checkout's code, same baseline
+    python -m benchmarks.run cli_help
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+COMMANDS = {
+    "help": ["-m", "protocols.grip_depth", "--help"],
+    "refused_override": ["-m", "protocols.grip_depth", "grip_depth=abc"],
+    "cfg_job": ["-m", "protocols.grip_depth", "--cfg", "job"],
+}
+BASELINE = ["-c", "pass"]
+HEAVY = ("numba", "cv2", "scipy", "torch", "mcap", "foxglove", "matplotlib")
+
+
+def _wall_s(args: list[str], repo: Path) -> float:
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, *args], cwd=repo, env=env, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL, check=False)
+    return time.perf_counter() - t0
+
+
+def _imported(args: list[str], repo: Path) -> list[str]:
+    """Every module the command imports (`-X importtime` lists each once)."""
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    r = subprocess.run([sys.executable, "-X", "importtime", *args], cwd=repo, env=env, capture_output=True,
+                       text=True, check=False)
+    return [ln.rsplit("|", 1)[1].strip() for ln in r.stderr.splitlines() if ln.startswith("import time:")
+            and not ln.rstrip().endswith("| package")]
+
+
+def run(repeats: int = 5, repo: Path = REPO) -> dict:
+    # interleaved, so that load from elsewhere on the machine falls on every command alike
+    walls: dict[str, list[float]] = {name: [] for name in ["python_pass", *COMMANDS]}
+    for _ in range(repeats):
+        walls["python_pass"].append(_wall_s(BASELINE, repo))
+        for name, args in COMMANDS.items():
+            walls[name].append(_wall_s(args, repo))
+    out = {f"{name}_s": {"median": round(statistics.median(w), 3), "best": round(min(w), 3)}
+           for name, w in walls.items()}
+    base = statistics.median(walls["python_pass"])
+    for name in COMMANDS:
+        out[f"{name}_minus_pass_s"] = round(statistics.median(walls[name]) - base, 3)
+    modules = _imported(COMMANDS["help"], repo)
+    out["help_modules"] = len(modules)
+    out["help_heavy_modules"] = sorted({m.split(".")[0] for m in modules} & set(HEAVY))
+    out["repeats"] = repeats
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.cli_help", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repo", type=Path, default=REPO, help="the checkout whose commands are timed")
+    args = parser.parse_args(argv)
+    for key, value in run(args.repeats, args.repo.resolve()).items():
+        print(f"{key:<30} {value}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
