@@ -22,7 +22,7 @@ from omegaconf import MISSING
 import hardware.config  # noqa: F401
 import layerskin_exp.sim.config  # noqa: F401
 from layerskin_exp import rig
-from layerskin_exp.config import require, require_seed
+from layerskin_exp.config import SkinConfig, require, require_seed
 
 # Hard ceilings no config can raise: what the skin, the platform, the UR5e and the Hand-E can do
 # safely on this rig. Checked when the config is validated, before any device connects.
@@ -499,10 +499,12 @@ class GripDepthConfig:
         for key, value in (("hold_s", self.hold_s), ("close.settle_s", self.close.settle_s),
                            ("approach.baseline_s", a.baseline_s)):
             _check_duration(key, value, self.trial_timeout_s)
-        min_baseline_s = MIN_BASELINE_FRAMES * self.skin.frame_period_ms / 1000.0
+        # a config built in code may leave the skin unset ({}): the default readout's period then
+        period_ms = getattr(self.skin, "frame_period_ms", None) or SkinConfig().frame_period_ms
+        min_baseline_s = MIN_BASELINE_FRAMES * period_ms / 1000.0
         require(a.baseline_s >= min_baseline_s, "approach.baseline_s", a.baseline_s,
                 f"must be >= {min_baseline_s:g} s ({MIN_BASELINE_FRAMES} skin frames of "
-                f"skin.frame_period_ms={self.skin.frame_period_ms:g}): the baseline averages them, and with none it is "
+                f"skin.frame_period_ms={period_ms:g}): the baseline averages them, and with none it is "
                 "0 counts and contact is detected at once")
         # the motion that runs fits in the trial (the other one may need a longer trial_timeout_s)
         if self.trajectory.motion == "translation":
