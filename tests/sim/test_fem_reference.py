@@ -5,6 +5,7 @@ compared quantity; and its comparison with the fast model can fail."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -229,3 +230,16 @@ def test_the_refinement_check_sees_an_unconverged_quantity():
     limit = study["pos_tol_mm"] if q["kind"] == "mm" else study["rel_tol"]
     q.update(change=2 * max(limit, widen) + 0.01, converged=False)
     assert name in conv.uncovered(study, fc.load_tolerances())
+
+
+def test_the_hemispheres_press_carries_the_load():
+    """The 3D check of the press (the stack as a solid of revolution under the hemisphere):
+    every layer's ring pressures carry the cap's load within 2 %, and its comparison with the
+    section is written from the same data."""
+    axi = fc.load_fem("axisymmetric")
+    for line, b in regen.balance(axi).items():
+        assert np.all(np.abs(b - 1.0) < 0.02), (line, b)
+    check = json.loads((fc.DATA / "plane_strain.json").read_text())
+    for depth, row in check["depths"].items():
+        j = int(np.flatnonzero(np.isclose(axi["depth_mm"], float(depth.split()[0])))[0])
+        assert row["peak_superficial_kpa"]["hemisphere"] == pytest.approx(axi["superficial_kpa"][j].max(), rel=1e-4)

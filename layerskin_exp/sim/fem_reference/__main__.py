@@ -156,6 +156,74 @@ def solve(sim, mesh: str, out: Path) -> dict:
     return res
 
 
+AXI_DEPTHS_MM = (0.1, 0.2, 0.3, 0.45, 0.6)
+# what the section and the hemisphere (solid of revolution) are compared on, at equal cap depth
+PLANE_STRAIN_DEPTHS_MM = (0.3, 0.6)
+
+
+def run_axisymmetric(sim, log=print) -> dict:
+    """The 3D check of the press: the same stack as a solid of revolution (walls as rings, the
+    pad a disc of its half-width) under the hemisphere itself, pressed in frictionless. Shear
+    breaks the symmetry: it is not solved here."""
+    from layerskin_exp.sim.fem_reference.model import build_mesh
+
+    sec = Section.from_sim(sim)
+    fe = StackFE(sec, mesh=build_mesh(sec, Mesher(), axisymmetric=True))
+    top = fe.height_mm + sec.radius_mm
+    states = []
+    with np.errstate(all="ignore"):  # the axis node carries no area: its pressure is undefined (nan)
+        for depth in AXI_DEPTHS_MM:
+            try:
+                it = fe.move_to(np.array([0.0, top - depth]), sticking=False, step_mm=0.05)
+            except (RuntimeError, FloatingPointError, np.linalg.LinAlgError) as err:
+                log(f"  axisymmetric: no equilibrium beyond depth {states[-1]['depth_mm']:.2f} mm ({err})")
+                break
+            st = fe.state()
+            st.update(phase=0.0, newton_iterations=it, branch_depth_mm=np.nan)
+            states.append(st)
+            log(f"  axisymmetric press depth {depth:.2f}: F {st['fz_n_per_mm']:.4f} N, contact radius "
+                f"{st['contact_to_mm']:.3f} mm, lattice strain {st['max_lattice_strain']:.2f}")
+    out = {k: np.array([s[k] for s in states], dtype=float) for k in SCALARS}
+    out["contact_w_mm"] = fe.mesh.top_weights
+    for line in LINES:
+        out[f"{line}_x_mm"] = states[0][f"{line}_x_mm"]
+        out[f"{line}_w_mm"] = states[0][f"{line}_w_mm"]  # ring areas, mm^2
+        out[f"{line}_kpa"] = np.nan_to_num(np.stack([s[f"{line}_kpa"] for s in states]))  # the axis node: 0 x 0
+    out["contact_kpa"] = np.nan_to_num(np.stack([s["contact_kpa"] for s in states]))
+    out["contact_x_mm"] = np.stack([s["contact_x_mm"] for s in states])
+    bal = balance(out)
+    worst = {line: float(np.abs(b - 1).max()) for line, b in bal.items()}
+    log(f"  balance, worst |sum(p A) / F - 1| per layer: {worst}")
+    if max(worst.values()) > BALANCE_TOL:
+        raise RuntimeError(f"a layer's pressure does not carry the load: {worst} (allowed {BALANCE_TOL})")
+    return out
+
+
+def plane_strain_check(section: dict, axi: dict) -> dict:
+    """The section (a cylinder, per mm) beside the hemisphere (a solid of revolution, N) at equal
+    cap depths: contact half-width vs radius, peak superficial and deep pressures, the lattice's
+    compression. Ratios are hemisphere / section."""
+    rows = {}
+    for depth in PLANE_STRAIN_DEPTHS_MM:
+        i = np.flatnonzero((section["phase"] == 0) & np.isclose(section["depth_mm"], depth))
+        j = np.flatnonzero(np.isclose(axi["depth_mm"], depth))
+        if len(i) == 0 or len(j) == 0:
+            continue
+        i, j = int(i[0]), int(j[0])
+        pairs = {
+            "contact_half_width_mm": (0.5 * (section["contact_to_mm"][i] - section["contact_from_mm"][i]),
+                                      axi["contact_to_mm"][j]),
+            "peak_superficial_kpa": (section["superficial_kpa"][i].max(), axi["superficial_kpa"][j].max()),
+            "peak_deep_kpa": (section["deep_kpa"][i].max(), axi["deep_kpa"][j].max()),
+            "max_lattice_strain": (section["max_lattice_strain"][i], axi["max_lattice_strain"][j]),
+        }
+        rows[f"{depth:.2f} mm"] = {k: {"section": round(float(a), 5), "hemisphere": round(float(b), 5),
+                                       "ratio": round(float(b / a), 4)} for k, (a, b) in pairs.items()}
+        rows[f"{depth:.2f} mm"]["load"] = {"section_n_per_mm": round(float(section["fz_n_per_mm"][i]), 5),
+                                           "hemisphere_n": round(float(axi["fz_n_per_mm"][j]), 5)}
+    return rows
+
+
 def main(argv=None) -> int:
     from layerskin_exp.sim.config import load_sim
 
@@ -164,16 +232,28 @@ def main(argv=None) -> int:
                     help="solve on this mesh only (default: the committed data's)")
     ap.add_argument("--refinement", action="store_true",
                     help="solve on every mesh and write reference/convergence.json")
+    ap.add_argument("--axisymmetric", action="store_true",
+                    help="the hemisphere's press as a solid of revolution (the 3D check), beside the section")
     ap.add_argument("--convergence-only", action="store_true",
                     help="recompute reference/convergence.json from the data already there")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: the package's reference/)")
     args = ap.parse_args(argv)
     sim = load_sim([])
-    if not args.convergence_only:
+    if not args.convergence_only and not args.axisymmetric:
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
             solve(sim, mesh, out)
+    if args.axisymmetric:
+        t0 = time.time()
+        out = args.out or DATA
+        axi = run_axisymmetric(sim)
+        np.savez_compressed(out / "axisymmetric.npz", **axi)
+        check = {"seconds": round(time.time() - t0, 1), "depths": plane_strain_check(dict(np.load(out / f"{BOUND}.npz")), axi),
+                 "states": [{k: (None if not np.isfinite(axi[k][i]) else round(float(axi[k][i]), 5)) for k in SCALARS}
+                            for i in range(len(axi["phase"]))]}
+        (out / "plane_strain.json").write_text(json.dumps(check, indent=1))
+        print(json.dumps(check["depths"], indent=1))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 

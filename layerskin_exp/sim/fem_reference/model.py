@@ -169,8 +169,9 @@ class Mesh:
     z_edges: np.ndarray
     layer_z: dict  # name -> (bottom, top) reference heights
     top_nodes: np.ndarray  # cover surface nodes, left to right
-    top_weights: np.ndarray  # their tributary lengths (Simpson lumping of a quadratic edge)
+    top_weights: np.ndarray  # their tributary lengths (Simpson lumping of a quadratic edge; ring areas when axisymmetric)
     base_nodes: np.ndarray
+    axisymmetric: bool = False  # x is the radius: the solid of revolution about x = 0
 
     def line_nodes(self, z_mm: float) -> np.ndarray:
         """The nodes on the horizontal line z = z_mm (an element edge), left to right."""
@@ -180,8 +181,9 @@ class Mesh:
         return on[np.argsort(self.points[on, 0])]
 
     def line_weights(self) -> np.ndarray:
-        """Simpson tributary lengths of a node line's nodes (every line has the same x)."""
-        return simpson_weights(self.x_edges)
+        """Simpson tributary lengths of a node line's nodes (every line has the same x); for a
+        solid of revolution, the rings' areas 2 pi r w (mm^2)."""
+        return ring_weights(self.x_edges) if self.axisymmetric else simpson_weights(self.x_edges)
 
 
 def simpson_weights(x_edges: np.ndarray) -> np.ndarray:
@@ -197,6 +199,20 @@ def simpson_weights(x_edges: np.ndarray) -> np.ndarray:
     return w
 
 
+def ring_weights(r_edges: np.ndarray) -> np.ndarray:
+    """A solid of revolution's node areas on a line of quadratic edges: 2 pi int N_i r dr per
+    node (exact; the axis node's is 0, as a uniform pressure puts no force on it)."""
+    g, gw = np.polynomial.legendre.leggauss(4)
+    t, gw = 0.5 * (g + 1.0), 0.5 * gw
+    shape = np.stack([(1 - t) * (1 - 2 * t), 4 * t * (1 - t), t * (2 * t - 1)])  # corner, mid, corner
+    w = np.zeros(2 * len(r_edges) - 1)
+    for c in range(len(r_edges) - 1):
+        a, b = r_edges[c], r_edges[c + 1]
+        r = a + (b - a) * t
+        w[2 * c:2 * c + 3] += 2 * np.pi * (shape * r * gw).sum(axis=1) * (b - a)
+    return w
+
+
 def stack_rows(sec: Section, mesher: Mesher) -> list[tuple[str, float, int]]:
     """(layer, thickness mm, element rows), bottom to top."""
     r = mesher.refine
@@ -207,14 +223,20 @@ def stack_rows(sec: Section, mesher: Mesher) -> list[tuple[str, float, int]]:
 
 
 def build_mesh(sec: Section, mesher: Mesher = Mesher(), rows: list | None = None,
-               x_edges: np.ndarray | None = None) -> Mesh:
+               x_edges: np.ndarray | None = None, axisymmetric: bool = False) -> Mesh:
     """The section's mesh. `rows` (layer, thickness, element rows) and `x_edges` replace the
-    skin's stack and the lattice's cell pattern (the closed-form checks use a plain layer)."""
+    skin's stack and the lattice's cell pattern (the closed-form checks use a plain layer).
+    `axisymmetric`: only x >= 0, read as the radius (the walls become rings, the pad a disc of
+    the pad's half-width)."""
     rows = stack_rows(sec, mesher) if rows is None else rows
     if x_edges is None:
         xe, wall_col = _x_edges(sec, mesher.wall_elems, mesher.void_elems, 2 * mesher.refine)
     else:
         xe, wall_col = np.asarray(x_edges, float), np.ones(len(x_edges) - 1, bool)
+    if axisymmetric:  # the right half, split at the axis where an element straddles it
+        keep = xe[1:] > 1e-12
+        wall_col = wall_col[keep]
+        xe = np.concatenate([[0.0], xe[1:][keep]])
     names = tuple(name for name, _, _ in rows)
     ze, row_layer, layer_z = [0.0], [], {}
     for li, (name, t, n) in enumerate(rows):
@@ -246,8 +268,9 @@ def build_mesh(sec: Section, mesher: Mesher = Mesher(), rows: list | None = None
             wall.append(bool(wall_col[c]) or row_layer[r] != lattice)
     top = np.array([nid(len(zn) - 1, i) for i in range(nxn)])
     base = np.array([nid(0, i) for i in range(nxn)])
+    top_w = ring_weights(xe) if axisymmetric else simpson_weights(xe)
     return Mesh(points, np.array(cells), np.array(layer), np.array(wall), names, xe, ze, layer_z, top,
-                simpson_weights(xe), base)
+                top_w, base, axisymmetric)
 
 
 def _neo_hooke(e_mpa: float, nu: float):
@@ -357,19 +380,43 @@ class StackFE:
             body, fld = self._body(mask, umat)
             self.bodies.append((mask, body))
             self.fields.append(fld)
-        self.u = self._first[0].values  # (n, 2) shared displacement array
         n = len(m.points)
-        fixed = np.zeros((n, 2), bool)
-        fixed[m.base_nodes] = True
-        self.free = np.flatnonzero(~fixed.ravel())
+        self.u = np.zeros((n, 2))  # (x, z) displacements; the fields get them at each assembly (_sync)
+        # felupe's axisymmetric fields take (axial, radial) = (z, r): our degrees of freedom swapped
+        self._perm = np.arange(2 * n).reshape(-1, 2)[:, ::-1].ravel() if m.axisymmetric else None
+        self.free = np.flatnonzero(~self._fixed().ravel())
         self.contact = CapContact(m.top_nodes, m.top_weights, sec.radius_mm, penalty)
         self.centre = np.array([0.0, self.height_mm + sec.radius_mm])
         self.max_step_mm = 0.15
+        # A solid of revolution's ring forces span 2 pi r (0 on the axis to 80 mm at the rim): its
+        # residual's round-off floor is ~1e-8 of the load, above the section's 1e-7 at small loads.
+        self.newton_tol = 1e-5 if m.axisymmetric else 1e-7
         self._probes: dict = {}
 
+    def _fixed(self) -> np.ndarray:
+        """(n, 2) fixed degrees of freedom: the base; on the axis of a solid of revolution, u_r."""
+        m = self.mesh
+        fixed = np.zeros((len(m.points), 2), bool)
+        fixed[m.base_nodes] = True
+        if m.axisymmetric:
+            fixed[np.isclose(m.points[:, 0], 0.0), 0] = True
+        return fixed
+
+    def _sync(self) -> None:
+        self._first[0].values[:] = self.u[:, ::-1] if self.mesh.axisymmetric else self.u
+
+    def _ours(self, vec: np.ndarray) -> np.ndarray:
+        return vec if self._perm is None else vec[self._perm]
+
     def _body(self, mask: np.ndarray, umat):
-        region = fem.RegionBiQuadraticQuad(fem.Mesh(self.mesh.points, self.mesh.cells[mask], "quad9"))
-        fld = fem.FieldContainer([fem.FieldPlaneStrain(region, dim=2)])
+        if self.mesh.axisymmetric:
+            # (z, r) mirrors the plane: the cells' winding reversed keeps their volumes positive
+            cells = self.mesh.cells[mask][:, [0, 3, 2, 1, 7, 6, 5, 4, 8]]
+            region = fem.RegionBiQuadraticQuad(fem.Mesh(self.mesh.points[:, ::-1].copy(), cells, "quad9"))
+            fld = fem.FieldContainer([fem.FieldAxisymmetric(region, dim=2)])
+        else:
+            region = fem.RegionBiQuadraticQuad(fem.Mesh(self.mesh.points, self.mesh.cells[mask], "quad9"))
+            fld = fem.FieldContainer([fem.FieldPlaneStrain(region, dim=2)])
         if self._first is None:
             self._first = fld
         else:
@@ -406,9 +453,12 @@ class StackFE:
         n = self.u.size
         r = np.zeros(n)
         K = sp.csr_matrix((n, n))
+        self._sync()
         for (_, body), fld in zip(self.bodies, self.fields, strict=True):
             r += np.asarray(body.assemble.vector(fld).todense()).ravel()
             K = K + body.assemble.matrix(fld)
+        if self._perm is not None:
+            r, K = r[self._perm], K.tocsr()[self._perm][:, self._perm]
         nodes = self.contact.nodes
         x = self.mesh.points[nodes] + self.u[nodes]
         f, k, normal = self.contact.forces(x, self.centre)
@@ -419,9 +469,10 @@ class StackFE:
         K = K + sp.csr_matrix((k.ravel(), (rows, cols)), shape=(n, n))
         return r, K, f, normal
 
-    def newton(self, tol: float = 1e-7, max_iter: int = 25, scale: float | None = None) -> int:
+    def newton(self, tol: float | None = None, max_iter: int = 25, scale: float | None = None) -> int:
         """Equilibrium at the cap's current position; returns iterations (raises on failure).
-        The residual is judged against `scale` (N/mm; default: the cap's contact force)."""
+        The residual is judged against tol x `scale` (N/mm; default: the cap's contact force)."""
+        tol = self.newton_tol if tol is None else tol
         for it in range(1, max_iter + 1):
             r, K, f, _ = self._system()
             rf = r[self.free]
@@ -475,8 +526,7 @@ class StackFE:
         from the top nodes' reactions."""
         m = self.mesh
         self.centre = np.array([0.0, self.height_mm + 10.0 * self.sec.radius_mm + 10.0])  # out of reach
-        fixed = np.zeros((len(m.points), 2), bool)
-        fixed[m.base_nodes] = True
+        fixed = self._fixed()
         fixed[m.top_nodes] = True
         self.free = np.flatnonzero(~fixed.ravel())
         for k in range(1, steps + 1):
@@ -518,9 +568,10 @@ class StackFE:
             self._probes[z_mm] = (nodes, probes)
         nodes, probes = self._probes[z_mm]
         f = np.zeros(self.u.size)
+        self._sync()
         for probe, fld in probes:
             f += np.asarray(probe.assemble.vector(fld).todense()).ravel()
-        return nodes, f.reshape(-1, 2)[nodes]
+        return nodes, self._ours(f).reshape(-1, 2)[nodes]
 
     def layer_pressure(self, z_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Across the node line z = z_mm: the nodes' reference x (mm), their normal traction
@@ -575,7 +626,8 @@ class StackFE:
             first = float((y[:, 0] * g[:, 1]).sum())
             expected = fz * load_x + fx * load_h + float((y[:, 1] * g[:, 0]).sum())
             out[f"{name}_first_moment"] = first
-            out[f"{name}_moment_error"] = (first - expected) / moment_scale(fz, fx, load_x, load_h)
+            out[f"{name}_moment_error"] = (np.nan if m.axisymmetric  # a solid of revolution has no first moment in x
+                                           else (first - expected) / moment_scale(fz, fx, load_x, load_h))
         # the superficial sheet's lateral displacement (its core's mean, under the cap's start)
         out["sheet_shift_mm"] = float(self._core_shift())
         out["sheet_x_under_cap_mm"] = float(self._core_point_under(self.centre[0]))
