@@ -475,9 +475,12 @@ def _size_problem(c: ChunkHead, blob: memoryview) -> str:
 def _decompress_into(compression: str, blob: memoryview, out: memoryview, zstd) -> None:
     """Decompress one chunk's records into `out`, which must be exactly their size."""
     if compression == "zstd":
-        got = zstd.stream_reader(blob).readinto(out)
-        if got != len(out):
-            raise ValueError(f"zstd frame gave {got} bytes, chunk header says {len(out)}")
+        # one-shot into bytes, then copied: stream_reader(...).readinto(out) from several threads
+        # at once crashed the interpreter once in the suite (SIGSEGV inside zstandard's C code)
+        raw = zstd.decompress(blob, max_output_size=len(out))
+        if len(raw) != len(out):
+            raise ValueError(f"zstd frame gave {len(raw)} bytes, chunk header says {len(out)}")
+        out[:] = raw
     elif compression == "lz4":
         raw = lz4.frame.decompress(blob)
         if len(raw) != len(out):
