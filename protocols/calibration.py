@@ -113,11 +113,13 @@ class PlatformControl:
         self.platform = rig.platform
         self.log: TrialLog | None = None
         self.loop: ControlLoop | None = None
-        self._known_mm: np.ndarray | None = None  # last reported position, kept across trials
+        self._known_mm: np.ndarray | None = None  # last reported position in this trial
 
     def bind(self, log: TrialLog) -> PlatformControl:
-        """Use this trial's log (and a control loop on it) from now on."""
+        """Use this trial's log (and a control loop on it) from now on. Nothing known from an
+        earlier trial is kept: a trial runs the same whether it comes first or after others."""
         self.log = log
+        self._known_mm = None
         self.loop = ControlLoop(log, self.cfg.control_period_s, trial_timeout_s=self.cfg.trial_timeout_s)
         return self
 

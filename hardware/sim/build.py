@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -32,14 +33,52 @@ class SimRig(Rig):
     extras["world"] is the World (for tests, benchmarks and the realtime emulators; protocols
     must not use it). trial_hooks(labels) run at each begin_trial: the world draws the trial's
     noise and bench variation from the seed and the labels.
+
+    A trial is determined by its identity, not by the trials before it: with fresh_trials, each
+    begin_trial puts the world and every twin back into the state they had at the first one
+    (stage or arm where they started, skin at rest, streams at their first phase, counters at
+    zero), so a trial replays the same whether it runs first, after others or after a resume.
+    The realtime world (loopback) keeps one running world instead: it cannot step back in time.
     """
 
     extras: dict = field(default_factory=dict)
     trial_hooks: list[Callable[[dict], None]] = field(default_factory=list)
+    fresh_trials: bool = True
+    _first_state: dict | None = field(default=None, init=False, repr=False)
 
     def begin_trial(self, labels: dict) -> None:
+        if self.fresh_trials:
+            if self._first_state is None:
+                self._take_first_state()
+            else:
+                self._restore_first_state()
         for hook in self.trial_hooks:
             hook(dict(labels))
+
+    def _state_objects(self) -> list:
+        """What holds the simulation's state and is referenced from outside it (restored in place)."""
+        world = self.extras["world"]
+        return [world, world.scene, world.skin_model, *self.devices()]
+
+    def _keep(self) -> dict:
+        """deepcopy memo: objects shared as they are (the rig; the camera's imager, a cache of
+        pure renderings that holds OpenCV objects)."""
+        keep = [self] + ([self.camera.imager] if self.camera is not None else [])
+        return {id(o): o for o in keep}
+
+    def _copy(self, objs: list, dicts: list[dict]) -> list[dict]:
+        """A deep copy of dicts (the objs' __dict__s) in which references to objs stay references."""
+        return copy.deepcopy(dicts, self._keep() | {id(o): o for o in objs})
+
+    def _take_first_state(self) -> None:
+        objs = self._state_objects()
+        self._first_state = {"objs": objs, "dicts": self._copy(objs, [o.__dict__ for o in objs])}
+
+    def _restore_first_state(self) -> None:
+        objs = self._first_state["objs"]
+        for o, d in zip(objs, self._copy(objs, self._first_state["dicts"]), strict=True):
+            o.__dict__.clear()
+            o.__dict__.update(d)
 
 
 def _default_skin_model(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm):
