@@ -23,7 +23,7 @@ from layerskin_exp.types import SkinEstimate
 from protocols.config import GripDepthConfig, TrajectoryConfig
 from protocols.identity import design_id, exact_number, trial_identity, write_manifest
 from protocols.loop import ControlLoop, DeviceTimeout
-from protocols.runner import ProtocolError, TrialLog, TrialResult, run_trial
+from protocols.runner import ProtocolError, TrialLog, TrialResult, run_trial, trial_slot_s
 from protocols.safety import Safety
 from protocols.stops import NO_CONTACT, TARGET_REACHED
 
@@ -228,6 +228,7 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) ->
     path = trial_path(cfg, metadata["config"])
     write_manifest(path.parent, metadata["config"])
     result = run_trial(rig, path, labels, meta, body,
-                       identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live)
+                       identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live,
+                       slot_s=trial_slot_s(cfg.trial, cfg.trial_timeout_s))
     print(result.summary(), flush=True)
     return result

@@ -53,6 +53,17 @@ def trial_rng(seed: int, *keys: int | str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(entropy))
 
 
+# A trial is stopped at its timeout; the margin covers what follows (the last drain, the close).
+SLOT_MARGIN_S = 10.0
+
+
+def trial_slot_s(index: int, trial_timeout_s: float) -> float:
+    """Where trial `index` of a campaign starts, s after the run's start, on a simulated clock
+    (the simulated rig dates it there): slots of the timeout plus a margin never overlap, so the
+    trials of a campaign follow each other in run order whichever of them a run does."""
+    return index * (trial_timeout_s + SLOT_MARGIN_S)
+
+
 class ProtocolError(RuntimeError):
     """The protocol could not carry out a trial as planned (e.g. no contact found)."""
 
@@ -321,10 +332,11 @@ def _describe(exc: BaseException) -> str:
 
 
 def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
-              identity: str | None = None, save_images: bool = False, live=None) -> TrialResult:
+              identity: str | None = None, save_images: bool = False, live=None, slot_s: float = 0.0) -> TrialResult:
     """Run one trial into `path` (skipped when a complete file of the same identity is there).
 
     identity: the trial identity (protocols.identity), stored in the file's metadata.
+    slot_s: where the trial starts in its campaign (trial_slot_s), for a simulated clock.
     live: a layerskin_exp.log.live.LiveView that also serves what the trial writes.
 
     body(log) drives the rig and calls log.drain() as the clock advances. If it raises (a device
@@ -348,9 +360,11 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + PARTIAL_SUFFIX)
     log.info("trial %s -> %s", name, path)
-    rig.begin_trial(labels)
+    rig.begin_trial(labels, slot_s)
     t0_ns = rig.clock.now_ns()
-    writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True)
+    offset, how = rig.log_time() or (None, "given")
+    writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True, epoch_offset_ns=offset,
+                           epoch_how=how)
     writer.live = live
     trial = TrialLog(writer, rig, save_images)
     try:
