@@ -153,18 +153,17 @@ def _total(frame) -> int:
 def log_estimates(log: TrialLog, online) -> None:
     """From now on, every skin frame the log drains goes through `online` (an OnlineEstimator)
     and each new estimate is written to the session beside the frames."""
-    drain = log.drain
 
-    def drain_and_estimate():
-        frames, wrenches = drain()
+    def estimates(frames) -> list[SkinEstimate]:
+        out = []
         for f in frames:
             e = online.update(f.superficial, f.deep, f.device_t_ns)
             if e is not None and e.new:
                 score = None if e.slip_score != e.slip_score else e.slip_score  # NaN: no slip detector
-                log.writer.write(SkinEstimate(e.force_n, score, e.slip, e.frame, e.t_ns, f.host_t_ns))
-        return frames, wrenches
+                out.append(SkinEstimate(e.force_n, score, e.slip, e.frame, e.t_ns, f.host_t_ns))
+        return out
 
-    log.drain = drain_and_estimate
+    log.derive.append(estimates)
 
 
 @functools.lru_cache(maxsize=4)
