@@ -141,7 +141,7 @@ class LoopbackRig(Rig):
 
     bench: LoopbackBench | None = field(default=None, repr=False)
 
-    def begin_trial(self, labels: dict) -> None:
+    def begin_trial(self, labels: dict, slot_s: float = 0.0) -> None:
         if self.bench is not None:
             self.bench.rt.begin_trial(labels)
 

@@ -54,9 +54,17 @@ class Rig:
     watchdog_period_s: float = field(default=0.005, init=False, repr=False)
 
     # ---- trials --------------------------------------------------------------------------------
-    def begin_trial(self, labels: dict) -> None:
+    def begin_trial(self, labels: dict, slot_s: float = 0.0) -> None:
         """A trial with these labels is about to start (protocols call this before each trial).
-        Real devices need nothing; the simulated rig draws the trial's noise here."""
+        slot_s: where the trial starts in its campaign, s after the run's start (see
+        protocols.runner.trial_slot_s). Real devices need nothing; the simulated rig draws the
+        trial's noise here and dates the trial at its slot."""
+
+    def log_time(self) -> tuple[int, str] | None:
+        """(offset of the current trial's host times on the Unix epoch, how it was chosen) where
+        the rig's clock is not the host's (the simulator); None where the session writer dates
+        by the wall clock (layerskin_exp.log.session.epoch)."""
+        return None
 
     # ---- guards --------------------------------------------------------------------------------
     def add_guard(self, guard: Guard, stream: str = "ft") -> None:

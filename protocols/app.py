@@ -117,6 +117,7 @@ def sweep_job(task: Callable[[], dict]) -> dict:
 
 
 _grace: list[threading.Timer] = []
+_holding: list[bool] = []  # the run has ended; the live view is held open (live_hold)
 
 
 def _on_sigterm(signum, frame) -> None:
@@ -135,9 +136,15 @@ def _on_sigterm(signum, frame) -> None:
 
 
 def _on_sigint(signum, frame) -> None:
-    """First Ctrl-C: stop at the next tick, closing the trial cleanly; a second one: at once."""
+    """First Ctrl-C: stop at the next tick, closing the trial cleanly; a second one: at once.
+    While the live view holds after the run: stop holding."""
     from protocols.runner import request_termination, terminate_now, termination_pending  # loaded by run_app
 
+    if _holding:
+        print("the run has already ended and its files are written; closing the live view", file=sys.stderr,
+              flush=True)
+        request_termination("interrupted (Ctrl-C)")
+        return
     if termination_pending():
         terminate_now()
         return
@@ -282,5 +289,9 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
         print(RUN_FILES.line(), flush=True)
         if live is not None:
             if finished and getattr(typed, "live_hold", False):
-                live.hold(termination_pending)  # Ctrl-C or SIGTERM ends it
+                _holding.append(True)
+                try:
+                    live.hold(termination_pending)  # Ctrl-C or SIGTERM ends it
+                finally:
+                    _holding.clear()
             live.close()

@@ -25,7 +25,15 @@ from layerskin_exp.rig import SENSING_HALF_WIDTH_MM
 from protocols.config import ForceCalibrationConfig, PositionsConfig
 from protocols.identity import design_id, trial_identity, write_manifest
 from protocols.loop import ControlLoop
-from protocols.runner import RUN_FILES, TrialLog, TrialResult, run_trial, trial_is_complete, trial_rng
+from protocols.runner import (
+    RUN_FILES,
+    TrialLog,
+    TrialResult,
+    run_trial,
+    trial_is_complete,
+    trial_rng,
+    trial_slot_s,
+)
 from protocols.safety import Safety
 from protocols.stops import (
     DEPTH_LIMIT,
@@ -113,11 +121,13 @@ class PlatformControl:
         self.platform = rig.platform
         self.log: TrialLog | None = None
         self.loop: ControlLoop | None = None
-        self._known_mm: np.ndarray | None = None  # last reported position, kept across trials
+        self._known_mm: np.ndarray | None = None  # last reported position in this trial
 
     def bind(self, log: TrialLog) -> PlatformControl:
-        """Use this trial's log (and a control loop on it) from now on."""
+        """Use this trial's log (and a control loop on it) from now on. Nothing known from an
+        earlier trial is kept: a trial runs the same whether it comes first or after others."""
         self.log = log
+        self._known_mm = None
         self.loop = ControlLoop(log, self.cfg.control_period_s, trial_timeout_s=self.cfg.trial_timeout_s)
         return self
 
@@ -305,6 +315,8 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=Non
             tqdm.write(f"{PROTOCOL}: {len(trials) - len(todo)} of {len(trials)} trials already complete "
                        f"in {root}; running the other {len(todo)}")
         for trial in todo:
+            slot_s = trial_slot_s(trials.index(trial), cfg.trial_timeout_s)
+
             def body(log: TrialLog, trial=trial) -> None:
                 ctl.bind(log)
                 log.event("phase", "approach", position_mm=list(trial.position_mm))
@@ -319,7 +331,7 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=Non
 
             meta = {**metadata, "protocol": PROTOCOL, "plan": trial.labels}
             result = run_trial(rig, root / f"{trial.name}.mcap", trial.labels, meta, body,
-                               identity=identity[trial.name], live=live)
+                               identity=identity[trial.name], live=live, slot_s=slot_s)
             results.append(result)
             bar.update(1)
             if cfg.progress:

@@ -23,7 +23,7 @@ from layerskin_exp.types import SkinEstimate
 from protocols.config import GripDepthConfig, TrajectoryConfig
 from protocols.identity import design_id, exact_number, trial_identity, write_manifest
 from protocols.loop import ControlLoop, DeviceTimeout
-from protocols.runner import ProtocolError, TrialLog, TrialResult, run_trial
+from protocols.runner import ProtocolError, TrialLog, TrialResult, run_trial, trial_slot_s
 from protocols.safety import Safety
 from protocols.stops import NO_CONTACT, TARGET_REACHED
 
@@ -153,18 +153,17 @@ def _total(frame) -> int:
 def log_estimates(log: TrialLog, online) -> None:
     """From now on, every skin frame the log drains goes through `online` (an OnlineEstimator)
     and each new estimate is written to the session beside the frames."""
-    drain = log.drain
 
-    def drain_and_estimate():
-        frames, wrenches = drain()
+    def estimates(frames) -> list[SkinEstimate]:
+        out = []
         for f in frames:
             e = online.update(f.superficial, f.deep, f.device_t_ns)
             if e is not None and e.new:
                 score = None if e.slip_score != e.slip_score else e.slip_score  # NaN: no slip detector
-                log.writer.write(SkinEstimate(e.force_n, score, e.slip, e.frame, e.t_ns, f.host_t_ns))
-        return frames, wrenches
+                out.append(SkinEstimate(e.force_n, score, e.slip, e.frame, e.t_ns, f.host_t_ns))
+        return out
 
-    log.drain = drain_and_estimate
+    log.derive.append(estimates)
 
 
 @functools.lru_cache(maxsize=4)
@@ -228,6 +227,7 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) ->
     path = trial_path(cfg, metadata["config"])
     write_manifest(path.parent, metadata["config"])
     result = run_trial(rig, path, labels, meta, body,
-                       identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live)
+                       identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live,
+                       slot_s=trial_slot_s(cfg.trial, cfg.trial_timeout_s))
     print(result.summary(), flush=True)
     return result

@@ -6,9 +6,10 @@
 
 The same as the protocol's own command with live=true: a Foxglove WebSocket server on
 127.0.0.1:live_port serves both layer maps, their CoP, force, poses, the frame tree and the
-events, thinned to display rate. --hold (live_hold=true) keeps it serving after the run until
-Ctrl-C, so a client that connects late still sees the run's end; every client gets the events
-logged before it subscribed.
+events, thinned to display rate. Every client is sent, when it subscribes, what was served
+before (every event, and the latest ten minutes or so of each other topic); --hold
+(live_hold=true) keeps the server up after the run until Ctrl-C, so a client that connects then
+is shown the whole run: maps, plots, poses and events.
 
 In Foxglove: Open connection > Foxglove WebSocket > ws://127.0.0.1:8765, then Layouts > Import
 the file `python -m layerskin_exp.log layout gripper` (or `platform`) writes. The server is the

@@ -19,6 +19,7 @@ import logging
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,17 @@ def trial_rng(seed: int, *keys: int | str) -> np.random.Generator:
     entropy = [seed & 0xFFFFFFFF] + [k & 0xFFFFFFFF if isinstance(k, int) else zlib.crc32(k.encode())
                                      for k in keys]
     return np.random.default_rng(np.random.SeedSequence(entropy))
+
+
+# A trial is stopped at its timeout; the margin covers what follows (the last drain, the close).
+SLOT_MARGIN_S = 10.0
+
+
+def trial_slot_s(index: int, trial_timeout_s: float) -> float:
+    """Where trial `index` of a campaign starts, s after the run's start, on a simulated clock
+    (the simulated rig dates it there): slots of the timeout plus a margin never overlap, so the
+    trials of a campaign follow each other in run order whichever of them a run does."""
+    return index * (trial_timeout_s + SLOT_MARGIN_S)
 
 
 class ProtocolError(RuntimeError):
@@ -216,7 +228,13 @@ class TrialResult:
 class TrialLog:
     """An open session file bound to the rig: `drain()` moves everything acquired into the log.
 
-    Keeps the latest samples and running peaks the protocols decide on.
+    Keeps the latest samples and running peaks the protocols decide on. The file is written in
+    log-time order (streaming readers, a live tail and `mcap cat` see time run forward): each
+    drain writes what the devices handed over since the last one sorted by host receive time,
+    then the frame tree at the drain's time. An event is written at the rig's time after a drain
+    up to that time (what it drains is handed to the next drain's caller, so the control loop
+    still sees every sample). derive: functions of the drained skin frames returning records
+    written with them (the online estimates, see protocols.grip.log_estimates).
     """
 
     def __init__(self, writer: SessionWriter, rig: Rig, save_images: bool = False) -> None:
@@ -230,6 +248,9 @@ class TrialLog:
         self.last_gripper: GripperState | None = None
         self.stop_reason: str | None = None
         self.safety_trip: str | None = None  # the first safety limit that tripped in this trial
+        self.derive: list[Callable[[list[TwoLayerFrame]], list]] = []
+        self._drained_ns: int | None = None  # rig time of the last drain
+        self._carried: tuple[list, list] = ([], [])  # drained for an event, not yet returned
         self._last_image_seq: int | None = None
         self._noted_trip: str | None = None
         # What Foxglove draws besides the raw streams: the frame tree's fixed part, CoP overlays.
@@ -238,12 +259,17 @@ class TrialLog:
                                 calibration() if calibration is not None else None)
         self.view = SkinView()
 
-    def event(self, kind: str, message: str, **detail) -> None:
+    def _event(self, kind: str, message: str, **detail) -> ProtocolEvent:
+        """The event at the rig's time, logged to the job log (not yet to the file)."""
         t_ns = self.rig.clock.now_ns()
         log.log(logging.WARNING if kind in ("error", "safety") else logging.INFO, "%s: %s: %s %s",
                 self.writer.path.name.removesuffix(".mcap" + PARTIAL_SUFFIX), kind, message, detail or "")
-        self.writer.write(ProtocolEvent(kind=kind, message=message, host_t_ns=t_ns, device_t_ns=t_ns,
-                                        detail=detail))
+        return ProtocolEvent(kind=kind, message=message, host_t_ns=t_ns, device_t_ns=t_ns, detail=detail)
+
+    def event(self, kind: str, message: str, **detail) -> None:
+        if self.rig.clock.now_ns() != self._drained_ns:  # records received meanwhile are older than the event
+            self._carried = self.drain()
+        self.writer.write(self._event(kind, message, **detail))
 
     def stop(self, reason: str, **detail) -> str:
         """Log the reason the motion ended (kind "stop"); the first one is the trial's."""
@@ -255,17 +281,26 @@ class TrialLog:
     def drain(self) -> tuple[list[TwoLayerFrame], list[Wrench]]:
         """Write every sample acquired since the last call; returns the new skin frames and wrenches."""
         rig, w = self.rig, self.writer
+        carried_frames, carried_wrenches = self._carried
+        self._carried = ([], [])
+        # (host receive time ns, write) of everything this drain writes; sorted before writing
+        out: list[tuple[int, Callable[[], None]]] = []
+
+        def put(records) -> None:
+            out.extend((int(r.host_t_ns), partial(w.write, r)) for r in records)
+
         frames = rig.skin.read_available()
-        for f in frames:
-            w.write(f)
+        put(frames)
         if frames:
-            for topic, schema, payload in self.view.summary(frames[-1]):
-                w.write_view(topic, schema, payload, frames[-1].host_t_ns)
+            last = frames[-1]
+            out.extend((int(last.host_t_ns), partial(w.write_view, topic, schema, payload, last.host_t_ns))
+                       for topic, schema, payload in self.view.summary(last))
+            for derive in self.derive:
+                put(derive(frames))
         wrenches: list[Wrench] = []
         if rig.ft is not None:
             wrenches = rig.ft.read_available()
-            for s in wrenches:
-                w.write(s)
+            put(wrenches)
             if wrenches:
                 self.last_wrench = wrenches[-1]
                 force_n = np.stack([s.force_n for s in wrenches])
@@ -279,33 +314,35 @@ class TrialLog:
             # its target, the slow zone) is a normal stop (info).
             if is_safety_trip(rig.tripped):
                 self.safety_trip = self.safety_trip or rig.tripped
-                self.event("safety", rig.tripped)
+                put([self._event("safety", rig.tripped)])
             else:
-                self.event("sample_stop", rig.tripped)
+                put([self._event("sample_stop", rig.tripped)])
         for dev in (rig.platform, rig.arm, rig.gripper):
             if dev is None:
                 continue
             records = dev.read_available()
-            for rec in records:
-                w.write(rec)
+            put(records)
             if records and dev is rig.platform:
                 self.last_stage = records[-1]
             elif records and dev is rig.gripper:
                 self.last_gripper = records[-1]
         if rig.camera is not None:
             detections: list[MarkerDetection] = rig.camera.read_available()
-            for d in detections:
-                w.write(d)
+            put(detections)
             if self.save_images and detections and detections[-1].frame_seq != self._last_image_seq:
                 image = rig.camera.latest_image()
                 if image is not None:
-                    seq = detections[-1].frame_seq
-                    w.write_image(image, detections[-1].device_t_ns, detections[-1].host_t_ns, seq,
-                                  detections=[d for d in detections if d.frame_seq == seq])
-                    self._last_image_seq = seq
-        self.frames.update(rig.clock.now_ns(),
-                           None if self.last_gripper is None else float(self.last_gripper.position_mm))
-        return frames, wrenches
+                    d = detections[-1]
+                    out.append((int(d.host_t_ns), partial(
+                        w.write_image, image, d.device_t_ns, d.host_t_ns, d.frame_seq,
+                        detections=[x for x in detections if x.frame_seq == d.frame_seq])))
+                    self._last_image_seq = d.frame_seq
+        out.sort(key=lambda item: item[0])  # stable: records of one time keep their order
+        for _, write in out:
+            write()
+        self._drained_ns = now_ns = rig.clock.now_ns()
+        self.frames.update(now_ns, None if self.last_gripper is None else float(self.last_gripper.position_mm))
+        return carried_frames + frames, carried_wrenches + wrenches
 
 
 def _describe(exc: BaseException) -> str:
@@ -321,10 +358,11 @@ def _describe(exc: BaseException) -> str:
 
 
 def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
-              identity: str | None = None, save_images: bool = False, live=None) -> TrialResult:
+              identity: str | None = None, save_images: bool = False, live=None, slot_s: float = 0.0) -> TrialResult:
     """Run one trial into `path` (skipped when a complete file of the same identity is there).
 
     identity: the trial identity (protocols.identity), stored in the file's metadata.
+    slot_s: where the trial starts in its campaign (trial_slot_s), for a simulated clock.
     live: a layerskin_exp.log.live.LiveView that also serves what the trial writes.
 
     body(log) drives the rig and calls log.drain() as the clock advances. If it raises (a device
@@ -348,9 +386,11 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + PARTIAL_SUFFIX)
     log.info("trial %s -> %s", name, path)
-    rig.begin_trial(labels)
+    rig.begin_trial(labels, slot_s)
     t0_ns = rig.clock.now_ns()
-    writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True)
+    offset, how = rig.log_time() or (None, "given")
+    writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True, epoch_offset_ns=offset,
+                           epoch_how=how)
     writer.live = live
     trial = TrialLog(writer, rig, save_images)
     try:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 
 from hardware.interfaces import DeviceError
 from hardware.rig import Rig
@@ -32,14 +34,68 @@ class SimRig(Rig):
     extras["world"] is the World (for tests, benchmarks and the realtime emulators; protocols
     must not use it). trial_hooks(labels) run at each begin_trial: the world draws the trial's
     noise and bench variation from the seed and the labels.
+
+    A trial is determined by its identity, not by the trials before it: with fresh_trials, each
+    begin_trial puts the world and every twin back into the state they had at the first one
+    (stage or arm where they started, skin at rest, streams at their first phase, counters at
+    zero), so a trial replays the same whether it runs first, after others or after a resume.
+    The realtime world (loopback) keeps one running world instead: it cannot step back in time.
+
+    Dates: the run starts at run_start_ns (Unix ns: sim.rig.start_time, else the wall clock when
+    the rig was built); a trial's first host time is dated run_start_ns + its slot_s.
     """
 
     extras: dict = field(default_factory=dict)
     trial_hooks: list[Callable[[dict], None]] = field(default_factory=list)
+    fresh_trials: bool = True
+    run_start_ns: int = 0
+    start_how: str = ""  # where run_start_ns came from, for the sessions' "log_time" record
+    _first_state: dict | None = field(default=None, init=False, repr=False)
+    _log_time: tuple[int, str] | None = field(default=None, init=False, repr=False)
 
-    def begin_trial(self, labels: dict) -> None:
+    def begin_trial(self, labels: dict, slot_s: float = 0.0) -> None:
+        if self.fresh_trials:
+            if self._first_state is None:
+                self._take_first_state()
+            else:
+                self._restore_first_state()
         for hook in self.trial_hooks:
             hook(dict(labels))
+        offset = self.run_start_ns + round(slot_s * 1e9) - self.clock.now_ns()
+        self._log_time = (offset, f"simulated: run start {_iso(self.run_start_ns)} ({self.start_how}) + trial "
+                                  f"slot {slot_s:g} s")
+
+    def log_time(self) -> tuple[int, str] | None:
+        return self._log_time
+
+    def _state_objects(self) -> list:
+        """What holds the simulation's state and is referenced from outside it (restored in place)."""
+        world = self.extras["world"]
+        return [world, world.scene, world.skin_model, *self.devices()]
+
+    def _keep(self) -> dict:
+        """deepcopy memo: objects shared as they are (the rig; the camera's imager, a cache of
+        pure renderings that holds OpenCV objects)."""
+        keep = [self] + ([self.camera.imager] if self.camera is not None else [])
+        return {id(o): o for o in keep}
+
+    def _copy(self, objs: list, dicts: list[dict]) -> list[dict]:
+        """A deep copy of dicts (the objs' __dict__s) in which references to objs stay references."""
+        return copy.deepcopy(dicts, self._keep() | {id(o): o for o in objs})
+
+    def _take_first_state(self) -> None:
+        objs = self._state_objects()
+        self._first_state = {"objs": objs, "dicts": self._copy(objs, [o.__dict__ for o in objs])}
+
+    def _restore_first_state(self) -> None:
+        objs = self._first_state["objs"]
+        for o, d in zip(objs, self._copy(objs, self._first_state["dicts"]), strict=True):
+            o.__dict__.clear()
+            o.__dict__.update(d)
+
+
+def _iso(unix_ns: int) -> str:
+    return datetime.fromtimestamp(unix_ns / 1e9, timezone.utc).isoformat(timespec="milliseconds")
 
 
 def _default_skin_model(sim_cfg, skin_cfg, indenter, rng, support_stiffness_n_per_mm):
@@ -67,7 +123,9 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
     world = World(rc, skin_cfg, sim_cfg.seed, scene, model)
     clock = SimClock(world)
     skin = SimSkinReader(world, rc.skin)
-    rig = SimRig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup})
+    rig = SimRig(backend="sim", clock=clock, skin=skin, extras={"world": world, "setup": setup},
+                 run_start_ns=rc.run_start_ns(),
+                 start_how="wall clock" if rc.start_time is None else "sim.rig.start_time")
     # Skin guards act at the end of each world advance (at most one control tick late); F/T
     # guards act on the very sample, rewinding the world to it (see SimForceTorque).
     skin.on_frames = rig.check_frames

@@ -45,6 +45,7 @@ class RealtimeWorld:
         if not period_s > 0:
             raise ValueError(f"period_s={period_s!r}: must be > 0 s")
         self.rig = rig
+        rig.fresh_trials = False  # one world runs on at wall-clock pace: it cannot go back to a first state
         self.world = rig.extras["world"]
         self.period_s = float(period_s)
         self.lock = threading.RLock()

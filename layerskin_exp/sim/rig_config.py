@@ -8,7 +8,9 @@ rate, Hand-E stroke and speeds, D435 colour intrinsics at 640x480); the rest are
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 
 from layerskin_exp.config import require
 from layerskin_exp.vision.camera_model import CameraModelConfig
@@ -257,6 +259,9 @@ class RigConfig:
 
     mech_rate_hz: float = 1000.0  # skin mechanics step rate
     host_start_s: float = 100.0  # virtual host monotonic clock at world start
+    # When the simulated run starts, in UTC (e.g. "2026-01-05T09:00:00Z"); null: the wall clock
+    # when the run starts. Files are byte-identical across reruns only with a fixed start.
+    start_time: str | None = None
     skin: SkinReaderConfig = field(default_factory=SkinReaderConfig)
     ft: ForceTorqueConfig = field(default_factory=ForceTorqueConfig)
     platform: PlatformConfig = field(default_factory=PlatformConfig)
@@ -269,3 +274,27 @@ class RigConfig:
         require(100 <= self.mech_rate_hz <= 10000, "sim.rig.mech_rate_hz", self.mech_rate_hz,
                 "must be 100..10000 Hz")
         require(self.host_start_s >= 0, "sim.rig.host_start_s", self.host_start_s, "must be >= 0")
+        if self.start_time is not None:
+            start_time_ns(self.start_time)
+
+    def run_start_ns(self) -> int:
+        """Unix ns at which this run's simulated clock starts (start_time, else now)."""
+        return time.time_ns() if self.start_time is None else start_time_ns(self.start_time)
+
+
+START_YEARS = (1970, 2200)
+
+
+def start_time_ns(text) -> int:
+    """Unix ns of a UTC date and time in ISO 8601 ("2026-01-05T09:00:00Z"); ConfigError otherwise."""
+    what = ("must be a UTC date and time like 2026-01-05T09:00:00Z (or null for the wall clock when the run "
+            "starts)")
+    try:
+        when = datetime.fromisoformat(str(text).replace("Z", "+00:00")) if isinstance(text, str) else None
+    except ValueError:
+        when = None
+    require(when is not None and when.utcoffset() is not None, "sim.rig.start_time", text, what)
+    require(START_YEARS[0] <= when.astimezone(timezone.utc).year < START_YEARS[1], "sim.rig.start_time", text,
+            f"must lie in the years {START_YEARS[0]}..{START_YEARS[1] - 1}")
+    delta = when - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1_000

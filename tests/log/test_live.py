@@ -6,6 +6,7 @@ from __future__ import annotations
 import base64
 import json
 import logging
+import signal
 import threading
 import time
 
@@ -123,6 +124,16 @@ def test_a_late_client_gets_the_earlier_events_once_and_others_no_repeat():
     assert sorted(t for _, t, _ in late.messages) == sent  # the first three replayed, then live
 
 
+def test_a_late_client_gets_a_long_run_whole():
+    """A replay far longer than the SDK's default per-client queue (1024) arrives whole."""
+    with LiveView(port=0) as view:
+        sent = [_event(view, k) for k in range(5000)]
+        late = _log_client(view.port, start=False)
+        late.read_until(lambda c: len(c.messages) >= len(sent), limit=20_000)
+        late.close()
+    assert [t for _, t, _ in late.messages] == sent
+
+
 def test_a_foxglove_websocket_v1_client_is_refused_with_one_warning(caplog):
     """The SDK's server speaks foxglove.sdk.v1 only; refusals are reported once, not as an error each."""
     with caplog.at_level(logging.DEBUG), LiveView(port=0) as view:
@@ -139,9 +150,11 @@ def test_a_foxglove_websocket_v1_client_is_refused_with_one_warning(caplog):
 
 def test_hold_keeps_serving_after_the_run_until_stopped(tmp_path, capsys):
     """live_hold=true (`python -m protocols.live ... --hold`): after the trial the server stays up,
-    a client joining then gets the trial's events, and a stop request (what Ctrl-C or SIGTERM
-    makes) ends it. Run in a thread here, where the app leaves signal handling alone."""
-    from protocols import runner
+    a client joining then gets the whole run (both layer maps over the trial, poses, the frame
+    tree, every event), and Ctrl-C says the run has already ended and ends the hold. Run in a
+    thread here, where the app leaves signal handling alone; the Ctrl-C handler is called as
+    the signal would."""
+    from protocols import app, runner
 
     cfg, _ = compose_app("grip_depth", [*TINY_GRIP, f"data_root={tmp_path}", "progress=false", "live=true",
                                         "live_port=0", "live_hold=true"])
@@ -157,15 +170,39 @@ def test_hold_keeps_serving_after_the_run_until_stopped(tmp_path, capsys):
         assert "run finished" in out and th.is_alive(), out
         port = int(out.split("ws://127.0.0.1:", 1)[1].split()[0])
         session = load_session(next(tmp_path.rglob("*.mcap")))  # closed before the hold began
-        client = _log_client(port, start=False)  # after the run: the server is still up
-        client.read_until(lambda c: len(c.messages) >= len(session.streams["events"]["kind"]), limit=1000)
+        client = FoxgloveClient("127.0.0.1", port)  # after the run: the server is still up
+        client.read_until(lambda c: set(FIXED_TOPICS) <= {ch["topic"] for ch in c.channels.values()})
+        client.subscribe(list(client.channels))
+        events_ns = sorted(session.unix_ns(session.streams["events"]["host_t_ns"]))
+        frame_ns = session.unix_ns(session.streams["skin"]["host_t_ns"])
+
+        def by_topic(c) -> dict[str, list[int]]:
+            got: dict[str, list[int]] = {}
+            for cid, t, _ in c.messages:
+                got.setdefault(c.channels[cid]["topic"], []).append(t)
+            return got
+
+        def whole_run(c) -> bool:  # every event, both maps up to the trial's last frames, poses
+            got = by_topic(c)
+            return (len(got.get(S.LOG_TOPIC, ())) >= len(events_ns)
+                    and all(max(got.get(t, [0])) >= frame_ns[-1] - 2e8 for t in S.SKIN_TOPICS.values())
+                    and all(got.get(t) for t in (S.TCP_TOPIC, S.TF_TOPIC, S.SKIN_SUMMARY_TOPIC)))
+
+        client.read_until(whole_run, limit=100_000)
         client.close()
-        assert sorted(t for _, t, _ in client.messages) == sorted(session.unix_ns(session.streams["events"]["host_t_ns"]))
+        got = by_topic(client)
+        assert sorted(got[S.LOG_TOPIC]) == events_ns
+        for topic in S.SKIN_TOPICS.values():  # the maps of the whole trial, thinned, at frame times
+            sent = np.sort(got[topic])
+            assert np.isin(sent, frame_ns).all() and len(set(sent)) == len(sent)
+            assert sent[0] - frame_ns[0] < 2e8 and frame_ns[-1] - sent[-1] < 2e8
         time.sleep(0.5)
         assert th.is_alive()  # still holding
-        runner.request_termination("interrupted (Ctrl-C)")
+        capsys.readouterr()
+        app._on_sigint(signal.SIGINT, None)
         th.join(timeout=30)
         assert not th.is_alive() and done["result"].outcome == "complete"
+        assert "the run has already ended and its files are written" in capsys.readouterr().err
     finally:
         runner.request_termination("test over")
         th.join(timeout=30)

@@ -16,7 +16,8 @@ META = {"config": {"a": 1}, "backend": "sim", "calibration": {"gain": [1.0]}}
 
 
 def _write(path, recs, **kw):
-    with SessionWriter(path, metadata=META, labels={"trial": 1}, **kw) as w:
+    # one fixed date: a simulated session written without the rig is dated when it is opened
+    with SessionWriter(path, metadata=META, labels={"trial": 1}, epoch_offset_ns=1_767_603_600 * 10**9, **kw) as w:
         for r in recs:
             w.write(r)
     return w

@@ -164,6 +164,7 @@ class SessionWriter:
         much data. Protocol events are flushed at once.
     epoch_offset_ns: MCAP log_time and Foxglove timestamps are host_t_ns + this (Unix ns);
         None chooses it from the metadata's backend (see layerskin_exp.log.session.epoch).
+    epoch_how: how a given epoch_offset_ns was chosen (stored with it in the "log_time" record).
 
     Use as a context manager: an exception inside closes the file with outcome
     "aborted: <Type: message>" (KeyboardInterrupt -> "aborted: interrupted") and propagates.
@@ -180,6 +181,7 @@ class SessionWriter:
         chunk_bytes: int = 1 << 20,
         overwrite: bool = False,
         epoch_offset_ns: int | None = None,
+        epoch_how: str = "given",
     ) -> None:
         if compression not in _COMPRESSION:
             raise ValueError(f"compression={compression!r}: use one of {sorted(_COMPRESSION)}")
@@ -191,7 +193,8 @@ class SessionWriter:
         # The file object owns the locked descriptor: closing it (or losing it) drops the lock.
         self._file = os.fdopen(self._lock.fd, "wb")
         try:
-            self._start(metadata or {}, labels or {}, compression, chunk_span_ns, chunk_bytes, epoch_offset_ns)
+            self._start(metadata or {}, labels or {}, compression, chunk_span_ns, chunk_bytes, epoch_offset_ns,
+                        epoch_how)
         except BaseException:
             # Refused metadata, or a failing disk: give the file and its lock back at once.
             self._lock.forget_owner()
@@ -212,11 +215,10 @@ class SessionWriter:
         self.live = None
 
     def _start(self, metadata: dict, labels: dict, compression: str, chunk_span_ns: int, chunk_bytes: int,
-               epoch_offset_ns: int | None) -> None:
+               epoch_offset_ns: int | None, epoch_how: str) -> None:
+        how = epoch_how
         if epoch_offset_ns is None:
             epoch_offset_ns, how = session_offset_ns(metadata)
-        else:
-            how = "given"
         if not 0 <= int(epoch_offset_ns) <= _U64_MAX:
             raise ValueError(f"epoch_offset_ns={epoch_offset_ns}: must be Unix ns in 0..{_U64_MAX}")
         # host_t_ns + this = MCAP log_time and Foxglove timestamp (Unix ns); see session/epoch.py

@@ -9,7 +9,10 @@ a second, one send.
 
 Channels for the fixed topics are advertised at start, so a client can subscribe before the
 first trial begins; marker topics are advertised when they first appear. A client that joins
-late gets every protocol event (/log) logged so far when it subscribes to /log, sent to it alone.
+late gets what was sent on a topic so far when it subscribes to it, sent to it alone: every
+protocol event (/log) and the latest REPLAY_MAX_PER_TOPIC messages of each other topic (about
+ten minutes at display rate), so a run that ended before the client connected (--hold) is
+shown whole: maps, plots, poses and events.
 
 Subprotocols: the SDK's server (foxglove-sdk 0.30) speaks `foxglove.sdk.v1` (and `.v1.1`), which
 the current Foxglove app offers. It refuses clients that offer only `foxglove.websocket.v1`
@@ -23,6 +26,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 
 from layerskin_exp.log.session import schema as S
@@ -32,6 +36,10 @@ log = logging.getLogger(__name__)
 
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.sdk.v1.1")
 REPLAY_MAX_EVENTS = 100_000  # events kept for late clients (a campaign logs tens per trial)
+REPLAY_MAX_PER_TOPIC = 20_000  # messages kept per other topic: ~10 min at the ~30 Hz display rate
+# Messages the SDK queues per client before dropping the oldest (its default, 1024, drops most of
+# a replay): room for every event and the kept messages of 20 topics.
+CLIENT_BACKLOG = REPLAY_MAX_EVENTS + 20 * REPLAY_MAX_PER_TOPIC
 
 # topic -> schema (protobuf class or JSON schema name) of what a session can carry from the start
 FIXED_TOPICS = {
@@ -74,14 +82,13 @@ if not any(isinstance(f, _RefusedClients) for f in _SDK_SERVER_LOG.filters):
 
 
 class _Listener:
-    """The SDK's ServerListener: a subscription to /log gets the events logged before it."""
+    """The SDK's ServerListener: a subscription to a topic gets what was sent on it before."""
 
     def __init__(self, view: LiveView) -> None:
         self.view = view
 
     def on_subscribe(self, client, channel) -> None:
-        if channel.topic == S.LOG_TOPIC:
-            self.view._replay_events(client)
+        self.view._replay(client, channel.topic)
 
     def __getattr__(self, name: str):
         # every other ServerListener callback (on_unsubscribe, on_client_advertise, ...): no-op
@@ -108,12 +115,12 @@ class LiveView:
         self._channels: dict[str, object] = {}
         self._last: dict[tuple, int] = {}
         self._last_frame_ns: int | None = None
-        self._events: list[tuple[bytes, int]] = []  # (Log payload, log time) of every event so far
-        self._events_lock = threading.Lock()
+        self._sent: dict[str, deque] = {}  # topic -> (payload, log time) of what was sent, for late clients
+        self._lock = threading.Lock()
         for topic, schema in FIXED_TOPICS.items():
             self._channel(topic, schema)
         self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context,
-                                            server_listener=_Listener(self))
+                                            server_listener=_Listener(self), message_backlog_size=CLIENT_BACKLOG)
         self.host, self.port = host, self.server.port
         log.info("live view on ws://%s:%d (subprotocol %s)", host, self.port, " / ".join(SUBPROTOCOLS))
 
@@ -143,24 +150,30 @@ class LiveView:
         if self._last_frame_ns is not None and t - self._last_frame_ns < self.period_ns:
             return
         self._last_frame_ns = t
-        self._channels[S.SKIN_TOPICS["superficial"]].log(head + frame.superficial.tobytes(), log_time=t)
-        self._channels[S.SKIN_TOPICS["deep"]].log(head + frame.deep.tobytes(), log_time=t)
+        self._send(S.SKIN_TOPICS["superficial"], S.RawImage, head + frame.superficial.tobytes(), t)
+        self._send(S.SKIN_TOPICS["deep"], S.RawImage, head + frame.deep.tobytes(), t)
 
     def message(self, topic: str, schema, payload: bytes, t_ns: int, key: str | None = "") -> None:
-        """One message as written to the file. key: thinned per (topic, key); None: always sent."""
-        if topic == S.LOG_TOPIC:
-            with self._events_lock:  # a client subscribing now gets it either live or replayed
-                if len(self._events) < REPLAY_MAX_EVENTS:
-                    self._events.append((payload, int(t_ns)))
-                self._channel(topic, schema).log(payload, log_time=int(t_ns))
-            return
-        if key is not None:
+        """One message as written to the file. key: thinned per (topic, key); None: always sent.
+        Protocol events (/log) are never thinned."""
+        if key is not None and topic != S.LOG_TOPIC:
             k = (topic, key)
             last = self._last.get(k)
             if last is not None and t_ns - last < self.period_ns:
                 return
             self._last[k] = t_ns
-        self._channel(topic, schema).log(payload, log_time=int(t_ns))
+        self._send(topic, schema, payload, int(t_ns))
+
+    def _send(self, topic: str, schema, payload: bytes, t_ns: int) -> None:
+        """Send to the subscribed clients and keep for later ones (under the lock, so a client
+        subscribing meanwhile gets the message either live or replayed)."""
+        with self._lock:
+            sent = self._sent.get(topic)
+            if sent is None:
+                sent = self._sent[topic] = deque(maxlen=REPLAY_MAX_EVENTS if topic == S.LOG_TOPIC
+                                                 else REPLAY_MAX_PER_TOPIC)
+            sent.append((payload, t_ns))
+            self._channel(topic, schema).log(payload, log_time=t_ns)
 
     @staticmethod
     def layout_json(setup: str, *, estimate: bool = False, camera: bool = False) -> str:
@@ -171,22 +184,23 @@ class LiveView:
 
         return json.dumps(rig_layout(setup, estimate=estimate, camera=camera))
 
-    def _replay_events(self, client) -> None:
-        """Send the events logged so far to one client (its sink), not again to the others.
+    def _replay(self, client, topic: str) -> None:
+        """Send what was sent on `topic` so far to one client (its sink), not again to the others.
 
         foxglove-sdk 0.30's Python Client carries only its id; a websocket client's sink id is
         drawn from the same sequence as its client id as long as the process opens no other SDK
         sink (this module opens none), so the id addresses its sink. tests/log/test_live.py checks
         that a late client gets each event once and an early one sees no repeat."""
         sink = getattr(client, "sink_id", None) or client.id
-        channel = self._channels[S.LOG_TOPIC]
-        with self._events_lock:
-            for payload, t_ns in self._events:
+        with self._lock:
+            channel = self._channels.get(topic)
+            for payload, t_ns in self._sent.get(topic, ()) if channel is not None else ():
                 channel.log(payload, log_time=t_ns, sink_id=sink)
 
     def hold(self, stop: Callable[[], bool] = lambda: False, poll_s: float = 0.2) -> None:
         """Keep serving until stop() is true or Ctrl-C (after a run, so a client can still look)."""
-        print(f"run finished; the live view stays up on {self.url} until you stop it (Ctrl-C)", flush=True)
+        print(f"run finished; the live view stays up on {self.url}, replaying the run to clients that connect "
+              "now, until you stop it (Ctrl-C)", flush=True)
         try:
             while not stop():
                 time.sleep(poll_s)
