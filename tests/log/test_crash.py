@@ -218,3 +218,34 @@ def test_multithreaded_decompression_matches_single(tmp_path, monkeypatch):
                 np.testing.assert_array_equal(value, many.streams[name][key], err_msg=f"{name}.{key}")
             else:
                 assert value == many.streams[name][key]
+
+
+def test_a_chunk_present_twice_is_read_once_and_reported(tmp_path):
+    """A chunk written twice (a copy or write retried): each message is returned once, the
+    repeats are counted per stream, and `recover` drops them and says so in the file it writes."""
+    from mcap.reader import make_reader
+
+    path = tmp_path / "twice.mcap"
+    frames = [frame(i) for i in range(300)]
+    with SessionWriter(path) as w:
+        for f in frames:
+            w.write(f)
+    with open(path, "rb") as fh:
+        chunks = make_reader(fh).get_summary().chunk_indexes
+    c = chunks[len(chunks) // 2]
+    raw = path.read_bytes()
+    end = c.chunk_start_offset + c.chunk_length + c.message_index_length
+    path.write_bytes(raw[:end] + raw[c.chunk_start_offset:end] + raw[end:])
+    s = load_session(path, warn=False)
+    skin = s.streams["skin"]
+    np.testing.assert_array_equal(skin["seq"], [f.seq for f in frames])
+    np.testing.assert_array_equal(skin["superficial"], np.stack([f.superficial for f in frames]))
+    in_chunk = sum(c.message_start_time <= f.host_t_ns + w.epoch_offset_ns <= c.message_end_time for f in frames)
+    assert s.repeats == {"skin": 2 * in_chunk} and in_chunk > 0  # both layers' messages
+    assert not s.complete and any("repeated message(s) dropped" in m for m in s.warnings)
+    dst = tmp_path / "recovered.mcap"
+    recover(path, dst)
+    r = load_session(dst, warn=False)
+    np.testing.assert_array_equal(r.streams["skin"]["seq"], [f.seq for f in frames])
+    assert r.metadata["recovered"]["repeats"] == {"skin": 2 * in_chunk}
+    assert any(f"repeated messages dropped then: {{'skin': {2 * in_chunk}}}" in m for m in r.warnings)

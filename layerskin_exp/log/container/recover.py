@@ -17,8 +17,8 @@ def recover(src, dst) -> int:
     """Copy every readable record of `src` into a new MCAP file `dst`. Returns messages copied.
 
     The outcome stays absent (the trial did not finish, or its file was damaged); a "recovered"
-    metadata record names the source, the number of messages saved, the damage found and the
-    lost time ranges. `dst` must not exist. Raises SessionFileError for a source with nothing
+    metadata record names the source, the number of messages saved, the damage found, the
+    lost time ranges and the exact repeats dropped per stream (a chunk present twice). `dst` must not exist. Raises SessionFileError for a source with nothing
     readable or that is not a layerskin session.
     """
     src, dst = Path(src), Path(dst)
@@ -62,6 +62,10 @@ def recover(src, dst) -> int:
                 int(h["sequence"]),
             )
         note = "; ".join(sc.warnings) or "file was complete"
+        repeats: dict[str, int] = {}
+        for cid, k in sc.repeats.items():
+            stream = (sc.channels[cid].metadata.get("stream") or sc.channels[cid].topic) if cid in sc.channels else str(cid)
+            repeats[stream] = repeats.get(stream, 0) + k
         w.add_metadata(
             S.META_RECOVERED,
             {
@@ -71,6 +75,7 @@ def recover(src, dst) -> int:
                 "lost": S.dumps(
                     [{"start_ns": x.start_ns, "end_ns": x.end_ns, "reason": x.reason} for x in sc.lost]
                 ).decode(),
+                "repeats": S.dumps(repeats).decode(),
             },
         )
         w.finish()

@@ -62,6 +62,8 @@ class Session:
         everything else was read.
     damaged: any damage found, including damage that lost no messages (metadata, indexes).
     chunks_skipped: chunks that could not be read.
+    repeats: exact repeats of a message dropped on reading (a chunk present twice), per stream;
+        a file `recover` wrote says in its "recovered" record what it dropped.
     epoch_offset_ns: MCAP log_time - host_t_ns, the session's place on the Unix epoch (0 for a
         file written before log times were Unix times, or whose "log_time" record is lost).
     """
@@ -77,6 +79,7 @@ class Session:
     lost: list[LostRange] = field(default_factory=list)
     damaged: bool = False
     chunks_skipped: int = 0
+    repeats: dict[str, int] = field(default_factory=dict)
     epoch_offset_ns: int = 0
 
     def unix_ns(self, host_t_ns):
@@ -163,6 +166,13 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         clock_sync[name] = cmap
         arrays["t_ns"] = cmap.to_host(arrays["device_t_ns"])
     damaged = sc.damaged or bool(lost)
+    repeats = {}
+    for cid, k in sc.repeats.items():
+        repeats[_stream_of(sc, cid)] = repeats.get(_stream_of(sc, cid), 0) + k
+    recovered = metadata.get(S.META_RECOVERED)
+    dropped = recovered.get("repeats") if isinstance(recovered, dict) else None
+    if dropped:
+        msgs.append(f"recovered from a damaged file; repeated messages dropped then: {dropped}")
     finished = outcome is not None and (outcome == "complete" or outcome.startswith("complete ("))
     complete = sc.has_footer and finished and not damaged
     if outcome is None:
@@ -186,6 +196,7 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         lost=lost,
         damaged=damaged,
         chunks_skipped=sc.chunks_skipped,
+        repeats=repeats,
         epoch_offset_ns=epoch,
     )
 
