@@ -337,15 +337,18 @@ def _drop_repeats(data: np.ndarray, messages: dict[int, ChannelMessages]) -> dic
     raw = memoryview(data)
     for cid, m in messages.items():
         key = m.header[["sequence", "log_time", "publish_time"]]
-        _, first, counts = np.unique(key, return_index=True, return_counts=True)
+        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
         if (counts == 1).all():
             continue
-        _, inverse = np.unique(key, return_inverse=True)
+        inverse = inverse.ravel()
         keep = np.ones(m.count, bool)
         start, end = m.payload_start, m.payload_end
-        for i in np.flatnonzero(first[inverse.ravel()] != np.arange(m.count)).tolist():
-            j = int(first[inverse.ravel()[i]])
-            keep[i] = raw[start[i]:end[i]] != raw[start[j]:end[j]]
+        seen: dict[int, set[bytes]] = {}  # payloads met so far, per repeated key
+        for i in np.flatnonzero(counts[inverse] > 1).tolist():
+            payload = raw[start[i]:end[i]].tobytes()
+            group = seen.setdefault(int(inverse[i]), set())
+            keep[i] = payload not in group
+            group.add(payload)
         if not keep.all():
             dropped[cid] = int((~keep).sum())
             m.offset, m.header = m.offset[keep], m.header[keep]
