@@ -10,7 +10,9 @@ Outcomes: "complete" (the trial ran as planned); "complete (safety stop: <trip>)
 limit stopped the motion, the protocol retracted and finished the trial: its data are kept and
 analysed, and a rerun does not repeat it); "aborted: <reason>" (kept as `.partial`, run again by
 a rerun). A complete file is never replaced: a rerun skips it when its identity matches and
-refuses (`TrialConflictError`) when the same path holds a trial of another identity.
+refuses (`TrialConflictError`) when the same path holds a trial of another identity, read from
+the parts that survive when the file is damaged. A damaged file whose identity matches or cannot
+be read is moved aside (`<name>.mcap.damaged`, reported) before the trial is recorded again.
 """
 
 from __future__ import annotations
@@ -123,14 +125,19 @@ class RunFiles:
     written: int = 0  # complete, under their final names
     interrupted: list[Path] = field(default_factory=list)  # closed aborted, kept as <name>.mcap.partial
     already_complete: int = 0
+    set_aside: list[Path] = field(default_factory=list)  # damaged files moved to <name>.mcap.damaged
 
     def reset(self) -> None:
         self.folder, self.written, self.interrupted, self.already_complete = None, 0, [], 0
+        self.set_aside = []
 
     def record(self, path: Path, how: str) -> None:
-        """how: "written", "interrupted" (path: the .partial) or "already_complete"."""
+        """how: "written", "interrupted" (path: the .partial), "already_complete" or "set_aside"
+        (path: where the damaged file now is)."""
         self.folder = path.parent
-        if how == "written":
+        if how == "set_aside":
+            self.set_aside.append(path)
+        elif how == "written":
             self.written += 1
         elif how == "interrupted":
             self.interrupted.append(path)
@@ -151,6 +158,9 @@ class RunFiles:
             s += f", {len(self.interrupted)} interrupted (kept as .mcap.partial; a rerun runs it again)"
         if self.already_complete:
             s += f"; {self.already_complete} already complete there"
+        if self.set_aside:
+            s += (f"; {len(self.set_aside)} damaged file(s) moved aside, not replaced: "
+                  + ", ".join(p.name for p in self.set_aside))
         return s
 
 
@@ -169,25 +179,54 @@ def complete_session(path: Path):
     return session if session.complete else None
 
 
+def surviving_identity(path: Path) -> str | None:
+    """The identity a damaged or incomplete file at `path` was recorded with, read from the parts
+    that survive; None when no readable record holds it."""
+    try:
+        identity = load_session(path, warn=False).metadata.get("identity")
+    except SessionFileError:
+        return None
+    return identity if isinstance(identity, str) else None
+
+
 def trial_is_complete(path: Path, identity: str | None = None) -> bool:
     """True when `path` is a readable, undamaged, complete session recorded with `identity`;
-    raises TrialConflictError when it is a complete session of another identity (given one)."""
+    raises TrialConflictError when it holds a trial of another identity (given one), complete or
+    damaged."""
     session = complete_session(path)
-    if session is not None:
-        check_no_conflict(path, identity, session)
+    check_no_conflict(path, identity, session)
     return session is not None
 
 
 def check_no_conflict(path: Path, identity: str | None, session=None) -> None:
-    """Refuse (TrialConflictError) when `path` holds a complete trial of another identity.
-    session: the complete session already read from `path`, if it was."""
-    session = complete_session(path) if session is None else session
-    if identity is None or session is None or session.metadata.get("identity") == identity:
+    """Refuse (TrialConflictError) when `path` holds a trial of another identity: a complete one,
+    or a damaged one whose identity survives. session: the complete session already read from
+    `path`, if it was."""
+    if identity is None or not path.is_file():
         return
+    session = complete_session(path) if session is None else session
+    recorded = session.metadata.get("identity") if session is not None else surviving_identity(path)
+    if recorded is None or recorded == identity:
+        return
+    what = "a complete trial" if session is not None else "a damaged trial"
     raise TrialConflictError(
-        f"{path} holds a complete trial recorded with another configuration (identity "
-        f"{str(session.metadata.get('identity'))[:12]}..., this run {identity[:12]}...); it is not replaced. "
+        f"{path} holds {what} recorded with another configuration (identity "
+        f"{str(recorded)[:12]}..., this run {identity[:12]}...); it is not replaced. "
         "Record this one under another data_root, or move that file away first")
+
+
+def set_aside(path: Path) -> Path:
+    """Move the damaged file at `path` to a sibling `<name>.mcap.damaged[-k]` (never replacing
+    one; out of the `*.mcap` a folder's sessions are listed by) so that the trial can be recorded
+    again; returns the new path."""
+    k = 0
+    while True:
+        aside = path.with_name(f"{path.name}.damaged{'' if k == 0 else f'-{k}'}")
+        if not aside.exists():
+            break
+        k += 1
+    path.rename(aside)
+    return aside
 
 
 @dataclass
@@ -373,14 +412,20 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     name = path.stem
     check_termination()
     existing = complete_session(path)
+    check_no_conflict(path, identity, existing)
     if existing is not None:
-        check_no_conflict(path, identity, existing)
         note = _missing_views(existing.metadata.get("config") or {}, metadata.get("config") or {})
         if note:
             log.warning("trial %s is already complete (%s); it is not run again", name, note)
         RUN_FILES.record(path, "already_complete")
         return TrialResult(name, labels, str(path), existing.outcome, skipped=True,
                            extra={"note": note} if note else {})
+    if path.is_file():  # damaged, of this identity or of none that can be read: kept, not replaced
+        aside = set_aside(path)
+        RUN_FILES.record(aside, "set_aside")
+        log.warning("trial %s: the file there is damaged (identity %s); moved to %s, recording the "
+                    "trial again", name, "unreadable" if surviving_identity(aside) is None else "this run's",
+                    aside.name)
     if identity is not None:
         metadata = {**metadata, "identity": identity}
     path.parent.mkdir(parents=True, exist_ok=True)

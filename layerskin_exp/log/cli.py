@@ -37,6 +37,12 @@ def describe(s: Session) -> str:
                 t0 = int(min(firsts))
                 at = f" [{(x.start_ns - t0) / 1e9:.3f} .. {(x.end_ns - t0) / 1e9:.3f} s into the session]"
             lines.append(f"  lost: {x.describe()}{at}")
+    if s.damaged_fields:
+        lines.append(f"  DAMAGED METADATA (left out): {', '.join(s.damaged_fields)}")
+    if s.unchecked:
+        lines.append(f"  metadata unchecked (written without checks): {', '.join(s.unchecked)}")
+    if s.repeats:
+        lines.append(f"  repeats dropped: {s.repeats} (exact copies of messages read once)")
     if "recovered" in s.metadata:
         lines.append(f"  recovered: {s.metadata['recovered']}")
     lines.append(f"  labels: {s.labels}")

@@ -218,3 +218,75 @@ def test_multithreaded_decompression_matches_single(tmp_path, monkeypatch):
                 np.testing.assert_array_equal(value, many.streams[name][key], err_msg=f"{name}.{key}")
             else:
                 assert value == many.streams[name][key]
+
+
+def test_a_chunk_present_twice_is_read_once_and_reported(tmp_path):
+    """A chunk written twice (a copy or write retried): each message is returned once, the
+    repeats are counted per stream, and `recover` drops them and says so in the file it writes."""
+    from mcap.reader import make_reader
+
+    path = tmp_path / "twice.mcap"
+    frames = [frame(i) for i in range(300)]
+    with SessionWriter(path) as w:
+        for f in frames:
+            w.write(f)
+    with open(path, "rb") as fh:
+        chunks = make_reader(fh).get_summary().chunk_indexes
+    c = chunks[len(chunks) // 2]
+    raw = path.read_bytes()
+    end = c.chunk_start_offset + c.chunk_length + c.message_index_length
+    path.write_bytes(raw[:end] + raw[c.chunk_start_offset:end] + raw[end:])
+    s = load_session(path, warn=False)
+    skin = s.streams["skin"]
+    np.testing.assert_array_equal(skin["seq"], [f.seq for f in frames])
+    np.testing.assert_array_equal(skin["superficial"], np.stack([f.superficial for f in frames]))
+    in_chunk = sum(c.message_start_time <= f.host_t_ns + w.epoch_offset_ns <= c.message_end_time for f in frames)
+    assert s.repeats == {"skin": 2 * in_chunk} and in_chunk > 0  # both layers' messages
+    assert not s.complete and any("repeated message(s) dropped" in m for m in s.warnings)
+    dst = tmp_path / "recovered.mcap"
+    recover(path, dst)
+    r = load_session(dst, warn=False)
+    np.testing.assert_array_equal(r.streams["skin"]["seq"], [f.seq for f in frames])
+    assert r.metadata["recovered"]["repeats"] == {"skin": 2 * in_chunk}
+    assert any(f"repeated messages dropped then: {{'skin': {2 * in_chunk}}}" in m for m in r.warnings)
+
+
+def _flip_value(raw: bytes, record: bytes, key: bytes) -> bytes:
+    """raw with the first character of `key`'s stored value in metadata record `record` changed
+    (a digit stays a digit: the value still parses, only the check can tell)."""
+    at = raw.index(key, raw.index(record)) + len(key) + 4  # the value follows its u32 length
+    return raw[:at] + bytes([raw[at] ^ 0x01]) + raw[at + 1:]
+
+
+@pytest.mark.parametrize(("record", "key", "field"), [(b"log_time", b"offset_ns", "log_time.offset_ns"),
+                                                       (b"labels", b"trial", "labels.trial")])
+def test_a_damaged_metadata_field_is_named_left_out_and_not_recovered(tmp_path, record, key, field):
+    path = tmp_path / "meta.mcap"
+    with SessionWriter(path, metadata={"backend": "sim", "config": {"seed": 1}}, labels={"trial": 3}) as w:
+        for i in range(40):
+            w.write(frame(i))
+    clean = load_session(path, warn=False)
+    assert clean.complete and not clean.damaged_fields and not clean.unchecked
+    path.write_bytes(_flip_value(path.read_bytes(), record, key))
+    s = load_session(path, warn=False)
+    assert s.damaged_fields == [field] and s.damaged and not s.complete
+    assert any(field in m for m in s.warnings)
+    assert "trial" not in s.labels if field == "labels.trial" else s.labels == {"trial": 3}
+    dst = tmp_path / "recovered.mcap"
+    recover(path, dst)
+    r = load_session(dst, warn=False)
+    assert r.metadata["recovered"]["damaged_metadata"] == [field]
+    assert any(f"metadata left out then: ['{field}']" in m for m in r.warnings)
+    assert r.labels.get("trial") in (None, 3)  # never the damaged value
+
+
+def test_a_file_written_before_metadata_checks_reads_unchecked_not_damaged(tmp_path, monkeypatch):
+    from layerskin_exp.log.session import writer as writer_module
+
+    monkeypatch.setattr(writer_module, "with_check", lambda name, values: values)
+    path = tmp_path / "old.mcap"
+    with SessionWriter(path, labels={"trial": 3}) as w:
+        w.write(frame(0))
+    s = load_session(path, warn=False)
+    assert s.complete and not s.damaged and not s.damaged_fields and s.labels == {"trial": 3}
+    assert {"session", "log_time", "labels", "clock_sync", "outcome"} <= set(s.unchecked)

@@ -13,7 +13,7 @@ from protocols.config import ForceCalibrationConfig
 from protocols.grip import trial_name, trial_path
 from protocols.identity import MANIFEST, design_id, trial_identity, write_manifest
 from protocols.progress import LOG_FILE, PLAN_FILE, SweepProgress
-from protocols.runner import TrialConflictError, run_trial
+from protocols.runner import RUN_FILES, TrialConflictError, run_trial
 from protocols.sessions import describe
 from tests.protocols.conftest import compose_app
 from tests.protocols.fake_rig import platform_rig
@@ -142,3 +142,52 @@ def test_sessions_listing_names_what_tells_designs_apart(tmp_path):
     assert "1 complete, 1 interrupted  sim.spacer.modulus_kpa=20.0" in text
     assert "1 complete, 0 interrupted  sim.spacer.modulus_kpa=60.0" in text
     assert all((root / d / MANIFEST).is_file() for d in [p.name for p in root.iterdir()])
+
+
+def _first_chunk(data: bytes) -> int:
+    off = 8  # after the magic: records are opcode (1 byte), length (u64), body
+    while data[off] != 0x06:
+        off += 9 + int.from_bytes(data[off + 1:off + 9], "little")
+    return off
+
+
+def _flip(path, offset):
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0x5A
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("damage", ["closing magic", "inside a chunk"])
+def test_a_damaged_trial_of_another_identity_is_not_replaced(tmp_path, damage):
+    rig = platform_rig()
+    rig.connect()
+    path = tmp_path / "t.mcap"
+    meta = {"config": {}, "backend": "fake"}
+
+    def body(log):
+        for _ in range(20):
+            rig.clock.sleep(0.005)
+            log.drain()
+
+    run_trial(rig, path, {"trial": 0}, meta, body, identity="a" * 64)
+    data = path.read_bytes()
+    _flip(path, len(data) - 3 if damage == "closing magic" else _first_chunk(data) + 60)
+    before = path.read_bytes()
+    with pytest.raises(TrialConflictError, match="damaged trial recorded with another configuration"):
+        run_trial(rig, path, {"trial": 0}, meta, body, identity="b" * 64)
+    assert path.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["t.mcap"]
+
+
+def test_a_damaged_file_whose_identity_cannot_be_read_is_moved_aside_and_reported(tmp_path, caplog):
+    rig = platform_rig()
+    rig.connect()
+    path = tmp_path / "t.mcap"
+    path.write_bytes(b"\x89MCAP0\r\n" + bytes(64))  # a header and nothing readable
+    (tmp_path / "t.mcap.damaged").write_bytes(b"an earlier one")
+    RUN_FILES.reset()
+    result = run_trial(rig, path, {"trial": 0}, {"config": {}}, lambda log: None, identity="b" * 64)
+    assert result.outcome == "complete"
+    assert (tmp_path / "t.mcap.damaged-1").read_bytes() == b"\x89MCAP0\r\n" + bytes(64)
+    assert (tmp_path / "t.mcap.damaged").read_bytes() == b"an earlier one"
+    assert "moved aside, not replaced: t.mcap.damaged-1" in RUN_FILES.line()
+    assert any("t.mcap.damaged-1" in r.getMessage() and r.levelname == "WARNING" for r in caplog.records)

@@ -11,14 +11,16 @@ from mcap.writer import Writer
 import layerskin_exp
 from layerskin_exp.log.container.scan import SessionFileError, scan
 from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.session.metacheck import check_records, with_check
 
 
 def recover(src, dst) -> int:
     """Copy every readable record of `src` into a new MCAP file `dst`. Returns messages copied.
 
     The outcome stays absent (the trial did not finish, or its file was damaged); a "recovered"
-    metadata record names the source, the number of messages saved, the damage found and the
-    lost time ranges. `dst` must not exist. Raises SessionFileError for a source with nothing
+    metadata record names the source, the number of messages saved, the damage found, the
+    lost time ranges, the exact repeats dropped per stream (a chunk present twice) and the
+    metadata fields left out for failing their check (never copied as if valid). `dst` must not exist. Raises SessionFileError for a source with nothing
     readable or that is not a layerskin session.
     """
     src, dst = Path(src), Path(dst)
@@ -40,9 +42,10 @@ def recover(src, dst) -> int:
     with open(dst, "wb") as fh:
         w = Writer(fh)
         w.start(profile="", library=f"layerskin-exp/{layerskin_exp.__version__} recover")
-        for name, values in sc.metadata:
+        kept, damaged_fields, unchecked = check_records(sc.metadata, sc.has_footer)
+        for name, values in kept:  # damaged fields left out; those kept vouched for again
             if name not in (S.META_OUTCOME, S.META_RECOVERED):
-                w.add_metadata(name, values)
+                w.add_metadata(name, values if name in unchecked else with_check(name, values))
         schema_ids = {}
         for sid, s in sorted(sc.schemas.items()):
             schema_ids[sid] = w.register_schema(s.name, s.encoding, s.data)
@@ -62,7 +65,11 @@ def recover(src, dst) -> int:
                 int(h["sequence"]),
             )
         note = "; ".join(sc.warnings) or "file was complete"
-        w.add_metadata(
+        repeats: dict[str, int] = {}
+        for cid, k in sc.repeats.items():
+            stream = (sc.channels[cid].metadata.get("stream") or sc.channels[cid].topic) if cid in sc.channels else str(cid)
+            repeats[stream] = repeats.get(stream, 0) + k
+        w.add_metadata(S.META_RECOVERED, with_check(
             S.META_RECOVERED,
             {
                 "messages": str(len(rows)),
@@ -71,7 +78,9 @@ def recover(src, dst) -> int:
                 "lost": S.dumps(
                     [{"start_ns": x.start_ns, "end_ns": x.end_ns, "reason": x.reason} for x in sc.lost]
                 ).decode(),
+                "repeats": S.dumps(repeats).decode(),
+                "damaged_metadata": S.dumps(damaged_fields).decode(),
             },
-        )
+        ))
         w.finish()
     return len(rows)

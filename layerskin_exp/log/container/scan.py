@@ -13,6 +13,9 @@ helped by the summary's chunk index when the summary is intact). What was lost i
 McapScan.lost with its log-time range, taken from the summary's chunk index (CRC-checked) where
 there is one, else from the chunk header or the neighbouring good chunks. A file cut off
 mid-record is read up to the last whole chunk.
+
+A message present twice (a chunk written or copied twice: same channel, sequence number, times
+and payload) is kept once; McapScan.repeats counts what was dropped.
 """
 
 from __future__ import annotations
@@ -107,6 +110,7 @@ class McapScan:
     lost: data that could not be read (skipped chunks, damaged records), see Lost.
     damaged: any damage at all, including records that held no messages (metadata, indexes)
         and a data section failing its CRC; a damaged file is never complete.
+    repeats: exact repeats of a message dropped (the first copy kept), by channel id.
     """
 
     data: np.ndarray
@@ -120,6 +124,7 @@ class McapScan:
     lost: list[Lost] = field(default_factory=list)
     damaged: bool = False
     chunks_skipped: int = 0
+    repeats: dict[int, int] = field(default_factory=dict)
 
     def payloads(self, msgs: ChannelMessages) -> list[bytes]:
         raw = memoryview(self.data)
@@ -297,6 +302,11 @@ def _scan(path, buf) -> McapScan:
         t = m.header["log_time"]
         lost.append(Lost(int(t.min()), int(t.max()), {cid: m.count},
                          f"channel {cid} has no channel record; its {m.count} messages cannot be decoded"))
+    repeats = _drop_repeats(data, messages)
+    if repeats:
+        damaged = True
+        warnings.append(f"{sum(repeats.values())} repeated message(s) dropped (a chunk present twice?), "
+                        f"by channel {repeats}")
     if summary and summary.statistics is not None:
         _check_counts(summary.statistics.channel_message_counts, messages, lost, warnings)
     if summary:
@@ -316,7 +326,33 @@ def _scan(path, buf) -> McapScan:
         lost=lost,
         damaged=damaged,
         chunks_skipped=int((~good).sum()) + sum(1 for x in lost if x.reason.endswith("lies in damaged bytes")),
+        repeats=repeats,
     )
+
+
+def _drop_repeats(data: np.ndarray, messages: dict[int, ChannelMessages]) -> dict[int, int]:
+    """Drop, in place, every message that repeats an earlier one of its channel exactly (sequence,
+    log and publish times, payload); returns how many were dropped per channel id."""
+    dropped = {}
+    raw = memoryview(data)
+    for cid, m in messages.items():
+        key = m.header[["sequence", "log_time", "publish_time"]]
+        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+        if (counts == 1).all():
+            continue
+        inverse = inverse.ravel()
+        keep = np.ones(m.count, bool)
+        start, end = m.payload_start, m.payload_end
+        seen: dict[int, set[bytes]] = {}  # payloads met so far, per repeated key
+        for i in np.flatnonzero(counts[inverse] > 1).tolist():
+            payload = raw[start[i]:end[i]].tobytes()
+            group = seen.setdefault(int(inverse[i]), set())
+            keep[i] = payload not in group
+            group.add(payload)
+        if not keep.all():
+            dropped[cid] = int((~keep).sum())
+            m.offset, m.header = m.offset[keep], m.header[keep]
+    return dropped
 
 
 def _bracket(chunks: list[ChunkHead], good: np.ndarray, i: int) -> tuple[int | None, int | None]:

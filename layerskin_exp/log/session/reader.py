@@ -14,6 +14,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from layerskin_exp.log.container.scan import ChannelMessages, Lost, McapScan, scan
 from layerskin_exp.log.errors import SessionFileError
 from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.session.metacheck import check_records
 from layerskin_exp.sync import ClockMap, estimate_clock_map
 from layerskin_exp.types import SKIN_SHAPE
 
@@ -62,6 +63,12 @@ class Session:
         everything else was read.
     damaged: any damage found, including damage that lost no messages (metadata, indexes).
     chunks_skipped: chunks that could not be read.
+    repeats: exact repeats of a message dropped on reading (a chunk present twice), per stream;
+        a file `recover` wrote says in its "recovered" record what it dropped.
+    damaged_fields: metadata that failed its check or is missing, as "record.field" (a field) or
+        "record" (a whole record missing); left out of metadata, labels, outcome and clock_sync.
+    unchecked: metadata records stored without a check (files written before it existed): read
+        as they are, neither vouched for nor damaged.
     epoch_offset_ns: MCAP log_time - host_t_ns, the session's place on the Unix epoch (0 for a
         file written before log times were Unix times, or whose "log_time" record is lost).
     """
@@ -77,6 +84,9 @@ class Session:
     lost: list[LostRange] = field(default_factory=list)
     damaged: bool = False
     chunks_skipped: int = 0
+    repeats: dict[str, int] = field(default_factory=dict)
+    damaged_fields: list[str] = field(default_factory=list)
+    unchecked: list[str] = field(default_factory=list)
     epoch_offset_ns: int = 0
 
     def unix_ns(self, host_t_ns):
@@ -109,7 +119,8 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
     """
     path = Path(path)
     sc = scan(path)
-    records = {name: _decode_meta(values) for name, values in sc.metadata}
+    kept, damaged_fields, unchecked = check_records(sc.metadata, sc.has_footer)
+    records = {name: _decode_meta(values) for name, values in kept}
     session_meta = records.get(S.META_SESSION, {})
     ours = any(c.metadata.get("stream") for c in sc.channels.values())
     if session_meta.get("format") != S.FORMAT and not sc.has_footer and not sc.channels:
@@ -117,7 +128,7 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
             f"{path}: cut off or damaged ({path.stat().st_size} bytes) before any session metadata or "
             f"data; there is nothing to read"
         )
-    if session_meta.get("format") != S.FORMAT and not (ours and sc.damaged):
+    if session_meta.get("format") != S.FORMAT and not (ours and (sc.damaged or damaged_fields)):
         topics = sorted({c.topic for c in sc.channels.values()})[:6]
         raise SessionFileError(
             f"{path}: an MCAP file but not a layerskin session (no '{S.META_SESSION}' metadata with "
@@ -132,6 +143,9 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
                         S.META_LAYOUT_APP, S.META_LOG_TIME):
             metadata[name] = values
     epoch = records.get(S.META_LOG_TIME, {}).get("offset_ns", 0)
+    if any(f in (S.META_LOG_TIME, f"{S.META_LOG_TIME}.offset_ns") for f in damaged_fields):
+        msgs.append("the log_time offset is damaged: every stream's host_t_ns is its log time (Unix ns), "
+                    "not the host clock the clock maps use")
     if not isinstance(epoch, int) or isinstance(epoch, bool) or epoch < 0:
         msgs.append(f"log_time record holds offset {epoch!r}; log times read as host times")
         epoch = 0
@@ -162,7 +176,18 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
             continue
         clock_sync[name] = cmap
         arrays["t_ns"] = cmap.to_host(arrays["device_t_ns"])
-    damaged = sc.damaged or bool(lost)
+    damaged = sc.damaged or bool(lost) or bool(damaged_fields)
+    if damaged_fields:
+        msgs.append(f"metadata failing its check or missing, left out: {damaged_fields}")
+    repeats = {}
+    for cid, k in sc.repeats.items():
+        repeats[_stream_of(sc, cid)] = repeats.get(_stream_of(sc, cid), 0) + k
+    recovered = metadata.get(S.META_RECOVERED)
+    recovered = recovered if isinstance(recovered, dict) else {}
+    if recovered.get("repeats"):
+        msgs.append(f"recovered from a damaged file; repeated messages dropped then: {recovered['repeats']}")
+    if recovered.get("damaged_metadata"):
+        msgs.append(f"recovered from a damaged file; metadata left out then: {recovered['damaged_metadata']}")
     finished = outcome is not None and (outcome == "complete" or outcome.startswith("complete ("))
     complete = sc.has_footer and finished and not damaged
     if outcome is None:
@@ -186,6 +211,9 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         lost=lost,
         damaged=damaged,
         chunks_skipped=sc.chunks_skipped,
+        repeats=repeats,
+        damaged_fields=damaged_fields,
+        unchecked=unchecked,
         epoch_offset_ns=epoch,
     )
 

@@ -23,6 +23,7 @@ import layerskin_exp
 from layerskin_exp.log.container.lock import WriterLock
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.session.epoch import session_offset_ns
+from layerskin_exp.log.session.metacheck import with_check
 from layerskin_exp.log.view import frame_tree as F
 
 # Imported with the writer, not where the layout is written: foxglove.layouts takes ~35 ms to
@@ -285,7 +286,7 @@ class SessionWriter:
     def _add_metadata(self, name: str, values) -> None:
         # MCAP metadata maps str -> str: each value is stored as JSON so types come back.
         items = values.items() if hasattr(values, "items") else values
-        self._mcap.add_metadata(name, {str(k): S.dumps(v).decode() for k, v in items})
+        self._mcap.add_metadata(name, with_check(name, {str(k): S.dumps(v).decode() for k, v in items}))
         self._file.flush()
 
     def _schema(self, name: str) -> int:
