@@ -6,12 +6,19 @@ time unwrapped, `device_t_ns` = board µs * 1000, `host_t_ns` = time.monotonic_n
 read returned. Sequence gaps count into `health.lost`, parser rejections into `health.corrupt`;
 both are logged (the first at once, then at most one summary a second).
 
+A stall is judged by the board's own clock, not by when the receive thread last ran: fault()
+first drains what the OS holds for the port, then estimates when the newest frame was made on
+the host clock (its board time plus the smallest host-minus-board offset seen, which follows
+clock drift). A receive thread that was not scheduled while frames queued up in the OS is not a
+silent board; a board that stopped scanning is reported once its newest frame is too old.
+
 The board streams on its own once powered; the host never writes to it.
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import threading
 import time
 from collections import deque
@@ -27,6 +34,10 @@ from layerskin_exp.types import TwoLayerFrame
 log = logging.getLogger(__name__)
 
 _LOG_EVERY_NS = 1_000_000_000
+# How fast the host-minus-board offset may grow (board clock slower than the host's): 1000 ppm,
+# far above a crystal's drift, far below what would hide a stall.
+_DRIFT_ALLOWANCE = 1e-3
+_REFILL_WAIT_S = 0.001
 
 
 class SkinBoardReader(SkinReader):
@@ -49,12 +60,14 @@ class SkinBoardReader(SkinReader):
         self._thread: threading.Thread | None = None
         self._ser: serial.Serial | None = None
         self._last_seq: int | None = None
-        self._last_frame_ns: int | None = None
+        self._newest_device_ns: int | None = None  # board time of the newest frame, ns
+        self._offset_ns: int | None = None  # smallest (host receive - board time) seen, drift-relaxed
+        self._rx_lock = threading.Lock()  # one reader of the port at a time: bytes reach the parser in order
         self._link_error: str | None = None
         self._ever_connected = False
         self.bytes_received = 0
-        # on_frames(frames) is called in the receive thread with each batch as it arrives (the
-        # rig's skin guards); it must be quick and must not block.
+        # on_frames(frames) is called with each batch as it arrives (the rig's skin guards), in the
+        # receive thread or in fault()'s caller when it drains the port; quick, never blocking.
         self.on_frames = None
         self.ring_dropped = 0  # frames dropped because read_available() was not called for too long
         self._reported = (0, 0, 0)  # lost, corrupt, ring_dropped at the last log line
@@ -69,7 +82,7 @@ class SkinBoardReader(SkinReader):
         ser = self._open(deadline)
         # the unwrapper and the last seq carry over: frames missed while disconnected count as lost
         self.parser.reset()
-        self._last_frame_ns = None
+        self._newest_device_ns = self._offset_ns = None  # the board may have restarted its clock
         self._link_error = None
         self._first_frame.clear()
         self._stop.clear()
@@ -132,10 +145,21 @@ class SkinBoardReader(SkinReader):
             return None
         if self._link_error is not None:
             return f"skin: link lost ({self._link_error}) on {self.cfg.port}"
-        last = self._last_frame_ns
-        if last is not None and now_ns - last > self.cfg.stall_timeout_s * 1e9:
-            return f"skin stalled: no frame for {(now_ns - last) / 1e6:.0f} ms on {self.cfg.port}"
+        silent_ns = self._silent_ns(now_ns)
+        if silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9:
+            self._drain()  # frames the receive thread has not been scheduled to read yet
+            silent_ns = self._silent_ns(now_ns)
+            if silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9:
+                return (f"skin stalled: no frame for {silent_ns / 1e6:.0f} ms on {self.cfg.port} (board time of "
+                        f"the newest frame, seq {self._last_seq}); check the board's power and USB link")
         return None
+
+    def _silent_ns(self, now_ns: int) -> int | None:
+        """How long before now_ns (host ns) the board made its newest frame; None before the first."""
+        dev, offset = self._newest_device_ns, self._offset_ns
+        if dev is None or offset is None:
+            return None
+        return now_ns - (dev + offset)
 
     # ---- SkinReader --------------------------------------------------------------------------
     def read_available(self) -> list[TwoLayerFrame]:
@@ -154,20 +178,49 @@ class SkinBoardReader(SkinReader):
     # ---- receive thread ----------------------------------------------------------------------
     def _run(self) -> None:
         ser = self._ser
-        chunk = self.cfg.read_chunk_bytes
         while not self._stop.is_set():
             try:
-                data = ser.read(1)  # blocks up to read_timeout_s
-                if data:
-                    waiting = ser.in_waiting
-                    if waiting:
-                        data += ser.read(min(waiting, chunk))
-            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                if self._wait_readable(ser):
+                    self._drain(until_empty=False)
+            except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as exc:
                 if self._stop.is_set():
                     break  # closed by disconnect()
                 self._link_error = f"{type(exc).__name__}: {exc}"
                 log.error("skin board on %s: link lost: %s", self.cfg.port, self._link_error)
                 break
+
+    def _wait_readable(self, ser: serial.Serial) -> bool:
+        """Block up to read_timeout_s for bytes (outside the read lock, so fault() may drain)."""
+        return bool(select.select([ser.fileno()], [], [], self.cfg.read_timeout_s)[0])
+
+    def _drain(self, until_empty: bool = True) -> None:
+        """Read and parse what the OS holds for the port, without blocking. From the receive
+        thread (until_empty=False, after select said readable: a readable port with nothing
+        waiting is an unplugged one, whose read raises) or from fault() (errors left to the
+        receive thread, which reports them)."""
+        ser = self._ser
+        if ser is None:
+            return
+        with self._rx_lock:
+            data = b""
+            try:
+                # the tty layer hands over its buffer a few KiB at a time, refilling it just after a
+                # read: after each read that found bytes, a short wait for the next part
+                while len(data) < self.cfg.read_chunk_bytes:
+                    waiting = ser.in_waiting
+                    if not waiting and data and select.select([ser.fileno()], [], [], _REFILL_WAIT_S)[0]:
+                        waiting = ser.in_waiting
+                    if waiting:
+                        data += ser.read(min(waiting, self.cfg.read_chunk_bytes - len(data)))
+                    elif not data and not until_empty and select.select([ser.fileno()], [], [], 0)[0]:
+                        data = ser.read(1)  # readable yet empty: raises on an unplugged port
+                    else:
+                        break
+            except (serial.SerialException, OSError, TypeError, AttributeError, ValueError):
+                if not until_empty:
+                    if data:
+                        self._receive(data, time.monotonic_ns())
+                    raise
             if data:
                 self._receive(data, time.monotonic_ns())
 
@@ -186,7 +239,12 @@ class SkinBoardReader(SkinReader):
                 self._ring.extend(frames)  # a bounded deque: the oldest frames go first
             if overflow > 0:
                 self.ring_dropped += overflow
-            self._last_frame_ns = host_ns
+            newest = frames[-1].device_t_ns
+            offset = host_ns - newest
+            if self._offset_ns is not None and self._newest_device_ns is not None:
+                relaxed = self._offset_ns + int((newest - self._newest_device_ns) * _DRIFT_ALLOWANCE)
+                offset = min(offset, relaxed)
+            self._offset_ns, self._newest_device_ns = offset, newest
             self._first_frame.set()
             if self.on_frames is not None:
                 self.on_frames(frames)

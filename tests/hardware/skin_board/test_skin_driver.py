@@ -258,3 +258,85 @@ def test_connect_errors_name_the_port(tmp_path):
 def test_config_rejects_bad_values(field, value):
     with pytest.raises(ConfigError, match=f"hardware.skin_board.{field}"):
         SkinBoardConfig(**{field: value})
+
+
+class _HandBoard:
+    """The test as the board: frames written to a pty by hand, board time = host time - base."""
+
+    def __init__(self, monkeypatch):
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        os.set_blocking(self.master, False)
+        self.base_ns, self.seq, self.last_write_ns = time.monotonic_ns(), 0, 0
+        self.zeros = np.zeros((16, 16), dtype=np.uint16)
+        # the receive thread can be held back before it waits for bytes, as a thread the
+        # scheduler does not run
+        self.run_rx = threading.Event()
+        self.run_rx.set()
+        self.monkeypatch = monkeypatch
+
+    def hold_back(self, drv):
+        real = drv._wait_readable
+
+        def gated(ser):
+            self.run_rx.wait()
+            return real(ser)
+
+        self.monkeypatch.setattr(drv, "_wait_readable", gated)
+
+    def send(self):
+        self.last_write_ns = time.monotonic_ns()
+        os.write(self.master, encode_frame(self.seq, (self.last_write_ns - self.base_ns) // 1000, self.zeros,
+                                           self.zeros))
+        self.seq += 1
+
+    def close(self):
+        self.run_rx.set()
+        os.close(self.master)
+        os.close(self.slave)
+
+
+def test_frames_held_in_the_os_while_the_reader_is_not_run_are_no_stall(monkeypatch):
+    board = _HandBoard(monkeypatch)
+    # a short bound: the frames of a pause longer than it fit in the pty's buffer
+    drv = SkinBoardReader(SkinBoardConfig(port=os.ttyname(board.slave), connect_timeout_s=3.0,
+                                          stall_timeout_s=0.02))
+    board.hold_back(drv)
+    try:
+        connected = threading.Event()
+
+        def stream():  # the board streams from power-on; opening the port flushes what came before
+            while not connected.wait(0.005):
+                board.send()
+
+        sender = threading.Thread(target=stream, daemon=True)
+        sender.start()
+        drv.connect()
+        connected.set()
+        sender.join()
+        for _ in range(10):
+            board.send()
+        assert wait_for(lambda: drv.fault(board.last_write_ns) is None and len(drv.read_available()) > 0)
+        bound_ns = drv.cfg.stall_timeout_s * 1e9
+        board.run_rx.clear()
+        time.sleep(2 * drv.cfg.read_timeout_s)  # a select already under way returns
+        paused_from = board.seq
+        first_paused_ns = None
+        # the board streams on for more than the bound (its own clock), fewer frames than a pty holds
+        while first_paused_ns is None or board.last_write_ns - first_paused_ns <= 1.5 * bound_ns:
+            board.send()
+            first_paused_ns = first_paused_ns or board.last_write_ns
+            time.sleep(0.005)
+        assert board.seq - paused_from <= 12, "more frames than the pty buffers: the test would lose some"
+        # judged at the moment the board wrote its newest frame, the receive thread not having run since
+        assert drv.fault(board.last_write_ns + 1_000_000) is None
+        frames = drv.read_available()
+        assert frames[-1].seq == board.seq - 1 and drv.health.lost == 0  # the drain delivered every frame
+        # the board now goes silent: reported by its own clock, the newest frame made > 10 bounds ago
+        reason = drv.fault(board.last_write_ns + int(10 * bound_ns))
+        assert reason is not None and reason.startswith("skin stalled: no frame for")
+        assert f"seq {board.seq - 1}" in reason
+    finally:
+        board.run_rx.set()
+        drv.disconnect()
+        board.close()
