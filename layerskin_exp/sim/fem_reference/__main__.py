@@ -115,12 +115,16 @@ def run_bound(sim, mesher: Mesher | None = None, log=print) -> dict:
         out[k] = np.stack([s[k] for s in states])
     out["section"] = json.dumps(sec.__dict__)
     out["mesher"] = json.dumps(mesher.__dict__)
-    bal = balance(out)
-    worst = {line: float(np.abs(b - 1).max()) for line, b in bal.items()}
+    return require_balance(out, log)
+
+
+def require_balance(res: dict, log=print) -> dict:
+    """res, once every layer's profile carries F_z within BALANCE_TOL (else RuntimeError)."""
+    worst = {line: float(np.abs(b - 1).max()) for line, b in balance(res).items()}
     log(f"  balance, worst |sum(p w) / F_z - 1| per layer: {worst}")
     if max(worst.values()) > BALANCE_TOL:
         raise RuntimeError(f"a layer's pressure does not carry the load: {worst} (allowed {BALANCE_TOL})")
-    return out
+    return res
 
 
 def balance(res: dict) -> dict:
@@ -191,12 +195,7 @@ def run_axisymmetric(sim, log=print) -> dict:
         out[f"{line}_kpa"] = np.nan_to_num(np.stack([s[f"{line}_kpa"] for s in states]))  # the axis node: 0 x 0
     out["contact_kpa"] = np.nan_to_num(np.stack([s["contact_kpa"] for s in states]))
     out["contact_x_mm"] = np.stack([s["contact_x_mm"] for s in states])
-    bal = balance(out)
-    worst = {line: float(np.abs(b - 1).max()) for line, b in bal.items()}
-    log(f"  balance, worst |sum(p A) / F - 1| per layer: {worst}")
-    if max(worst.values()) > BALANCE_TOL:
-        raise RuntimeError(f"a layer's pressure does not carry the load: {worst} (allowed {BALANCE_TOL})")
-    return out
+    return require_balance(out, log)
 
 
 def plane_strain_check(section: dict, axi: dict) -> dict:
