@@ -93,7 +93,9 @@ class Emulator:
             if t.ident is None:  # (_open may have needed one running already)
                 t.start()
         for delay, fault in ((self.stall_after_s, self.stall), (self.disconnect_after_s, self.disconnect)):
-            if delay is not None:
+            if delay == 0:  # from the start: in force before a driver can connect, not raced by a timer
+                fault()
+            elif delay is not None:
                 timer = threading.Timer(delay, fault)
                 timer.daemon = True
                 timer.start()

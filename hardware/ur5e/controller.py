@@ -695,7 +695,7 @@ def _info(ctl: URController) -> dict:
             "tcp_offset": list(script.tool.tcp_offset) if script else None,
             "payload_kg": script.tool.payload_kg if script else None,
             "payload_cog_m": list(script.tool.payload_cog_m) if script else None,
-            "connections": len(ctl._conns)}
+            "connections": len(ctl._conns), "output_paused": ctl.output_paused}
 
 
 def main(argv: list[str]) -> int:

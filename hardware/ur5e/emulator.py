@@ -126,7 +126,11 @@ class UR5eEmulator(Emulator):
         self._send(("fault", "unlock_protective_stop"))
 
     def _on_stall(self, stalled: bool) -> None:
+        """Pause or resume the controller's data and wait until the controller process has taken
+        it: a client that connects after stall() returns must find the output paused (a test that
+        raced this left the ur_rtde control client looping for ever, holding the interpreter lock)."""
         self._send(("set", "output_paused", bool(stalled)))
+        self.wait_info(lambda info: info.get("output_paused") == bool(stalled))
 
     def disconnect(self, refuse_s: float = 0.0) -> None:
         """Close every client connection (see drop_connections)."""

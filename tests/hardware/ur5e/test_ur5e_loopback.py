@@ -5,6 +5,7 @@ Each test serves on its own loopback address: the client's ports are fixed. Conn
 client's disconnect sleeps). No assertion depends on timing beyond generous waits.
 """
 
+import re
 import time
 
 import numpy as np
@@ -177,15 +178,44 @@ def test_no_controller_is_a_clear_error():
     assert not arm.is_connected
 
 
-@pytest.mark.timeout(120, method="thread")  # a regression hangs holding the interpreter lock
-def test_controller_that_sends_nothing_is_a_clear_error(realtime_world):
-    # Connections accepted, no RTDE data from the start: the control client's constructor would
-    # loop reconnecting for ever, holding the interpreter lock (issue 31). The driver stops first.
-    with UR5eEmulator(realtime_world("gripper"), host="127.0.0.36", stall_after_s=0):
+_SENDS_NOTHING = """
+from hardware.interfaces import DeviceError
+from hardware.ur5e import UR5eArm, UR5eConfig
+from hardware.ur5e.emulator import UR5eEmulator
+from tests.hardware.conftest import start_realtime_world
+
+rt = start_realtime_world("gripper")
+try:
+    with UR5eEmulator(rt, host="127.0.0.36", stall_after_s=0):
         arm = UR5eArm(UR5eConfig(host="127.0.0.36"))
-        with pytest.raises(DeviceError, match=r"127\.0\.0\.36.*sends no data \(stalled\)"):
+        try:
             arm.connect()
-        assert not arm.is_connected
+        except DeviceError as exc:
+            print("refused:", exc)
+        print("connected:", arm.is_connected)
+finally:
+    rt.stop()
+"""
+
+
+def test_controller_that_sends_nothing_is_a_clear_error():
+    # Connections accepted, no RTDE data from the start: the control client's constructor would
+    # loop reconnecting for ever, holding the interpreter lock (issue 31), where no timeout or
+    # signal in this process can end it. So the scenario runs in a child process with a hard
+    # limit: a regression fails this test instead of hanging the suite (a CI run did hang here).
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[3]
+    try:
+        out = subprocess.run([sys.executable, "-c", _SENDS_NOTHING], cwd=root, capture_output=True, text=True,
+                             timeout=120)
+    except subprocess.TimeoutExpired as exc:
+        pytest.fail(f"connecting to a controller that sends nothing hung for 120 s: {exc.stdout!r}")
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert re.search(r"refused: .*127\.0\.0\.36.*sends no data \(stalled\)", out.stdout), out.stdout
+    assert "connected: False" in out.stdout
 
 
 def test_config_validates():
