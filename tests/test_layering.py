@@ -4,7 +4,8 @@ each other in a circle.
 
 Two independent views, so neither a lazy import nor a string import slips through:
 - the source: every import statement of every module (function-level ones included, since they
-  run when the function does), read with `ast`;
+  run when the function does, and `TYPE_CHECKING` ones, since the module needs the type), read
+  with `ast`;
 - a live process per layer: import every module of the layer, register its schemas and load
   each of its commands' configs, then look at `sys.modules`.
 """
@@ -43,19 +44,12 @@ def _modules(repo: Path) -> dict[str, tuple[Path, bool]]:
     return mods
 
 
-def _type_checking_only(tree: ast.AST) -> set[int]:
-    """ids of the import nodes under `if TYPE_CHECKING:` (never executed)."""
-    out: set[int] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            out |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
-    return out
-
-
 def import_graph(repo: Path) -> dict[str, set[str]]:
     """{module: modules of the four packages it imports}. `from pkg import name` is an edge to
     the submodule pkg.name where one exists, else to pkg; a module's own parent packages are not
-    edges (importing any submodule runs them; that is no dependency)."""
+    edges (importing any submodule runs them; that is no dependency). An import under
+    `if TYPE_CHECKING:` is an edge like any other: a type a module needs is a dependency, and a
+    circle closed by one is a circle all the same."""
     mods = _modules(repo)
 
     def resolve(name: str) -> str | None:
@@ -66,12 +60,9 @@ def import_graph(repo: Path) -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {}
     for name, (path, is_pkg) in mods.items():
         tree = ast.parse(path.read_text(), str(path))
-        skip = _type_checking_only(tree)
         package = name if is_pkg else name.rpartition(".")[0]
         targets: list[str] = []
         for node in ast.walk(tree):
-            if id(node) in skip:
-                continue
             if isinstance(node, ast.Import):
                 targets += [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -140,22 +131,24 @@ def test_no_modules_import_each_other_in_a_circle():
 
 
 def test_the_checks_see_an_upward_import_and_a_circle(tmp_path):
-    """The two checks on a made-up tree that has both faults, and on the same tree without them."""
+    """The two checks on a made-up tree that has both faults (one circle through a function-level
+    import, one closed by a `TYPE_CHECKING` import), and on the same tree without them."""
     for pkg in PACKAGES:
         (tmp_path / pkg).mkdir()
         (tmp_path / pkg / "__init__.py").write_text("")
     (tmp_path / "layerskin_exp" / "a.py").write_text("def f():\n    from layerskin_exp import b\n")
     (tmp_path / "layerskin_exp" / "b.py").write_text("from layerskin_exp.a import f\n")
     (tmp_path / "layerskin_exp" / "c.py").write_text("def g():\n    import protocols.x\n")
-    (tmp_path / "layerskin_exp" / "d.py").write_text(
-        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from layerskin_exp.c import g\n")
+    (tmp_path / "layerskin_exp" / "d.py").write_text("from layerskin_exp.e import T\n")
+    (tmp_path / "layerskin_exp" / "e.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from layerskin_exp.d import U\nT = int\n")
     (tmp_path / "protocols" / "x.py").write_text("from layerskin_exp import a, d\n")
     graph = import_graph(tmp_path)
     assert upward_imports(graph) == ["layerskin_exp.c -> protocols.x"]
-    assert cycles(graph) == [["layerskin_exp.a", "layerskin_exp.b"]]
-    assert graph["layerskin_exp.d"] == set()  # a type-only import is not a dependency
+    assert cycles(graph) == [["layerskin_exp.a", "layerskin_exp.b"], ["layerskin_exp.d", "layerskin_exp.e"]]
     (tmp_path / "layerskin_exp" / "b.py").write_text("")
     (tmp_path / "layerskin_exp" / "c.py").write_text("")
+    (tmp_path / "layerskin_exp" / "e.py").write_text("T = int\n")
     graph = import_graph(tmp_path)
     assert upward_imports(graph) == [] and cycles(graph) == []
 

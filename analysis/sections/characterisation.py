@@ -4,8 +4,6 @@ the study and this campaign."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from analysis import study
@@ -17,13 +15,11 @@ from analysis.characterization import (
     slide_loads,
     uniformity,
 )
+from analysis.report_run import ReportRun
 from layerskin_exp.features import two_layer_features
 
-if TYPE_CHECKING:
-    from analysis.report import Analysis
 
-
-def characterization(run: Analysis) -> None:
+def characterization(run: ReportRun) -> None:
     c = run.camp.calibration
     if not c:
         run.skip("characterization", "no complete force_calibration sessions")
@@ -70,7 +66,7 @@ def characterization(run: Analysis) -> None:
     run.results["characterization"] = {**res, **sensitivity_bands(run, res)}
 
 
-def sensitivity_bands(run: Analysis, res: dict) -> dict:
+def sensitivity_bands(run: ReportRun, res: dict) -> dict:
     """{"sensitivity_bands": ...}: the screen's band per outcome beside the study's value and this
     campaign's (what this section measured, and the force section's linear model); {} when no
     screening result was given."""

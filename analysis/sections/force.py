@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.stats import bootstrap
@@ -13,15 +12,13 @@ from tqdm.auto import tqdm
 from analysis import study
 from analysis.markdown import counted
 from analysis.metrics import mae, r2_score
+from analysis.report_run import ReportRun
 from analysis.run_info import convergence_caveats, force_ranges, training_state
 from layerskin_exp.estimation.artifact import Estimator
 from layerskin_exp.estimation.cnn import CnnGruForceModel
 from layerskin_exp.estimation.linear import LinearForceModel, linear_features
 from layerskin_exp.estimation.splits import split_trials
 from layerskin_exp.features import two_layer_features
-
-if TYPE_CHECKING:
-    from analysis.report import Analysis
 
 log = logging.getLogger("analysis.report")
 
@@ -61,7 +58,7 @@ def r2_gain_ci(y: np.ndarray, pred: np.ndarray, base: np.ndarray, trial: np.ndar
     return {ax: [float(g[i]), float(ci.low[i]), float(ci.high[i])] for i, ax in enumerate(AXES)}
 
 
-def calibration_arrays(run: Analysis):
+def calibration_arrays(run: ReportRun):
     """The calibration trials as one array: X (N, 2, 16, 16), y (N, 3) N, trial (N,), progress (N,)."""
     c = run.camp.calibration
     X = np.concatenate([t.maps for t in c])
@@ -71,7 +68,7 @@ def calibration_arrays(run: Analysis):
     return X, y, trial, progress
 
 
-def force(run: Analysis) -> None:
+def force(run: ReportRun) -> None:
     if not run.camp.calibration:
         run.skip("force", "no complete force_calibration sessions")
         return

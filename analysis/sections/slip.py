@@ -3,25 +3,21 @@ the live detector saved with the T-s5 artifact."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from analysis import study
 from analysis.markdown import counted
+from analysis.report_run import ReportRun
 from analysis.sections.tracking import representative
 from analysis.tracking import unwrap_angle
 from layerskin_exp.estimation.artifact import CAUSAL_CUES, Estimator
 from layerskin_exp.estimation.detector import SlipDetector
 from layerskin_exp.estimation.slip import CueTrial, candidates, cue_score, evaluate_loto, vision_slip_events
 
-if TYPE_CHECKING:
-    from analysis.report import Analysis
-
 LIVE_SLIP_CUE = "interlayer"  # the cue of the slip detector saved with the T-s5 artifact
 
 
-def cue_signal(run: Analysis, cue: str, i: int, f) -> np.ndarray | None:
+def cue_signal(run: ReportRun, cue: str, i: int, f) -> np.ndarray | None:
     """Grip trial i's raw cue signal (K,) from its features f; None when it needs a missing T-s5."""
     t = run.camp.grip[i]
     if cue == "superficial":
@@ -40,7 +36,7 @@ def cue_signal(run: Analysis, cue: str, i: int, f) -> np.ndarray | None:
     return np.linalg.norm(force, axis=1) if cue == "f_xyz" else force[:, 2]
 
 
-def slip(run: Analysis) -> None:
+def slip(run: ReportRun) -> None:
     grip = run.camp.grip
     if not grip:
         run.skip("slip", "no complete grip_depth sessions")
@@ -99,7 +95,7 @@ def slip(run: Analysis) -> None:
         _slip_figures(run)
 
 
-def _slip_figures(run: Analysis) -> None:
+def _slip_figures(run: ReportRun) -> None:
     from analysis.figures import slip_detections
     from layerskin_exp.estimation.slip import detect, matched_pairs
 

@@ -2,19 +2,15 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from analysis import study
 from analysis.markdown import counted
+from analysis.report_run import ReportRun
 from analysis.tracking import TrackingTrial, loto_calibration, unwrap_angle
 
-if TYPE_CHECKING:
-    from analysis.report import Analysis
 
-
-def tracking(run: Analysis) -> None:
+def tracking(run: ReportRun) -> None:
     grip = run.camp.grip
     if not grip:
         run.skip("tracking", "no complete grip_depth sessions")
@@ -55,7 +51,7 @@ def tracking(run: Analysis) -> None:
         _tracking_figures(run)
 
 
-def representative(run: Analysis, motion: str) -> int | None:
+def representative(run: ReportRun, motion: str) -> int | None:
     """The grip trial shown for a motion: the first at g = 12 mm (else the middle depth)."""
     idx = [i for i, t in enumerate(run.camp.grip) if t.motion == motion]
     if not idx:
@@ -65,7 +61,7 @@ def representative(run: Analysis, motion: str) -> int | None:
     return next(i for i in idx if run.camp.grip[i].grip_depth_mm == g)
 
 
-def _tracking_figures(run: Analysis) -> None:
+def _tracking_figures(run: ReportRun) -> None:
     from analysis.figures import tracking_plot
 
     for motion, unit in (("translation", "displacement (mm)"), ("torsion", "angle (°)")):

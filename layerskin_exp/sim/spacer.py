@@ -10,12 +10,9 @@ Lengths mm, pressures kPa, stiffness per area kPa/mm.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-if TYPE_CHECKING:  # only a type: the config builds the sheet's rigidity with laminate, which uses this law
-    from layerskin_exp.sim.config import SpacerConfig
+from layerskin_exp.sim.spacer_config import SpacerConfig
 
 _SOLID_STRAIN_CAP = 0.85  # beyond this the squeezed-solid law continues with its tangent (no pole)
 _TRANSITION = 0.02  # strain width over which the walls come into contact (smooth onset)

@@ -1,0 +1,71 @@
+"""The spacer lattice's parameters (`sim.spacer`), below both the skin's config (`config.SimConfig`)
+and the spacer's law (`spacer.SpacerLaw`), which the config's sheet rigidity reaches through
+`laminate`: kept apart so the three import no circle."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from layerskin_exp.config import require
+
+
+def positive(value: float, key: str, what: str = "must be > 0") -> None:
+    require(value is not None and value > 0, key, value, what)
+
+
+@dataclass
+class SpacerConfig:
+    """The compliant lattice between the two FSR layers.
+
+    Ecoflex 00-10 has a 100 % modulus of 55 kPa (Smooth-On datasheet) and an initial Young's
+    modulus of roughly 40-55 kPa; 10 % thinner lowers it, hence 35 kPa for the solid walls.
+    A hexagonal honeycomb of cell pitch `cell_mm` and wall thickness `wall_mm` has solid fraction
+    2t/P (1 - t/2P); loaded along its prism axis its modulus is fraction x E and its transverse
+    shear modulus about half the solid's shear modulus times the fraction (Gibson & Ashby).
+    """
+
+    modulus_kpa: float = 35.0  # Young's modulus of the (thinned) solid silicone
+    poisson: float = 0.49  # silicone is nearly incompressible
+    thickness_mm: float = 2.5  # lattice height
+    cell_mm: float = 2.0  # hexagonal cell pitch (the "feature size")
+    wall_mm: float = 0.5  # wall thickness of the lattice
+    width_mm: float = 26.0  # side of the square spacer pad (24 mm array + border)
+    confinement_length_mm: float = 2.0  # half-width of the squeezed region (~ indenter radius), sets S
+    lattice_contrast: float = 0.25  # relative depth of the cell pattern seen by the deep layer
+
+    def __post_init__(self) -> None:
+        positive(self.modulus_kpa, "sim.spacer.modulus_kpa", "Young's modulus must be > 0 kPa")
+        require(0 <= self.poisson < 0.5, "sim.spacer.poisson", self.poisson, "must lie in [0, 0.5)")
+        positive(self.thickness_mm, "sim.spacer.thickness_mm", "spacer height must be > 0 mm")
+        positive(self.cell_mm, "sim.spacer.cell_mm", "lattice cell pitch must be > 0 mm")
+        require(self.wall_mm is not None and 0 < self.wall_mm < self.cell_mm, "sim.spacer.wall_mm", self.wall_mm,
+                "wall thickness must be > 0 and smaller than the cell pitch")
+        positive(self.width_mm, "sim.spacer.width_mm", "pad side must be > 0 mm")
+        positive(self.confinement_length_mm, "sim.spacer.confinement_length_mm", "must be > 0 mm")
+        require(self.lattice_contrast is not None and 0 <= self.lattice_contrast < 0.5,
+                "sim.spacer.lattice_contrast", self.lattice_contrast, "must lie in [0, 0.5) to keep the load positive")
+
+    @property
+    def solid_fraction(self) -> float:
+        """Relative density of the hexagonal honeycomb (0..1)."""
+        r = self.wall_mm / self.cell_mm
+        return min(2.0 * r * (1.0 - 0.5 * r), 0.95)
+
+    @property
+    def densification_strain(self) -> float:
+        """Compressive strain at which the bulging walls fill the voids (1 - solid fraction)."""
+        return 1.0 - self.solid_fraction
+
+    @property
+    def lattice_modulus_kpa(self) -> float:
+        """Out-of-plane (prism-axis) modulus of the lattice, kPa."""
+        return self.solid_fraction * self.modulus_kpa
+
+    @property
+    def shear_modulus_kpa(self) -> float:
+        """Transverse shear modulus of the open lattice, kPa (~ fraction/2 x solid G)."""
+        return 0.5 * self.solid_fraction * self.solid_shear_modulus_kpa
+
+    @property
+    def solid_shear_modulus_kpa(self) -> float:
+        return self.modulus_kpa / (2.0 * (1.0 + self.poisson))
