@@ -208,10 +208,10 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
         log.error("device error before connecting: %s", one_line(e))
         _fail(one_line(e))
     with _sigterm_as_exception():
-        return _run_connected(cfg, rig, typed, body)
+        return _run_connected(cfg, setup, rig, typed, body)
 
 
-def _run_connected(cfg: DictConfig, rig, typed, body):
+def _run_connected(cfg: DictConfig, setup: str, rig, typed, body):
     from layerskin_exp.log import SessionInUseError
     from layerskin_exp.provenance import provenance
     from protocols.runner import (
@@ -250,7 +250,7 @@ def _run_connected(cfg: DictConfig, rig, typed, body):
     if getattr(typed, "live", False):
         from layerskin_exp.log.view.live import LiveView
 
-        live = LiveView(port=typed.live_port)
+        live = LiveView(setup, port=typed.live_port)
         print(f"live view: open {live.url} in Foxglove (Open connection > Foxglove WebSocket)", flush=True)
     finished = False
     try:

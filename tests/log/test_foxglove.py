@@ -206,6 +206,8 @@ def check_app_layout(doc: dict, file_topics: set[str]) -> dict[str, dict]:
         assert pid.split("!", 1)[0] in APP_PANEL_TYPES and "!" in pid, pid
         missing = _panel_topics(pid, config) - file_topics
         assert not missing, f"{pid} ({config.get('foxglovePanelTitle')}) shows topics the file lacks: {missing}"
+        # titled for both apps: Foxglove reads foxglovePanelTitle, Lichtblick lichtblickPanelTitle
+        assert config.get("foxglovePanelTitle") and config.get("lichtblickPanelTitle") == config["foxglovePanelTitle"], pid
     return doc["configById"]
 
 
@@ -292,6 +294,9 @@ def test_rig_layouts_for_the_live_view_name_only_that_rigs_topics():
         for estimate in (False, True):
             topics = rig_topics(setup, estimate=estimate, camera=True)
             check_app_layout(rig_layout(setup, estimate=estimate, camera=True), topics)
+    # the gripper's 3D panel shows the markers' poses the live view serves, beside the TCP
+    scene = next(c for pid, c in rig_layout("gripper")["configById"].items() if pid.startswith("3D!"))
+    assert set(scene["topics"]) == {S.TCP_TOPIC, S.marker_pose_topic(0), S.marker_pose_topic(1)}
     with pytest.raises(ValueError, match="setup='arm'"):
         rig_topics("arm")
 

@@ -19,10 +19,14 @@ from ws_client import FoxgloveClient
 from hardware import build_rig
 from layerskin_exp.log import load_session
 from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.view.layout import rig_topics
 from layerskin_exp.log.view.live import FIXED_TOPICS, LiveView
 from protocols.app import run_app
 from protocols.grip import run_grip_trial
 from tests.protocols.conftest import TINY_GRIP, compose_app
+
+# what a grip rig's live view advertises at start: its setup's topics of known schema
+GRIP_TOPICS = set(FIXED_TOPICS) & rig_topics("gripper")
 
 
 def _decoder(ch: dict):
@@ -35,9 +39,9 @@ def _decoder(ch: dict):
 
 def test_client_receives_a_running_trial_decimated(tmp_path):
     cfg, typed = compose_app("grip_depth", [*TINY_GRIP, f"data_root={tmp_path}", "progress=false"])
-    with LiveView(port=0) as view:
+    with LiveView("gripper", port=0) as view:
         client = FoxgloveClient("127.0.0.1", view.port)
-        client.read_until(lambda c: set(FIXED_TOPICS) <= {ch["topic"] for ch in c.channels.values()})
+        client.read_until(lambda c: GRIP_TOPICS <= {ch["topic"] for ch in c.channels.values()})
         assert client.server_info is not None
         client.subscribe(list(client.channels))
         client.start()
@@ -79,6 +83,12 @@ def test_client_receives_a_running_trial_decimated(tmp_path):
     assert [m.name for m in logs] == session.streams["events"]["kind"]
     assert {m.child_frame_id for _, m in got[S.TF_TOPIC]} >= {"tool", "skin", "camera"}
     assert got[S.TCP_TOPIC][0][1].frame_id == "base"
+    # every channel advertised carried data: none of the platform's (F/T, stage) on the grip rig,
+    # and the markers' poses the gripper layout's 3D panel shows
+    advertised = {ch["topic"] for ch in client.channels.values()}
+    assert advertised == set(got), f"advertised without data: {sorted(advertised - set(got))}"
+    assert {S.WRENCH_TOPIC, S.STAGE_TOPIC}.isdisjoint(advertised)
+    assert {t for t in advertised if t.startswith("/markers/")} == {S.marker_pose_topic(0), S.marker_pose_topic(1)}
 
 
 def test_live_option_serves_and_stops_with_the_run(tmp_path, capsys):
@@ -110,7 +120,7 @@ def _event(view: LiveView, k: int) -> int:
 
 
 def test_a_late_client_gets_the_earlier_events_once_and_others_no_repeat():
-    with LiveView(port=0) as view:
+    with LiveView("gripper", port=0) as view:
         early = _log_client(view.port)
         time.sleep(0.2)
         sent = [_event(view, k) for k in range(3)]
@@ -126,7 +136,7 @@ def test_a_late_client_gets_the_earlier_events_once_and_others_no_repeat():
 
 def test_a_late_client_gets_a_long_run_whole():
     """A replay far longer than the SDK's default per-client queue (1024) arrives whole."""
-    with LiveView(port=0) as view:
+    with LiveView("gripper", port=0) as view:
         sent = [_event(view, k) for k in range(5000)]
         late = _log_client(view.port, start=False)
         late.read_until(lambda c: len(c.messages) >= len(sent), limit=20_000)
@@ -136,7 +146,7 @@ def test_a_late_client_gets_a_long_run_whole():
 
 def test_a_foxglove_websocket_v1_client_is_refused_with_one_warning(caplog):
     """The SDK's server speaks foxglove.sdk.v1 only; refusals are reported once, not as an error each."""
-    with caplog.at_level(logging.DEBUG), LiveView(port=0) as view:
+    with caplog.at_level(logging.DEBUG), LiveView("gripper", port=0) as view:
         for _ in range(3):
             with pytest.raises(ConnectionError, match="400"):
                 FoxgloveClient("127.0.0.1", view.port, subprotocol="foxglove.websocket.v1", timeout=5)
@@ -171,7 +181,7 @@ def test_hold_keeps_serving_after_the_run_until_stopped(tmp_path, capsys):
         port = int(out.split("ws://127.0.0.1:", 1)[1].split()[0])
         session = load_session(next(tmp_path.rglob("*.mcap")))  # closed before the hold began
         client = FoxgloveClient("127.0.0.1", port)  # after the run: the server is still up
-        client.read_until(lambda c: set(FIXED_TOPICS) <= {ch["topic"] for ch in c.channels.values()})
+        client.read_until(lambda c: GRIP_TOPICS <= {ch["topic"] for ch in c.channels.values()})
         client.subscribe(list(client.channels))
         events_ns = sorted(session.unix_ns(session.streams["events"]["host_t_ns"]))
         frame_ns = session.unix_ns(session.streams["skin"]["host_t_ns"])

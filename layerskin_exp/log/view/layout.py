@@ -29,6 +29,7 @@ import foxglove.layouts as fl
 
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.view.frame_tree import BASE
+from layerskin_exp.rig import MARKER_IDS
 from layerskin_exp.types import ADC_MAX
 
 SETUPS = ("platform", "gripper")
@@ -40,8 +41,9 @@ APP_PANEL_TYPES = {"Image": "Image", "Plot": "Plot", "ThreeDee": "3D", "Log": "R
 def rig_topics(setup: str, *, estimate: bool = False, camera: bool = False) -> set[str]:
     """The topics a session of this rig carries (what a live view of it serves).
 
-    setup: "platform" (force calibration: stage, F/T) or "gripper" (arm, gripper, camera);
-    estimate: the live estimator's /estimate/* topics; camera: saved camera images."""
+    setup: "platform" (force calibration: stage, F/T) or "gripper" (arm, gripper, and the
+    printed markers' poses the camera tracks); estimate: the live estimator's /estimate/* topics;
+    camera: saved camera images."""
     if setup not in SETUPS:
         raise ValueError(f"setup={setup!r}: use one of {', '.join(SETUPS)}")
     topics = {*S.SKIN_TOPICS.values(), *(S.cop_topic(layer) for layer in S.SKIN_TOPICS), SUMMARY_TOPIC,
@@ -49,7 +51,7 @@ def rig_topics(setup: str, *, estimate: bool = False, camera: bool = False) -> s
     if setup == "platform":
         topics |= {S.WRENCH_TOPIC, S.STAGE_TOPIC}
     else:
-        topics |= {S.TCP_TOPIC, S.GRIPPER_TOPIC}
+        topics |= {S.TCP_TOPIC, S.GRIPPER_TOPIC, *(S.marker_pose_topic(m) for m in MARKER_IDS)}
         if camera:
             topics |= {S.CAMERA_TOPIC, S.CAMERA_MARKERS_TOPIC}
     if estimate:
@@ -159,8 +161,8 @@ def app_layout(layout: fl.Layout) -> dict:
                 raise ValueError(f"panel type {content['panelType']!r} has no app equivalent here")
             pid = f"{kind}!{len(config_by_id) + 1:x}"
             config = dict(content.get("config") or {})
-            if content.get("title"):
-                config["foxglovePanelTitle"] = content["title"]
+            if content.get("title"):  # Foxglove reads the first key, Lichtblick the second
+                config["foxglovePanelTitle"] = config["lichtblickPanelTitle"] = content["title"]
             config_by_id[pid] = config
             return pid
         return split(content["direction"], content["items"])

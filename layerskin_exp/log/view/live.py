@@ -7,8 +7,10 @@ bytes written to the file, with the file's log times (Unix ns), handed to the Fo
 server (Rust, its own threads), so the writer pays one time comparison per frame and, ~30 times
 a second, one send.
 
-Channels for the fixed topics are advertised at start, so a client can subscribe before the
-first trial begins; marker topics are advertised when they first appear. A client that joins
+Channels for the topics the rig's setup streams (`layout.rig_topics`: a grip rig has no F/T or
+stage channel, a platform no arm, gripper or markers) are advertised at start, so a client can
+subscribe before the first trial begins; the optional ones (estimates, camera images) are
+advertised when they first appear. A client that joins
 late gets what was sent on a topic so far when it subscribes to it, sent to it alone: every
 protocol event (/log) and the latest REPLAY_MAX_PER_TOPIC messages of each other topic (about
 ten minutes at display rate), so a run that ended before the client connected (--hold) is
@@ -30,7 +32,9 @@ from collections import deque
 from collections.abc import Callable
 
 from layerskin_exp.log.session import schema as S
+from layerskin_exp.log.view.layout import rig_topics
 from layerskin_exp.log.view.skin_summary import DISPLAY_PERIOD_NS
+from layerskin_exp.rig import MARKER_IDS
 
 log = logging.getLogger(__name__)
 
@@ -41,7 +45,8 @@ REPLAY_MAX_PER_TOPIC = 20_000  # messages kept per other topic: ~10 min at the ~
 # a replay): room for every event and the kept messages of 20 topics.
 CLIENT_BACKLOG = REPLAY_MAX_EVENTS + 20 * REPLAY_MAX_PER_TOPIC
 
-# topic -> schema (protobuf class or JSON schema name) of what a session can carry from the start
+# topic -> schema (protobuf class or JSON schema name) of what a session can carry from the start;
+# a live view advertises those its rig's setup streams (rig_topics)
 FIXED_TOPICS = {
     S.SKIN_TOPICS["superficial"]: S.RawImage,
     S.SKIN_TOPICS["deep"]: S.RawImage,
@@ -54,6 +59,7 @@ FIXED_TOPICS = {
     S.GRIPPER_TOPIC: "layerskin.GripperState",
     S.TF_TOPIC: S.FrameTransform,
     S.LOG_TOPIC: S.Log,
+    **{S.marker_pose_topic(m): S.PoseInFrame for m in MARKER_IDS},
 }
 
 
@@ -98,16 +104,19 @@ class _Listener:
 
 
 class LiveView:
-    """A Foxglove WebSocket server on host:port (port 0: any free port, see .port).
+    """A Foxglove WebSocket server on host:port (port 0: any free port, see .port) for a session
+    of the rig `setup` ("platform" or "gripper"), whose channels it advertises at start.
 
     Open it in Foxglove with "Open connection" -> Foxglove WebSocket -> ws://127.0.0.1:<port>;
     `layout_json(setup)` is the rig's layout in the app's import format. close() stops the
     server; hold(stop) keeps it serving (after a run) until stop() says so or Ctrl-C.
     """
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 8765, period_ns: int = DISPLAY_PERIOD_NS,
+    def __init__(self, setup: str, host: str = "127.0.0.1", port: int = 8765, period_ns: int = DISPLAY_PERIOD_NS,
                  name: str = "layerskin-exp") -> None:
         import foxglove
+
+        streamed = rig_topics(setup)  # refuses an unknown setup, naming it
 
         self._foxglove = foxglove
         self.period_ns = int(period_ns)
@@ -118,7 +127,8 @@ class LiveView:
         self._sent: dict[str, deque] = {}  # topic -> (payload, log time) of what was sent, for late clients
         self._lock = threading.Lock()
         for topic, schema in FIXED_TOPICS.items():
-            self._channel(topic, schema)
+            if topic in streamed:
+                self._channel(topic, schema)
         self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context,
                                             server_listener=_Listener(self), message_backlog_size=CLIENT_BACKLOG)
         self.host, self.port = host, self.server.port
