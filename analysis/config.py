@@ -71,7 +71,7 @@ class AnalysisConfig:
 class ReportConfig:
     sessions: str = "data"  # the protocols' data_root: a run's sessions are reported without sessions=
     out: str = "outputs/report"
-    # A sensitivity screening result (`python -m analysis.sensitivity out=FILE`): the characterisation
+    # A sensitivity screening result (`python -m protocols.sensitivity out=FILE`): the characterisation
     # section shows its bands over the simulator's brackets beside the study. None: no bands.
     sensitivity: str | None = None
     skin: SkinConfig = field(default_factory=SkinConfig)

@@ -8,7 +8,7 @@ ready for OnlineEstimator.from_artifact and `python -m layerskin_exp.estimation.
 The estimators come from layerskin_exp.estimation; this module orchestrates them and writes tables.
 A missing input (no calibration campaign, no shear trials, no grip sessions, no markers) skips
 the sections that need it with the reason in results.json and report.md. `sensitivity=FILE` (a
-`python -m analysis.sensitivity out=FILE` result) adds the simulator's bands over its brackets to
+`python -m protocols.sensitivity out=FILE` result) adds the simulator's bands over its brackets to
 the characterisation section; a missing or unreadable file is refused before anything runs.
 `sessions=` defaults to `data`, where the protocols write; a folder without a session file is
 refused (exit 2), naming it.

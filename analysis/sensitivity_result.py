@@ -1,9 +1,9 @@
-"""A sensitivity screening result (`python -m analysis.sensitivity out=FILE`) read back for the
+"""A sensitivity screening result (`python -m protocols.sensitivity out=FILE`) read back for the
 report: `load_result(path)` checks and reads it, `bands(result, study, ours)` sets each outcome's
 band over the simulator's brackets beside the study's value and a campaign's.
 
-Kept apart from analysis.sensitivity, which runs campaigns (it sits above the protocols); the
-report reads only the file.
+The screen itself runs campaigns, so it is a study beside the protocols it drives
+(protocols.sensitivity); the report reads only the file.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 
 from layerskin_exp.config import ConfigError
 
-PRODUCE = "`python -m analysis.sensitivity out=FILE`"
+PRODUCE = "`python -m protocols.sensitivity out=FILE`"
 HOW_TO = (f"{PRODUCE} screens the brackets of layerskin_exp/sim/brackets.yaml (minutes on 2 cores; `size=quick` "
           "for a first look); pass the file to the report as `sensitivity=FILE`")
 

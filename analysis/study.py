@@ -67,7 +67,7 @@ SLIP_LATENCY_MS = {"before": 82, "after": 10}  # median tactile lead over vision
 ALL = {"force": FORCE, "slip": SLIP, "tracking": TRACKING, "characterization": CHARACTERIZATION,
        "heights": HEIGHTS, "force_range_n": FORCE_RANGE_N, "preload_n": PRELOAD_N, "slip_latency_ms": SLIP_LATENCY_MS}
 
-# The study's figure for each outcome of the sensitivity screen (analysis.sensitivity.OUTCOMES), with
+# The study's figure for each outcome of the sensitivity screen (protocols.sensitivity.OUTCOMES), with
 # where it stands; None where the study gives none (its note says what it gives instead).
 SENSITIVITY_OUTCOMES = {
     "shift_per_n_mm": {"value": None, "source": "not reported; only the shift at 1.9–2.1 N shear, Sec. IV-A"},

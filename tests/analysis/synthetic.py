@@ -134,14 +134,14 @@ def write_campaign(root, n_positions=6, grip_depths=(6, 12), trials=3, seed=0) -
 
 
 def write_sensitivity_result(path) -> Path:
-    """A screening result in the shape `python -m analysis.sensitivity` writes, with made-up
+    """A screening result in the shape `python -m protocols.sensitivity` writes, with made-up
     numbers chosen against the study's (no simulator runs): the inter-layer shift at 2 N spans
     1.0-1.5 mm (the study's 2.20 lies above), position CV 0.10-0.20 (the study's 0.145 inside),
     the normal load during shear 4.1-4.3 N (the study's about 6 above), the grip preload 4.0-9.0 N
     (the study's 3.74 below), the linear R² undefined everywhere."""
     import json
 
-    from analysis.sensitivity import OUTCOMES
+    from protocols.sensitivity import OUTCOMES
 
     names = ["sim.sheet.interface", "sim.cover.friction", "sim.rig.gripper.support_stiffness_n_per_mm"]
 

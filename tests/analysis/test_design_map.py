@@ -115,7 +115,7 @@ def test_design_search_sweeper_composes(tmp_path):
     """The Optuna search config as the app resolves it: NSGA-II, two maximised objectives, the
     spacer's four keys (in a subprocess: under pytest `protocols` can name the tests' package)."""
     pytest.importorskip("hydra_plugins.hydra_optuna_sweeper")
-    r = run_cli("analysis.design_search", ["--cfg", "hydra", "hydra/sweeper=design_search"], tmp_path)
+    r = run_cli("protocols.design_search", ["--cfg", "hydra", "hydra/sweeper=design_search"], tmp_path)
     assert r.returncode == 0, r.stderr[-2000:]
     sweeper = r.stdout[r.stdout.index("sweeper:"):]
     assert "_target_: optuna.samplers.NSGAIISampler" in sweeper

@@ -125,7 +125,7 @@ def test_without_a_screening_result_the_report_says_how_to_make_one(campaign, tm
     cfg.figures = False
     run_report(only_cal, tmp_path / "out", cfg)
     md = (tmp_path / "out" / "report.md").read_text()
-    assert "Sensitivity bands: none given. `python -m analysis.sensitivity out=FILE`" in md
+    assert "Sensitivity bands: none given. `python -m protocols.sensitivity out=FILE`" in md
     assert "sensitivity=FILE" in md
     assert "sensitivity_bands" not in json.loads((tmp_path / "out" / "results.json").read_text())["characterization"]
 

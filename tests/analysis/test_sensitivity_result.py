@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from analysis import sensitivity as sens
 from analysis import sensitivity_result as sr
 from analysis import study
+from protocols import sensitivity as sens
 
 sys.path.insert(0, str(Path(__file__).parent))
 from synthetic import write_sensitivity_result  # noqa: E402

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from analysis import sensitivity as sens
+from protocols import sensitivity as sens
 
 
 def test_brackets_file_gives_a_problem_with_every_screened_entry():
@@ -51,7 +51,7 @@ def test_tiny_screen_moves_only_what_the_parameter_reaches(tmp_path):
 
     key = "sim.rig.gripper.support_stiffness_n_per_mm"
     out = tmp_path / "s.json"
-    r = run_cli("analysis.sensitivity", ["size=tiny", "trajectories=2", f"params=[{key}]", f"out={out}"],
+    r = run_cli("protocols.sensitivity", ["size=tiny", "trajectories=2", f"params=[{key}]", f"out={out}"],
                 tmp_path)
     assert r.returncode == 0, r.stderr[-3000:]
     res = json.loads(out.read_text())

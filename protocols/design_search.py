@@ -1,4 +1,4 @@
-"""`python -m analysis.design_search -m hydra/sweeper=design_search [overrides]`: search the spacer
+"""`python -m protocols.design_search -m hydra/sweeper=design_search [overrides]`: search the spacer
 design space (conf/hydra/sweeper/design_search.yaml) for sensitivity and range.
 
 The task is the calibration campaign itself (conf/force_calibration.yaml, the same app and the

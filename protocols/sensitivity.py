@@ -1,4 +1,4 @@
-"""`python -m analysis.sensitivity [size=quick] [trajectories=R] [out=FILE] [params=[a,b]]`
+"""`python -m protocols.sensitivity [size=quick] [trajectories=R] [out=FILE] [params=[a,b]]`
 
 Screens the simulated bench's uncertain parameters (their brackets: layerskin_exp/sim/brackets.yaml) with
 SALib's Morris method and prints which headline outcomes move and by how much.
