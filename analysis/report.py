@@ -23,7 +23,6 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-import hydra
 import torch
 from omegaconf import DictConfig
 from tqdm.auto import tqdm
@@ -36,15 +35,12 @@ from analysis.sections import force as force_section
 from analysis.sections import slip as slip_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import sessions_problem
-from layerskin_exp.cli import CONF_DIR as _CONF_DIR
-from layerskin_exp.cli import EXIT_CONFIG, answer_help, preflight, refuse
+from layerskin_exp.cli import EXIT_CONFIG, hydra_main, refuse
 from layerskin_exp.config import SkinConfig, validate
 from layerskin_exp.estimation.cnn import default_torch_threads
 from layerskin_exp.provenance import provenance
 
 log = logging.getLogger(__name__)
-
-CONF_DIR = str(_CONF_DIR)  # conf/ in a checkout, layerskin_exp/conf when installed
 
 
 class Analysis(ReportRun):
@@ -153,7 +149,7 @@ def _out_problem(out) -> str:
     return ""
 
 
-@hydra.main(version_base=None, config_path=CONF_DIR, config_name="report")
+@hydra_main("report")
 def main(cfg: DictConfig) -> None:
     try:
         rc: ReportConfig = validate(cfg)
@@ -179,7 +175,6 @@ def _check_command_line(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    answer_help("report", sys.argv[1:])
-    _check_command_line(sys.argv[1:])
-    preflight("report", sys.argv[1:])
-    main()
+    from analysis.cli import report
+
+    report()

@@ -1,4 +1,11 @@
-"""What every Hydra command line of the project shares: refusing a bad config before anything runs.
+"""What every Hydra command line of the project shares: one entry path, refusing a bad config
+before anything runs.
+
+Every command that takes config is a Hydra app on conf/<name>.yaml, decorated by `hydra_main(name)`
+(one config folder, one `version_base`) and started by `run_command(name, load_main, ...)`:
+`--help` from one composition, the command's own checks of its command line, then `preflight`,
+then Hydra. Only the small file tools (`python -m layerskin_exp.log`, `hardware.emulate`, the
+export and the benchmarks) parse their arguments with argparse.
 
 `preflight(config_name, argv)` composes and validates the config of every job a command line
 asks for (a multirun's whole sweep) before Hydra starts, so a bad override ends the command
@@ -12,14 +19,23 @@ from __future__ import annotations
 
 import itertools
 import sys
+from collections.abc import Callable, Iterable
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 
 from layerskin_exp import config
-from layerskin_exp.config import CONF_DIR, ConfigError, check_retired, format_config_error, one_line
+from layerskin_exp.config import (
+    CONF_DIR,
+    VERSION_BASE,
+    ConfigError,
+    check_retired,
+    format_config_error,
+    one_line,
+)
 
-__all__ = ["CONF_DIR", "EXIT_CONFIG", "answer_help", "expand_sweep", "one_line", "preflight", "refuse"]
+__all__ = ["CONF_DIR", "EXIT_CONFIG", "answer_help", "expand_sweep", "hydra_main", "one_line", "preflight", "refuse",
+           "run_command"]
 
 
 EXIT_CONFIG = 2
@@ -32,6 +48,33 @@ LAUNCHER_EXTRAS = {"slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
 def refuse(err: Exception) -> None:
     print(format_config_error(err), file=sys.stderr)
     sys.exit(EXIT_CONFIG)
+
+
+def hydra_main(config_name: str):
+    """The decorator of every Hydra app: conf/<config_name>.yaml from CONF_DIR, VERSION_BASE."""
+    import hydra
+
+    return hydra.main(version_base=VERSION_BASE, config_path=str(CONF_DIR), config_name=config_name)
+
+
+def run_command(config_name: str, load_main: Callable[[], Callable[[], object]],
+                before: Iterable[Callable[[list[str]], None]] = (),
+                after: Iterable[Callable[[list[str]], None]] = ()) -> None:
+    """The one entry path of a command that takes config (its console script and `python -m`).
+
+    Answers `--help` (from one composition, before the command's heavy modules load), runs the
+    command's own checks of its command line (`before` preflight, `after` it: each refuses with
+    exit 2), composes and validates every job (`preflight`), then runs the Hydra app
+    `load_main()` returns (decorated by `hydra_main(config_name)`; loaded last, so a refused
+    command line never imports it). The caller has stored its schemas. Reads sys.argv, as Hydra does."""
+    argv = sys.argv[1:]
+    answer_help(config_name, argv)
+    for check in before:
+        check(argv)
+    preflight(config_name, argv)
+    for check in after:
+        check(argv)
+    load_main()()
 
 
 def expand_sweep(overrides: list[str]) -> list[list[str]]:
@@ -65,7 +108,7 @@ def answer_help(config_name: str, argv: list[str]) -> None:
     overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
     GlobalHydra.instance().clear()
     try:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base=VERSION_BASE):
             cfg = compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
         template = cfg.hydra.help.template  # the header's ${...} resolve against this command line
     except HydraException as e:

@@ -37,6 +37,11 @@ def _conf_dir() -> Path:
 CONF_DIR = _conf_dir()
 
 
+# The Hydra behaviour every composition of the project asks for: the apps (layerskin_exp.cli.hydra_main),
+# `compose` and `--help`.
+VERSION_BASE = "1.3"
+
+
 class ConfigError(ValueError):
     """A configuration value is wrong. The message names the key, the value and the fix."""
 
@@ -178,7 +183,7 @@ def compose(config_name: str, overrides: Sequence[str] = ()):
     check_retired(overrides)
     GlobalHydra.instance().clear()
     try:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base=VERSION_BASE):
             cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
     except HydraException as e:
         raise ConfigError(one_line(e)) from None

@@ -12,15 +12,13 @@ a resumed search re-measures its designs at no simulation cost.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig, OmegaConf
 
 import protocols.config  # noqa: F401 - stores the calibration app's schemas for Hydra
-from layerskin_exp.config import CONF_DIR
-from protocols.app import preflight, run_app
+from layerskin_exp.cli import hydra_main, run_command
+from protocols.app import run_app
 from protocols.calibration import PROTOCOL, run_campaign
 from protocols.identity import design_id
 
@@ -34,7 +32,7 @@ def objectives(folder: Path) -> list[float]:
     return [float(o.get(k) or 0.0) for k in OBJECTIVES]
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="force_calibration")
+@hydra_main("force_calibration")
 def main(cfg: DictConfig) -> list[float]:
     run_app(cfg, "platform", run_campaign)
     folder = Path(cfg.data_root) / PROTOCOL / design_id(OmegaConf.to_container(cfg, resolve=True))
@@ -44,5 +42,4 @@ def main(cfg: DictConfig) -> list[float]:
 
 
 if __name__ == "__main__":
-    preflight("force_calibration", sys.argv[1:])
-    main()
+    run_command("force_calibration", lambda: main)

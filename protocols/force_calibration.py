@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import sys
-
-import hydra
 from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
-from layerskin_exp.config import CONF_DIR
-from protocols.app import answer_help, preflight, refuse_shared_files, run_app, sweep_job
+from layerskin_exp.cli import hydra_main, run_command
+from protocols.app import refuse_shared_files, run_app, sweep_job
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="force_calibration")
+@hydra_main("force_calibration")
 def main(cfg: DictConfig) -> dict:
     return sweep_job(lambda: _campaign(cfg))
 
@@ -26,10 +23,7 @@ def _campaign(cfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console script: answer --help, refuse a bad command line as a whole, then let Hydra run it."""
-    answer_help("force_calibration", sys.argv[1:])
-    preflight("force_calibration", sys.argv[1:])
-    refuse_shared_files(sys.argv[1:])
-    main()
+    run_command("force_calibration", lambda: main, after=[refuse_shared_files])
 
 
 if __name__ == "__main__":

@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import sys
-
-import hydra
 from omegaconf import DictConfig
 
 import protocols.config  # noqa: F401 - stores this app's schemas (and those it builds on) for Hydra
-from layerskin_exp.config import CONF_DIR
-from protocols.app import answer_help, preflight, refuse_renamed, refuse_shared_files, run_app, sweep_job
+from layerskin_exp.cli import hydra_main, run_command
+from protocols.app import refuse_renamed, refuse_shared_files, run_app, sweep_job
 from protocols.config import RENAMED_KEYS
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="grip_depth")
+@hydra_main("grip_depth")
 def main(cfg: DictConfig) -> dict:
     return sweep_job(lambda: _trial(cfg))
 
@@ -27,11 +24,8 @@ def _trial(cfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console script: answer --help, refuse a bad command line as a whole, then let Hydra run it."""
-    answer_help("grip_depth", sys.argv[1:])
-    refuse_renamed(sys.argv[1:], RENAMED_KEYS)
-    preflight("grip_depth", sys.argv[1:])
-    refuse_shared_files(sys.argv[1:])
-    main()
+    run_command("grip_depth", lambda: main, before=[lambda argv: refuse_renamed(argv, RENAMED_KEYS)],
+                after=[refuse_shared_files])
 
 
 if __name__ == "__main__":
