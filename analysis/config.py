@@ -1,4 +1,5 @@
-"""Analysis schemas (Hydra ConfigStore group `analysis`, and the `report` app's root schema).
+"""Analysis schemas (Hydra ConfigStore group `analysis`, and the root schemas of the `report` and
+`design_map` apps).
 
 Defaults are the study's settings; presets under conf/analysis/ (demo, default, paper) override
 only what they change.
@@ -84,10 +85,37 @@ class ReportConfig:
             load_result(self.sensitivity)
 
 
+@dataclass
+class DesignMapConfig:
+    sweep_dir: str = "data/design_sweep"
+    out: str | None = None  # default <sweep_dir>/design_map
+    fz_bins_n: list[float] = field(default_factory=lambda: [1.0, 2.5, 4.0, 6.5])
+    sensitivity_max_shear_n: float = 1.0
+    saturation_ratio: float = 0.3
+    noise_sigmas: float = 2.0
+    min_frames: int = 30
+    folds: int = 4  # position-grouped folds of every estimator's R²
+    ts5: bool = True  # train the T-s5 CNN-GRU per design and fold
+    n_jobs: int = 1  # campaigns measured in parallel (processes; each trains on one torch thread)
+    figures: bool = True
+    progress: bool = False
+    # The sweep's T-s5 preset: the demo's optimiser (batch 64, lr 1e-3 halved on plateaus, 4096
+    # windows an epoch) capped at 12 epochs (768 steps, ~28 CPU-s a fold on this machine). The
+    # report needs ~3000 steps to pass the linear baseline on Fx (conf/analysis/default.yaml), so
+    # the map's T-s5 is a short-budget model: compare designs by it, not against the study.
+    cnn: CnnConfig = field(default_factory=lambda: CnnConfig(
+        configurations=["T-s5"], batch_size=64, segment_windows=16, lr=1e-3, lr_schedule="plateau",
+        lr_plateau_factor=0.5, lr_plateau_patience=2, max_epochs=12, patience=4, max_train_windows=4096,
+        torch_threads=1))
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    characterization: CharacterizationConfig = field(default_factory=lambda: CharacterizationConfig(n_bootstrap=999))
+
+
 def _store() -> None:
     cs = ConfigStore.instance()
     cs.store(group="analysis", name="analysis_schema", node=AnalysisConfig)
     cs.store(name="report_schema", node=ReportConfig)
+    cs.store(name="design_map_schema", node=DesignMapConfig)
 
 
 _store()

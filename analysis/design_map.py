@@ -1,4 +1,5 @@
-"""`python -m analysis.design_map sweep_dir=DIR [out=DIR]`: the spacer design map of a design sweep.
+"""`python -m analysis.design_map sweep_dir=DIR [out=DIR]`: the spacer design map of a design sweep
+(a Hydra app on conf/design_map.yaml, schema `analysis.config.DesignMapConfig`).
 
 Reads every design folder of a force-calibration sweep (`<sweep_dir>/force_calibration/<design>/`,
 one per design x bracket, as `python -m protocols.force_calibration -m +design=... +bracket=...`
@@ -45,20 +46,21 @@ from __future__ import annotations
 import json
 import sys
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 from scipy.stats import linregress
 
 from analysis.characterization import PressTrial, cop_shift_at_shear, uniformity
-from analysis.config import CharacterizationConfig
+from analysis.config import DesignMapConfig
 from analysis.markdown import json_safe
 from analysis.metrics import r2_score
 from analysis.run_info import convergence_caveats, training_state
-from layerskin_exp.config import ConfigError, retired_message
-from layerskin_exp.estimation.config import CnnConfig, PreprocessConfig
+from layerskin_exp.cli import hydra_main, refuse, run_command
+from layerskin_exp.config import ConfigError, retired_message, validate
+from layerskin_exp.estimation.config import CnnConfig
 from layerskin_exp.estimation.linear import LinearForceModel, linear_features
 from layerskin_exp.features import two_layer_features
 from layerskin_exp.sim.config import BRACKETS_FILE
@@ -69,32 +71,6 @@ RANKED = (("shift_per_n_mm", "shift per newton at the slides' preload (mm/N)", T
           ("dynamic_range", "shear dynamic range (high/low)", True), ("linear_r2_shear", "linear shear R²", True),
           ("ts5_r2_shear", "T-s5 shear R² (the sweep's training preset)", True),
           ("densification_n", "normal range before densification (N)", True))
-
-
-@dataclass
-class DesignMapConfig:
-    sweep_dir: str = "data/design_sweep"
-    out: str | None = None  # default <sweep_dir>/design_map
-    fz_bins_n: list[float] = field(default_factory=lambda: [1.0, 2.5, 4.0, 6.5])
-    sensitivity_max_shear_n: float = 1.0
-    saturation_ratio: float = 0.3
-    noise_sigmas: float = 2.0
-    min_frames: int = 30
-    folds: int = 4  # position-grouped folds of every estimator's R²
-    ts5: bool = True  # train the T-s5 CNN-GRU per design and fold
-    n_jobs: int = 1  # campaigns measured in parallel (processes; each trains on one torch thread)
-    figures: bool = True
-    progress: bool = False
-    # The sweep's T-s5 preset: the demo's optimiser (batch 64, lr 1e-3 halved on plateaus, 4096
-    # windows an epoch) capped at 12 epochs (768 steps, ~28 CPU-s a fold on this machine). The
-    # report needs ~3000 steps to pass the linear baseline on Fx (conf/analysis/default.yaml), so
-    # the map's T-s5 is a short-budget model: compare designs by it, not against the study.
-    cnn: CnnConfig = field(default_factory=lambda: CnnConfig(
-        configurations=["T-s5"], batch_size=64, segment_windows=16, lr=1e-3, lr_schedule="plateau",
-        lr_plateau_factor=0.5, lr_plateau_patience=2, max_epochs=12, patience=4, max_train_windows=4096,
-        torch_threads=1))
-    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
-    characterization: CharacterizationConfig = field(default_factory=lambda: CharacterizationConfig(n_bootstrap=999))
 
 
 # ---------------------------------------------------------------------------- one campaign
@@ -628,25 +604,20 @@ def run(cfg: DesignMapConfig) -> dict:
     return result
 
 
-def parse(argv: list[str]) -> DesignMapConfig:
-    """key=value overrides onto the schema; a bad key or value is one line naming it."""
-    base = OmegaConf.structured(DesignMapConfig)
-    cli = OmegaConf.from_dotlist([a for a in argv if "=" in a])
-    bad = [a for a in argv if "=" not in a]
-    if bad:
-        raise ValueError(f"{bad[0]}: expected key=value (e.g. sweep_dir=data/design_sweep)")
-    merged = OmegaConf.merge(base, cli)
-    return OmegaConf.to_object(merged)
-
-
-def main(argv: list[str] | None = None) -> int:
+@hydra_main("design_map")
+def main(cfg: DictConfig) -> None:
     try:
-        cfg = parse(sys.argv[1:] if argv is None else argv)
-    except Exception as e:  # noqa: BLE001 - OmegaConf's key/type errors: one line, exit 2
-        key = getattr(e, "full_key", None)  # OmegaConf's errors carry the key on a later line
-        head = str(e).splitlines()[0]
-        print(f"configuration error: {key}: {head}" if key else f"configuration error: {head}", file=sys.stderr)
-        return 2
+        typed: DesignMapConfig = validate(cfg)
+    except ConfigError as e:
+        refuse(e)
+    code = command(typed)
+    if code:
+        sys.exit(code)
+
+
+def command(cfg: DesignMapConfig) -> int:
+    """The command on its validated config: the map, or exit code 2 with one line when the sweep
+    folder is missing, holds no campaign, or a campaign cannot be read."""
     if not Path(cfg.sweep_dir).is_dir():
         print(f"configuration error: sweep_dir={cfg.sweep_dir}: no such folder", file=sys.stderr)
         return 2
@@ -660,5 +631,10 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def cli() -> None:
+    """`python -m analysis.design_map`: --help, a bad key or value refused in one line (exit 2), then the map."""
+    run_command("design_map", lambda: main)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    cli()

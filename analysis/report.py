@@ -35,7 +35,7 @@ from analysis.sections import force as force_section
 from analysis.sections import slip as slip_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import sessions_problem
-from layerskin_exp.cli import EXIT_CONFIG, hydra_main, refuse
+from layerskin_exp.cli import EXIT_CONFIG, hydra_main, refuse, run_command
 from layerskin_exp.config import SkinConfig, validate
 from layerskin_exp.estimation.cnn import default_torch_threads
 from layerskin_exp.provenance import provenance
@@ -174,7 +174,5 @@ def _check_command_line(argv: list[str]) -> None:
             sys.exit(EXIT_CONFIG)
 
 
-if __name__ == "__main__":
-    from analysis.cli import report
-
-    report()
+if __name__ == "__main__":  # as the console script (analysis.cli.report), with this module loaded
+    run_command("report", lambda: main, before=[_check_command_line])

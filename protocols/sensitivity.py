@@ -1,4 +1,5 @@
-"""`python -m protocols.sensitivity [size=quick] [trajectories=R] [out=FILE] [params=[a,b]]`
+"""`python -m protocols.sensitivity [size=quick] [trajectories=R] [out=FILE] [params=[a,b]]` (a Hydra app on
+conf/sensitivity.yaml, schema `SensitivityConfig`)
 
 Screens the simulated bench's uncertain parameters (their brackets: layerskin_exp/sim/brackets.yaml) with
 SALib's Morris method and prints which headline outcomes move and by how much.
@@ -29,8 +30,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from omegaconf import OmegaConf
+from hydra.core.config_store import ConfigStore
+from omegaconf import DictConfig, OmegaConf
 
+from layerskin_exp.cli import hydra_main, refuse, run_command
+from layerskin_exp.config import ConfigError, require, validate
 from layerskin_exp.sim.config import BRACKETS_FILE
 
 SIZES = {  # campaign per Morris sample
@@ -62,6 +66,19 @@ class SensitivityConfig:
     params: list[str] = field(default_factory=list)  # empty: every screened entry of the brackets file
     out: str = "outputs/sensitivity.json"
     brackets: str = str(BRACKETS_FILE)
+
+    def __post_init__(self) -> None:
+        require(self.size in SIZES, "size", self.size, f"must be one of {', '.join(sorted(SIZES))}")
+        require(self.trajectories >= 2, "trajectories", self.trajectories, "must be >= 2 (Morris sigma needs two)")
+        try:
+            problem(load_brackets(self.brackets), self.params)
+        except OSError as e:
+            raise ConfigError(f"brackets={self.brackets}: cannot read it ({e.strerror or e})") from None
+        except ValueError as e:
+            raise ConfigError(str(e)) from None
+
+
+ConfigStore.instance().store(name="sensitivity_schema", node=SensitivityConfig)
 
 
 def load_brackets(path=BRACKETS_FILE) -> dict:
@@ -158,10 +175,6 @@ def analyse(prob: dict, X: np.ndarray, Y: dict[str, np.ndarray], num_levels: int
 def screen(cfg: SensitivityConfig, progress=print) -> dict:
     from SALib.sample import morris as morris_sample
 
-    if cfg.size not in SIZES:
-        raise ValueError(f"size={cfg.size}: must be one of {sorted(SIZES)}")
-    if cfg.trajectories < 2:
-        raise ValueError(f"trajectories={cfg.trajectories}: must be >= 2 (Morris sigma needs two)")
     brackets = load_brackets(cfg.brackets)
     prob = problem(brackets, cfg.params)
     X = morris_sample.sample(prob, cfg.trajectories, num_levels=cfg.num_levels, seed=cfg.seed)
@@ -206,30 +219,21 @@ def markdown_table(result: dict, digits: int = 3) -> str:
     return "\n".join(lines)
 
 
-def parse(argv: list[str]) -> SensitivityConfig:
-    bad = [a for a in argv if "=" not in a and a != "--quick"]
-    if bad:
-        raise ValueError(f"{bad[0]}: expected key=value (e.g. size=quick)")
-    dot = [a for a in argv if "=" in a] + (["size=quick"] if "--quick" in argv else [])
-    return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(SensitivityConfig), OmegaConf.from_dotlist(dot)))
-
-
-def main(argv: list[str] | None = None) -> int:
+@hydra_main("sensitivity")
+def main(cfg: DictConfig) -> None:
     try:
-        cfg = parse(sys.argv[1:] if argv is None else argv)
-        prob = problem(load_brackets(cfg.brackets), cfg.params)
-    except Exception as e:  # noqa: BLE001 - one line naming the key, exit 2
-        key = getattr(e, "full_key", None)  # OmegaConf's errors carry the key on a later line
-        head = str(e).splitlines()[0]
-        print(f"configuration error: {key}: {head}" if key else f"configuration error: {head}", file=sys.stderr)
-        return 2
+        typed: SensitivityConfig = validate(cfg)
+    except ConfigError as e:
+        refuse(e)
+    command(typed)
+
+
+def command(cfg: SensitivityConfig) -> None:
+    """The screen on its validated config: the table printed, the result written to cfg.out."""
+    prob = problem(load_brackets(cfg.brackets), cfg.params)
     n = cfg.trajectories * (prob["num_vars"] + 1)
     print(f"Morris screen: {prob['num_vars']} parameters, {n} short campaigns ({cfg.size} size)", flush=True)
-    try:
-        res = screen(cfg, lambda s: print(s, file=sys.stderr, flush=True))
-    except ValueError as e:
-        print(f"configuration error: {e}", file=sys.stderr)
-        return 2
+    res = screen(cfg, lambda s: print(s, file=sys.stderr, flush=True))
     out = Path(cfg.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(res, indent=1, default=float))
@@ -237,8 +241,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nmu* (sigma): mean |elementary effect|, the outcome's change per full bracket (a switch: per "
           f"step from its first to its last level), from steps of {cfg.num_levels / (2 * (cfg.num_levels - 1)):.2g} "
           f"bracket; bold: at least half the outcome's largest mu*. Written to {out} ({res['wall_s']:.0f} s)")
-    return 0
+
+
+def cli() -> None:
+    """`python -m protocols.sensitivity`: --help, a bad key or value refused in one line (exit 2), then the screen."""
+    run_command("sensitivity", lambda: main)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli()

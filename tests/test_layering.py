@@ -171,11 +171,13 @@ LOADS = {
         "from layerskin_exp.cli import preflight\n"
         "preflight('force_calibration', ['positions.count=2'])\n"
         "preflight('grip_depth', ['-m', 'grip_depth=6,9'])\n"
+        "preflight('sensitivity', ['size=quick', 'params=[sim.cover.friction]'])\n"
     ),
     "analysis": (
         "from analysis import cli, report\n"
         "from layerskin_exp.cli import preflight\n"
         "preflight('report', ['analysis=demo'])\n"
+        "preflight('design_map', ['sweep_dir=data', 'n_jobs=2'])\n"
     ),
 }
 

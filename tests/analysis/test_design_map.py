@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from analysis.design_map import DesignMapConfig, build_map, main, run
+from analysis.design_map import DesignMapConfig, build_map, command, run
 from tests.protocols.conftest import REPO, run_cli
 
 TINY = ["positions.count=2", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05", "progress=false"]
@@ -70,12 +70,13 @@ def test_rankings_only_where_they_hold_in_every_bracket():
 
 
 def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
-    assert main([f"sweep_dir={tmp_path}/nowhere"]) == 2
-    assert "sweep_dir=" in capsys.readouterr().err
-    assert main([f"sweep_dir={tmp_path}", "noise_sigmas=abc"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "noise_sigmas" in err[0]
-    assert main([f"sweep_dir={tmp_path}"]) == 2  # an empty folder: nothing to map
+    # through the command line (a subprocess: under pytest `protocols` can name the tests' package)
+    r = run_cli("analysis.design_map", [f"sweep_dir={tmp_path}", "noise_sigmas=abc"], tmp_path)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and "noise_sigmas" in err[0], r.stderr
+    r = run_cli("analysis.design_map", [f"sweep_dir={tmp_path}/nowhere"], tmp_path)
+    assert r.returncode == 2 and "sweep_dir=" in r.stderr and not (tmp_path / "nowhere").exists()
+    assert command(DesignMapConfig(sweep_dir=str(tmp_path))) == 2  # an empty folder: nothing to map
     assert "no force_calibration sessions" in capsys.readouterr().err
 
 
@@ -88,7 +89,7 @@ def test_a_campaign_recorded_under_a_renamed_key_is_refused_in_one_line(tmp_path
     folder.mkdir(parents=True)
     calibration_trial(folder / "pos000_press0.mcap", 0, "press", 0, np.random.default_rng(0), n=60,
                       config={"sim": {"spacer": {"modulus": 35.0, "thickness": 2.5}}})
-    assert main([f"sweep_dir={tmp_path}", "figures=false", "progress=false"]) == 2
+    assert command(DesignMapConfig(sweep_dir=str(tmp_path), figures=False, progress=False)) == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "sim.spacer.modulus" in err and "renamed to sim.spacer.modulus_kpa" in err and "rerun" in err, err
 

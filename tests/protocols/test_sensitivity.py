@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from layerskin_exp.config import ConfigError
 from protocols import sensitivity as sens
 
 
@@ -29,10 +30,17 @@ def test_brackets_file_gives_a_problem_with_every_screened_entry():
     assert "sim.sheet.interface=bonded" in ov
 
 
-def test_unknown_parameter_is_refused_by_name():
+def test_unknown_parameter_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match="params=sim.cover.frition"):
         sens.problem(sens.load_brackets(), ["sim.cover.frition"])
-    assert sens.main(["params=[sim.cover.frition]"]) == 2
+    with pytest.raises(ConfigError, match="params=sim.cover.frition"):  # the schema checks it
+        sens.SensitivityConfig(params=["sim.cover.frition"])
+    # the command line refuses it in one line, before any campaign
+    from tests.protocols.conftest import run_cli
+
+    r = run_cli("protocols.sensitivity", ["params=[sim.cover.frition]", f"out={tmp_path}/s.json"], tmp_path)
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == [r.stderr.strip()], r.stderr
+    assert "params=sim.cover.frition" in r.stderr and not (tmp_path / "s.json").exists()
 
 
 def test_morris_effect_is_the_change_per_bracket():
