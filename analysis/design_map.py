@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from scipy.stats import linregress
 
 from analysis.characterization import PressTrial, cop_shift_at_shear, uniformity
@@ -63,7 +63,7 @@ from layerskin_exp.config import ConfigError, retired_message, validate
 from layerskin_exp.estimation.config import CnnConfig
 from layerskin_exp.estimation.linear import LinearForceModel, linear_features
 from layerskin_exp.features import two_layer_features
-from layerskin_exp.sim.config import BRACKETS_FILE
+from layerskin_exp.sim.config import load_brackets
 
 STUDY_DESIGN = "study"
 # The headline outcomes a designer ranks by: key in the outcome dict, label, larger is better.
@@ -430,7 +430,7 @@ def _ts5_cell(entry: dict) -> str:
     return cell + (f" ({n_bad}/{len(per)} unconverged)" if n_bad else "")
 
 
-def write_markdown(path: Path, result: dict, brackets_doc: dict, figures: list[str]) -> None:
+def write_markdown(path: Path, result: dict, brackets: dict, figures: list[str]) -> None:
     m = result["map"]
     lines = ["# Spacer design map", "",
              f"Sweep: `{result['sweep_dir']}`; {len(m['designs'])} designs x brackets {', '.join(m['brackets'])}. "
@@ -502,7 +502,7 @@ def write_markdown(path: Path, result: dict, brackets_doc: dict, figures: list[s
                          f"{len(m['designs']) * (len(m['designs']) - 1) // 2} pairs, e.g. "
                          + "; ".join(f"{a} > {b}" for a, b in r["pairs_that_hold"][:6]) + ".")
     lines += ["", "## What the map depends on, and the measurement that settles it", ""]
-    for key, p in (brackets_doc.get("parameters") or {}).items():
+    for key, p in brackets.items():
         src = " ".join(str(p.get("source", "")).split())
         lo_hi = p.get("levels") or [p.get("low"), p.get("high")]
         lines.append(f"- `{key}` = {p.get('nominal')} (bracket {lo_hi}): {src}")
@@ -590,7 +590,7 @@ def run(cfg: DesignMapConfig) -> dict:
     else:
         measured = [_measure(folder, cfg) for folder in folders]
     outcomes = [o for o in measured if "error" not in o]
-    brackets_doc = OmegaConf.to_container(OmegaConf.load(BRACKETS_FILE)) if BRACKETS_FILE.is_file() else {}
+    brackets = load_brackets()
     from dataclasses import asdict
 
     result = {"sweep_dir": str(sweep), "map": build_map(outcomes), "brackets_file": "layerskin_exp/sim/brackets.yaml",
@@ -600,7 +600,7 @@ def run(cfg: DesignMapConfig) -> dict:
         plot_map(out / "design_map.png", result)
         figures.append("design_map.png")
     (out / "design_map.json").write_text(json.dumps(json_safe(result), indent=1))
-    write_markdown(out / "design_map.md", json_safe(result), brackets_doc, figures)
+    write_markdown(out / "design_map.md", json_safe(result), brackets, figures)
     return result
 
 

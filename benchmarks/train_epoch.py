@@ -24,10 +24,8 @@ import time
 
 import numpy as np
 import torch
-from omegaconf import OmegaConf
 from tqdm.auto import tqdm
 
-from layerskin_exp.cli import CONF_DIR
 from layerskin_exp.estimation import CnnGruForceModel
 from layerskin_exp.estimation.cnn import (
     LAYER_MODES,
@@ -129,9 +127,17 @@ def _windows_per_s(cls, data, epochs: int, device: str = "cpu", **cfg) -> tuple[
     return n / cpu, n / wall
 
 
+def analysis_preset(name: str):
+    """The report's `analysis=<name>` preset, composed and validated as the report composes it."""
+    import analysis.config  # noqa: F401 - stores the report's schemas
+    from layerskin_exp.config import compose
+
+    return compose("report", [f"analysis={name}"]).analysis
+
+
 def paper_preset(device: str, epochs: int = 1, n_trials: int = 900, frames: int = 210) -> dict:
     """Seconds per epoch of each configuration of `analysis=paper` at full-campaign size."""
-    paper = OmegaConf.load(f"{CONF_DIR}/analysis/paper.yaml").cnn
+    paper = analysis_preset("paper").cnn
     n_train, n_val = round(0.70 * n_trials), round(0.15 * n_trials)
     rng = np.random.default_rng(1)
     X = rng.random(((n_train + n_val) * frames, 2, 16, 16), dtype=np.float32)
@@ -157,7 +163,7 @@ def paper_preset(device: str, epochs: int = 1, n_trials: int = 900, frames: int 
 
 def run(epochs: int = 1, paper_cpu: bool = False) -> dict:
     data = _data()
-    demo = OmegaConf.load(f"{CONF_DIR}/analysis/demo.yaml").cnn
+    demo = analysis_preset("demo").cnn
     threads = torch.get_num_threads()
     res: dict = {"train_windows_per_epoch": len(data[0]), "epochs_timed": epochs, "threads": 1,
                  "measure": "training windows per CPU second (wall beside it)"}

@@ -35,7 +35,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from layerskin_exp.cli import hydra_main, refuse, run_command
 from layerskin_exp.config import ConfigError, require, validate
-from layerskin_exp.sim.config import BRACKETS_FILE
+from layerskin_exp.sim.config import BRACKETS_FILE, load_brackets
 
 SIZES = {  # campaign per Morris sample
     "default": ["positions.count=3", "press.repeats=2", "slide.repeats=2"],
@@ -79,11 +79,6 @@ class SensitivityConfig:
 
 
 ConfigStore.instance().store(name="sensitivity_schema", node=SensitivityConfig)
-
-
-def load_brackets(path=BRACKETS_FILE) -> dict:
-    """{key: entry} of layerskin_exp/sim/brackets.yaml."""
-    return dict(OmegaConf.to_container(OmegaConf.load(path))["parameters"])
 
 
 def problem(brackets: dict, params: list[str] | None = None) -> dict:

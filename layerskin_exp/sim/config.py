@@ -27,6 +27,28 @@ from layerskin_exp.sim.spacer_config import positive as _positive
 BRACKETS_FILE = Path(__file__).resolve().with_name("brackets.yaml")
 
 
+def load_brackets(path=BRACKETS_FILE) -> dict[str, dict]:
+    """{override key: entry} of a brackets file (the one reader of it: the screen, the design map).
+
+    Each entry has its `nominal` value and a `source`, and either `levels` (a switch) holding the
+    nominal or a bracket `low` <= nominal <= `high`; ConfigError names the first entry that has not."""
+    from omegaconf import OmegaConf
+
+    doc = OmegaConf.to_container(OmegaConf.load(path))
+    entries = doc.get("parameters") if isinstance(doc, dict) else None
+    require(isinstance(entries, dict) and entries, "brackets", str(path), "needs a `parameters:` mapping of entries")
+    for key, e in entries.items():
+        ok = isinstance(e, dict) and "nominal" in e and bool(e.get("source"))
+        if ok and "levels" in e:
+            ok = e["nominal"] in e["levels"]
+        elif ok:
+            ok = all(isinstance(e.get(k), int | float) for k in ("low", "high", "nominal")) and (
+                e["low"] <= e["nominal"] <= e["high"])
+        require(ok, f"brackets {path}: {key}", e, "needs nominal, source, and levels holding the nominal or "
+                "low <= nominal <= high")
+    return dict(entries)
+
+
 def _fraction(value: float, key: str, lo_open: bool = False) -> None:
     ok = value is not None and (0 < value < 1 if lo_open else 0 <= value < 1)
     require(ok, key, value, "must lie in (0, 1)" if lo_open else "must lie in [0, 1)")

@@ -30,6 +30,17 @@ def test_brackets_file_gives_a_problem_with_every_screened_entry():
     assert "sim.sheet.interface=bonded" in ov
 
 
+def test_a_bracket_without_its_source_or_outside_its_bounds_is_refused_by_name(tmp_path):
+    good = "parameters:\n  sim.cover.friction: {nominal: 1.0, low: 0.6, high: 1.5, source: bracket}\n"
+    (tmp_path / "ok.yaml").write_text(good)
+    assert sens.load_brackets(tmp_path / "ok.yaml")["sim.cover.friction"]["high"] == 1.5
+    for bad in ("{nominal: 2.0, low: 0.6, high: 1.5, source: bracket}", "{nominal: 1.0, low: 0.6, high: 1.5}",
+                "{nominal: glued, levels: [bonded, unbonded], source: bracket}"):
+        (tmp_path / "bad.yaml").write_text(f"parameters:\n  sim.cover.friction: {bad}\n")
+        with pytest.raises(ConfigError, match="sim.cover.friction"):
+            sens.load_brackets(tmp_path / "bad.yaml")
+
+
 def test_unknown_parameter_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match="params=sim.cover.frition"):
         sens.problem(sens.load_brackets(), ["sim.cover.frition"])

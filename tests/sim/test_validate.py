@@ -92,3 +92,13 @@ def test_checks_on_the_readout_use_counts_and_the_features_cop():
     rec = v.shift_and_height_record(SIM)
     assert set(rec["effective_height_counts_mm_by_fz"]) == {1.0, 3.0, 5.0}
     assert np.isfinite(rec["interlayer_shift_counts_mm_per_n_at_3n"])
+
+
+def test_the_slide_stops_are_the_calibration_protocols():
+    """validate's calibration-style slide stops where the protocol does: its stops are held to the
+    composed, validated calibration config (the core cannot compose the protocols' schema)."""
+    import protocols.config  # noqa: F401 - stores the calibration app's schemas
+    from layerskin_exp.config import compose
+
+    cfg = compose("force_calibration")
+    assert v.protocol_stops() == (cfg.slide.shear_stop_n, cfg.safety.max_normal_force_n)
