@@ -24,10 +24,10 @@ from collections.abc import Callable
 
 from omegaconf import DictConfig, OmegaConf
 
-from layerskin_exp.cli import EXIT_CONFIG, answer_help, expand_sweep, one_line, preflight, refuse
+from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, refuse
 from layerskin_exp.config import ConfigError, validate
 
-__all__ = ["EXIT_CONFIG", "answer_help", "expand_sweep", "preflight", "refuse_renamed", "refuse_shared_files",
+__all__ = ["EXIT_CONFIG", "expand_sweep", "refuse_renamed", "refuse_shared_files",
            "run_app", "sweep_job"]
 
 log = logging.getLogger(__name__)
