@@ -91,6 +91,33 @@ def test_client_receives_a_running_trial_decimated(tmp_path):
     assert {t for t in advertised if t.startswith("/markers/")} == {S.marker_pose_topic(0), S.marker_pose_topic(1)}
 
 
+def test_a_platform_campaign_carries_data_on_every_channel_its_live_view_advertises(tmp_path):
+    from protocols.calibration import run_campaign
+
+    cfg, typed = compose_app("force_calibration", ["positions.count=1", "press.repeats=1", "slide.repeats=1",
+                                                   "press.hold_s=0.05", f"data_root={tmp_path}", "progress=false"])
+    expected = set(FIXED_TOPICS) & rig_topics("platform")
+    with LiveView("platform", port=0) as view:
+        client = FoxgloveClient("127.0.0.1", view.port)
+        client.read_until(lambda c: expected <= {ch["topic"] for ch in c.channels.values()})
+        client.subscribe(list(client.channels))
+        client.start()
+        time.sleep(0.2)  # the subscription reaches the server before data flows
+        rig = build_rig(cfg, "platform")
+        rig.connect()
+        try:
+            run_campaign(typed, rig, {"config": OmegaConf.to_container(cfg, resolve=True), "backend": rig.backend,
+                                      "calibration": rig.skin.calibration()}, live=view)
+        finally:
+            rig.disconnect()
+        time.sleep(0.5)
+        client.close()
+    advertised = {ch["topic"] for ch in client.channels.values()}
+    got = {client.channels[cid]["topic"] for cid, _, _ in client.messages}
+    assert advertised == got, f"advertised without data: {sorted(advertised - got)}"
+    assert {S.WRENCH_TOPIC, S.STAGE_TOPIC} <= got and not {S.TCP_TOPIC, S.GRIPPER_TOPIC} & advertised
+
+
 def test_live_option_serves_and_stops_with_the_run(tmp_path, capsys):
     cfg, _ = compose_app("grip_depth", [*TINY_GRIP, f"data_root={tmp_path}", "progress=false", "live=true",
                                         "live_port=0"])
