@@ -1,11 +1,13 @@
 """What every Hydra command line of the project shares: one entry path, refusing a bad config
 before anything runs.
 
-Every command that takes config is a Hydra app on conf/<name>.yaml, decorated by `hydra_main(name)`
+Every command that runs or measures (the protocols, the report, the design map, the sensitivity
+screen, the design search) is a Hydra app on conf/<name>.yaml, decorated by `hydra_main(name)`
 (one config folder, one `version_base`) and started by `run_command(name, load_main, ...)`:
 `--help` from one composition, the command's own checks of its command line, then `preflight`,
-then Hydra. Only the small file tools (`python -m layerskin_exp.log`, `hardware.emulate`, the
-export and the benchmarks) parse their arguments with argparse.
+then Hydra. The simulator's preview and validation compose through `layerskin_exp.config.compose`;
+only the file tools (`python -m layerskin_exp.log`, `protocols.sessions`, `hardware.emulate`, the
+export, the demo) parse options with argparse (tests/test_entry.py holds all of this).
 
 `preflight(config_name, argv)` composes and validates the config of every job a command line
 asks for (a multirun's whole sweep) before Hydra starts, so a bad override ends the command

@@ -1,0 +1,62 @@
+"""One way in: every command that takes config is a Hydra app through `layerskin_exp.cli`
+(`hydra_main`, one config folder and `version_base`), no module parses `key=value` itself
+(`OmegaConf.from_dotlist`) or reads a YAML around the schemas (`OmegaConf.load`: only the one
+checked reader of the brackets file, which is no config), and argparse is for the file tools.
+Read from the source with `ast`, so a lazy import or a call inside a function counts too."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("layerskin_exp", "hardware", "protocols", "analysis")
+HYDRA_MAIN = {"layerskin_exp/cli.py"}  # hydra_main(name): the decorator every app uses
+YAML_READERS = {"layerskin_exp/sim/config.py"}  # load_brackets: the brackets file, checked entry by entry
+# The file tools: options, not config (a file to inspect, a device to emulate, an artifact to export).
+ARGPARSE = {"layerskin_exp/log/cli.py", "layerskin_exp/estimation/export.py", "layerskin_exp/demo.py",
+            "layerskin_exp/sim/fem_reference/__main__.py", "protocols/sessions.py", "hardware/emulate.py"}
+
+
+def entry_problems(repo: Path) -> list[str]:
+    out = []
+    for pkg in PACKAGES:
+        for path in sorted((repo / pkg).rglob("*.py")):
+            rel = str(path.relative_to(repo))
+            tree = ast.parse(path.read_text(), rel)
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Attribute):
+                    name = f"{ast.unparse(node.value)}.{node.attr}"
+                    if name == "hydra.main" and rel not in HYDRA_MAIN:
+                        out.append(f"{rel}: hydra.main (decorate with layerskin_exp.cli.hydra_main)")
+                    elif name == "OmegaConf.from_dotlist":
+                        out.append(f"{rel}: OmegaConf.from_dotlist (make the command a Hydra app)")
+                    elif name == "OmegaConf.load" and rel not in YAML_READERS:
+                        out.append(f"{rel}: OmegaConf.load (compose the config: layerskin_exp.config.compose)")
+                elif isinstance(node, ast.Import | ast.ImportFrom):
+                    names = [a.name for a in node.names] + ([node.module] if isinstance(node, ast.ImportFrom) else [])
+                    if "argparse" in names and rel not in ARGPARSE:
+                        out.append(f"{rel}: argparse (a command that takes config is a Hydra app)")
+    return sorted(set(out))
+
+
+def test_every_command_enters_one_way():
+    assert entry_problems(REPO) == []
+
+
+def test_the_check_sees_each_other_way_in(tmp_path):
+    for pkg in PACKAGES:
+        (tmp_path / pkg).mkdir()
+    (tmp_path / "analysis" / "a.py").write_text(
+        "import hydra\n@hydra.main(version_base=None, config_path='c', config_name='x')\ndef main(cfg): ...\n")
+    (tmp_path / "analysis" / "b.py").write_text(
+        "def parse(argv):\n    from omegaconf import OmegaConf\n    return OmegaConf.from_dotlist(argv)\n")
+    (tmp_path / "layerskin_exp").joinpath("c.py").write_text("from omegaconf import OmegaConf\nOmegaConf.load('x.yaml')\n")
+    (tmp_path / "protocols" / "d.py").write_text("def cli():\n    import argparse\n")
+    (tmp_path / "hardware" / "emulate.py").write_text("import argparse\n")  # a file tool: allowed
+    assert entry_problems(tmp_path) == [
+        "analysis/a.py: hydra.main (decorate with layerskin_exp.cli.hydra_main)",
+        "analysis/b.py: OmegaConf.from_dotlist (make the command a Hydra app)",
+        "layerskin_exp/c.py: OmegaConf.load (compose the config: layerskin_exp.config.compose)",
+        "protocols/d.py: argparse (a command that takes config is a Hydra app)",
+    ]
