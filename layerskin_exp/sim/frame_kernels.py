@@ -12,7 +12,8 @@ same numbers.
 
 Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
 - `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
-- `prm` (N_PARAM,) float64, entries `P_*` (geometry, table grids, FSR and readout constants);
+- `prm`: the parameter record (`PARAMS`, `new_params`): geometry, table grids, FSR and readout
+  constants, each by its name;
 - `lk` (2, n_pairs, n_fine, 4) float32: per layer (superficial, deep) the profile and its
   change per unit couple of the shear (hemisphere: divided by r, so that times the offset along
   the shear it gives the cos(phi) mode), resampled for nearest-bin lookups, as (profile at row
@@ -45,12 +46,35 @@ S_T, S_FX, S_FY, S_FZ, S_TORQUE, S_DELTA, S_AX, S_AY, S_YAW, S_UX, S_UY, S_ROT =
 N_STATE = 12
 assert (S_T, S_ROT) == (0, N_STATE - 1)
 
-# --- entries of the parameter vector
-(P_N, P_NQ, P_ROD, P_X0, P_PITCH, P_HALF_EL, P_DDELTA, P_XMAX_DELTA,
- P_LK_ORIGIN, P_LK_SCALE, P_HALF_PAD, P_PERIOD, P_HYST, P_CREEP, P_CREEP_S,
- P_PSAT, P_EXPONENT, P_G_FLOOR, P_G_SAT, P_G_LEAK, P_G_DIV, P_R_ON, P_SUPPLY_V, P_FULL_SCALE,
- P_CROSSTALK, P_REUSE, P_JITTER_S, P_NOISE_COUNTS, P_LK_SCALE_DEEP, P_LK_ORIGIN_DEEP) = range(30)
-N_PARAM = 30
+# --- the kernels' parameters: one structured record (fields by name, float64), made by
+# `new_params` and filled by `transduction_params` and `SkinModel`; the kernels read `prm.<name>`
+PARAMS = np.dtype([
+    # geometry: taxels per side, Gauss points per electrode side, rod (1) or hemisphere (0), the
+    # first taxel centre, the pitch and half the electrode's side (mm), half the pad's side (mm)
+    ("n_taxels", np.float64), ("quad_points", np.float64), ("rod", np.float64), ("first_centre_mm", np.float64),
+    ("pitch_mm", np.float64), ("half_electrode_mm", np.float64), ("half_pad_mm", np.float64),
+    # the contact tables: indentation step and last row index; the fine lookups' origin and scale
+    # (superficial, deep: r^2 or signed distance to bin)
+    ("delta_step_mm", np.float64), ("last_delta_row", np.float64), ("lk_origin", np.float64), ("lk_scale", np.float64),
+    ("lk_origin_deep", np.float64), ("lk_scale_deep", np.float64),
+    # the frame: its period (s), whether a hold reuses its maps (1/0), scan jitter (s rms)
+    ("frame_period_s", np.float64), ("reuse_maps", np.float64), ("jitter_s", np.float64),
+    # the FSR: hysteresis half-width, creep share and time constant (s), saturation (kPa),
+    # exponent, floor and saturated conductances (S)
+    ("hysteresis", np.float64), ("creep", np.float64), ("creep_s", np.float64), ("saturation_kpa", np.float64),
+    ("exponent", np.float64), ("g_floor_s", np.float64), ("g_sat_s", np.float64),
+    # the readout: leak and divider conductances (S), mux on-resistance (ohm), supply (V), ADC full
+    # scale (counts), crosstalk network on (1/0), read noise (counts rms)
+    ("g_leak_s", np.float64), ("g_divider_s", np.float64), ("mux_on_ohm", np.float64), ("supply_v", np.float64),
+    ("full_scale", np.float64), ("crosstalk", np.float64), ("noise_counts", np.float64),
+])
+
+
+def new_params() -> np.void:
+    """A zeroed parameter record (fields of PARAMS): numba reads it by reference, so a field
+    changed in Python is what the next kernel call sees."""
+    return np.zeros(1, PARAMS)[0]
+
 
 # Hemisphere windows: outside, the profile is below this fraction of its peak. At 1e-5 what is
 # left out moves a frame's counts by ~1e-4 count on average (one taxel in ~10^4 rounds to a
@@ -62,21 +86,21 @@ _F1 = np.float32(1.0)
 _FHALF = np.float32(0.5)
 
 
-def transduction_params(fsr, readout, adc_bits: int | None = None, prm: np.ndarray | None = None) -> np.ndarray:
-    """Parameter vector (N_PARAM,) with the FSR and readout entries filled from their configs
-    (an FSRConfig and a ReadoutConfig, either may be None); other entries left as in prm."""
-    prm = np.zeros(N_PARAM) if prm is None else prm
+def transduction_params(fsr, readout, adc_bits: int | None = None, prm: np.void | None = None) -> np.void:
+    """The parameter record (`new_params`) with the FSR and readout fields filled from their
+    configs (an FSRConfig and a ReadoutConfig, either may be None); other fields left as in prm."""
+    prm = new_params() if prm is None else prm
     if fsr is not None:
-        prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S] = fsr.hysteresis, fsr.creep, fsr.creep_s
-        prm[P_PSAT], prm[P_EXPONENT] = fsr.saturation_kpa, fsr.exponent
-        prm[P_G_FLOOR], prm[P_G_SAT] = 1.0 / (fsr.floor_mohm * 1e6), 1.0 / (fsr.saturated_kohm * 1e3)
+        prm["hysteresis"], prm["creep"], prm["creep_s"] = fsr.hysteresis, fsr.creep, fsr.creep_s
+        prm["saturation_kpa"], prm["exponent"] = fsr.saturation_kpa, fsr.exponent
+        prm["g_floor_s"], prm["g_sat_s"] = 1.0 / (fsr.floor_mohm * 1e6), 1.0 / (fsr.saturated_kohm * 1e3)
     if readout is not None:
-        prm[P_G_LEAK], prm[P_G_DIV] = 1.0 / (readout.leak_mohm * 1e6), 1.0 / (readout.divider_kohm * 1e3)
-        prm[P_R_ON], prm[P_SUPPLY_V] = readout.mux_on_ohm, readout.supply_v
-        prm[P_CROSSTALK] = 1.0 if readout.crosstalk else 0.0
-        prm[P_JITTER_S], prm[P_NOISE_COUNTS] = readout.scan_jitter_ms * 1e-3, readout.noise_counts
+        prm["g_leak_s"], prm["g_divider_s"] = 1.0 / (readout.leak_mohm * 1e6), 1.0 / (readout.divider_kohm * 1e3)
+        prm["mux_on_ohm"], prm["supply_v"] = readout.mux_on_ohm, readout.supply_v
+        prm["crosstalk"] = 1.0 if readout.crosstalk else 0.0
+        prm["jitter_s"], prm["noise_counts"] = readout.scan_jitter_ms * 1e-3, readout.noise_counts
     if adc_bits is not None:
-        prm[P_FULL_SCALE] = float(2**adc_bits - 1)
+        prm["full_scale"] = float(2**adc_bits - 1)
     return prm
 
 
@@ -84,7 +108,7 @@ def transduction_params(fsr, readout, adc_bits: int | None = None, prm: np.ndarr
 @_jit
 def _delta_row(delta, prm):
     """Indentation row i and fraction t of the contact tables (clipped to the grid)."""
-    x = min(max(delta / prm[P_DDELTA], 0.0), prm[P_XMAX_DELTA])
+    x = min(max(delta / prm.delta_step_mm, 0.0), prm.last_delta_row)
     i = int(x)
     return i, x - i
 
@@ -103,8 +127,8 @@ def _lookup(lk_row, t32, coord, origin32, scale32):
 def _window(cx, cy, reach, prm, win, at):
     """Taxel rows/cols [r0, r1] x [c0, c1] (inclusive) whose electrode comes within `reach` of
     (cx, cy), written to win[at:at + 4]; r1 < r0 or c1 < c0 when the reach misses the array."""
-    n = int(prm[P_N])
-    x0, pitch, half_el = prm[P_X0], prm[P_PITCH], prm[P_HALF_EL]
+    n = int(prm.n_taxels)
+    x0, pitch, half_el = prm.first_centre_mm, prm.pitch_mm, prm.half_electrode_mm
     for axis in range(2):
         c = cx if axis == 0 else cy
         lo = math.ceil((c - reach - half_el - x0) / pitch)
@@ -143,7 +167,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     Each layer reads the axisymmetric profile of the loaded laminate plus, along the shear, its
     first-order change under the shear's couple F_t H about the deep plane; the sheet's FSR
     reads no tension (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
-    n, nq = int(prm[P_N]), int(prm[P_NQ])
+    n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
     store = f_sup.shape[0] > 0  # the maps path passes empty field arrays: taxel means only
@@ -156,10 +180,10 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     i, t = _delta_row(delta, prm)
     h_eff = rows[i, 0] * (1 - t) + rows[i + 1, 0] * t
     t32 = np.float32(t)
-    origin32, scale32 = np.float32(prm[P_LK_ORIGIN]), np.float32(prm[P_LK_SCALE])
-    scale_d32, origin_d32 = np.float32(prm[P_LK_SCALE_DEEP]), np.float32(prm[P_LK_ORIGIN_DEEP])
+    origin32, scale32 = np.float32(prm.lk_origin), np.float32(prm.lk_scale)
+    scale_d32, origin_d32 = np.float32(prm.lk_scale_deep), np.float32(prm.lk_origin_deep)
     lk_sup, lk_deep = lk[0, i], lk[1, i]
-    if prm[P_ROD] != 0.0:
+    if prm.rod != 0.0:
         _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
                     origin32, scale32, origin_d32, scale_d32, colsum, tax, bounds[i, 0], bounds[i, 1])
         return
@@ -238,14 +262,14 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     along it, its moment is balanced by a linear load gradient along the line; torsion loads
     the line with traction proportional to the distance along it, whose moments turn the deep
     line."""
-    n, nq = int(prm[P_N]), int(prm[P_NQ])
+    n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
     store = f_sup.shape[0] > 0
     yaw = st[S_YAW]
     fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
     cdx, cdy = st[S_AX] + st[S_UX], st[S_AY] + st[S_UY]
-    s1, s2 = _chord(cdx, cdy, yaw, prm[P_HALF_PAD])
+    s1, s2 = _chord(cdx, cdy, yaw, prm.half_pad_mm)
     length = max(s2 - s1, 1e-9)
     line_q = fz / length  # N/mm
     yaw_s = yaw - st[S_ROT]  # rod axis in the superficial frame
@@ -315,11 +339,11 @@ def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cach
     """Taxel-mean pressure maps (N, 2, n, n) of N states into maps (zero when unloaded). A
     state whose config serial (>= 0) equals the previous one's (or, for the first,
     cache_serial[0]) repeats its loading configuration and reuses its maps (holds), unless
-    prm[P_REUSE] is 0. Updates the cache (the last state's serial and maps). Returns how many
+    prm.reuse_maps is 0. Updates the cache (the last state's serial and maps). Returns how many
     states' maps were computed."""
     f_sup = np.empty((0, 0), np.float32)  # fields are not kept: taxel means only
     f_deep = np.empty((0, 0), np.float32)
-    reuse = prm[P_REUSE] != 0.0
+    reuse = prm.reuse_maps != 0.0
     prev = cache_serial[0]
     computed = 0
     for k in range(states.shape[0]):
@@ -347,7 +371,7 @@ def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cach
 def fields_kernel(states, prm, lk, rows, bounds, dist, quad, lattice, out_sup, out_deep):
     """Pressure (kPa, float32) at the quadrature points of N states into out_sup, out_deep
     (N, n*q, n*q), zero-initialised by the caller; only each layer's window is written."""
-    n = int(prm[P_N])
+    n = int(prm.n_taxels)
     tax = np.empty((2, n, n))
     for k in range(states.shape[0]):
         if states[k, S_FZ] > 0.0:
@@ -379,10 +403,10 @@ def _conductance(p_kpa, gain, prm):
     below 1e-30 x^n (n > 0 ... < 1e-30) cannot change G_floor + G_sat x / (1 + x) in float64."""
     x = 0.0
     if p_kpa > 0.0:
-        y = np.float32(p_kpa / prm[P_PSAT])
+        y = np.float32(p_kpa / prm.saturation_kpa)
         if y > np.float32(1e-30):
-            x = np.float64(y ** np.float32(prm[P_EXPONENT]))
-    return gain * (x * prm[P_G_SAT] / (1.0 + x) + prm[P_G_FLOOR])
+            x = np.float64(y ** np.float32(prm.exponent))
+    return gain * (x * prm.g_sat_s / (1.0 + x) + prm.g_floor_s)
 
 
 @_jit
@@ -426,9 +450,9 @@ def _column_volts(g, prm, y, chol, vec, out):
     n = g.shape[0]
     d_c, d_r = vec[0], vec[1]
     for c in range(n):
-        d_c[c] = prm[P_G_DIV]
+        d_c[c] = prm.g_divider_s
     for r in range(n):
-        s = prm[P_G_LEAK]
+        s = prm.g_leak_s
         for c in range(n):
             s += g[r, c]
             d_c[c] += g[r, c]
@@ -470,7 +494,7 @@ def _column_volts(g, prm, y, chol, vec, out):
         inv = 1.0 / chol[r, r]
         for c in range(n):
             y[r, c] *= inv
-    vs, r_on = prm[P_SUPPLY_V], prm[P_R_ON]
+    vs, r_on = prm.supply_v, prm.mux_on_ohm
     for r in range(n):
         s = 1.0
         for c in range(n):
@@ -486,9 +510,9 @@ def column_volts_batch(g, prm, out):
     g (M, n, n) (siemens): the crosstalk network (`_column_volts`), or without crosstalk each
     taxel alone in series with the mux and its divider."""
     n_mat, n = g.shape[0], g.shape[1]
-    vs, r_on = prm[P_SUPPLY_V], prm[P_R_ON]
-    if prm[P_CROSSTALK] == 0.0:
-        r_div = 1.0 / prm[P_G_DIV]
+    vs, r_on = prm.supply_v, prm.mux_on_ohm
+    if prm.crosstalk == 0.0:
+        r_div = 1.0 / prm.g_divider_s
         for m in range(n_mat):
             for r in range(n):
                 for c in range(n):
@@ -508,8 +532,8 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, l
 
     serial (N,) int64: configuration serials (-1: unknown) for the maps reuse during holds;
     rng: the numpy Generator of the random draws, standard normals taken in this order: the
-    scan jitter (N, 2, n) (times prm[P_JITTER_S] seconds added to each row's sampling instant)
-    if prm[P_JITTER_S] > 0, then the read noise (2, N, n, n) (times prm[P_NOISE_COUNTS]
+    scan jitter (N, 2, n) (times prm.jitter_s seconds added to each row's sampling instant)
+    if prm.jitter_s > 0, then the read noise (2, N, n, n) (times prm.noise_counts
     counts) if that is > 0 (`_read_noise`);
     row_offsets (2, n) seconds from each row's nominal instant to the frame end;
     gains, baseline (2, n, n); play, lag, last_maps (2, n, n) updated in place;
@@ -521,14 +545,14 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, l
     n_all = states.shape[0]
     if n_all == 0:
         return True, 0
-    n = int(prm[P_N])
+    n = int(prm.n_taxels)
     computed = maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cache_serial,
                            cache_maps, maps)
-    sj = prm[P_JITTER_S]
-    w_h, c_cr, creep_s = prm[P_HYST], prm[P_CREEP], prm[P_CREEP_S]
+    sj = prm.jitter_s
+    w_h, c_cr, creep_s = prm.hysteresis, prm.creep, prm.creep_s
     g = np.empty((n_all * 2, n, n))  # conductance [frame * 2 + layer]
     eff_row = np.empty(n)
-    prev_t = memory[0] if memory[1] != 0.0 else t_s[0] - prm[P_PERIOD]
+    prev_t = memory[0] if memory[1] != 0.0 else t_s[0] - prm.frame_period_s
     for k in range(n_all):
         tk = t_s[k]
         dt = tk - prev_t  # time since the previous frame
@@ -553,7 +577,7 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, l
         prev_t = tk
     volts = np.empty_like(g)
     column_volts_batch(g, prm, volts)
-    fs, vs = prm[P_FULL_SCALE], prm[P_SUPPLY_V]
+    fs, vs = prm.full_scale, prm.supply_v
     values = g.reshape((2, n_all, n, n))  # the conductances are spent: their memory takes the counts
     for layer in range(2):
         for k in range(n_all):
@@ -576,9 +600,9 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, l
 @_jit
 def _read_noise(values, rng, prm, counts):
     """counts (2, N, n, n) uint16: float counts values (2, N, n, n) plus the read noise
-    (prm[P_NOISE_COUNTS] rms; standard normals from rng in the arrays' order), rounded and
+    (prm.noise_counts rms; standard normals from rng in the arrays' order), rounded and
     clipped to [0, full scale]."""
-    sn, fs = prm[P_NOISE_COUNTS], prm[P_FULL_SCALE]
+    sn, fs = prm.noise_counts, prm.full_scale
     src, dst = values.reshape(-1), counts.reshape(-1)
     for i in range(src.shape[0]):
         v = src[i]
@@ -593,7 +617,7 @@ def idle_counts_kernel(idle_counts, rng, prm, counts):
     noise, rounded and clipped to [0, full scale]. Takes the draws `frames_kernel` would (the
     scan jitter's too, unused at zero pressure, so a seed gives the same noise either way)."""
     n_all, n = counts.shape[1], counts.shape[2]
-    if prm[P_JITTER_S] > 0.0:
+    if prm.jitter_s > 0.0:
         for _ in range(n_all * 2 * n):
             rng.standard_normal()
     values = np.empty(counts.shape)

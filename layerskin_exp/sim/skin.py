@@ -318,28 +318,28 @@ class SkinModel:
         last = np.where(above.any(axis=1), last, -2)
         return dist[_clip(last + 2, 0, len(dist) - 1)]
 
-    def _kernel_params(self) -> np.ndarray:
-        """The kernels' parameter vector (frame_kernels.P_*)."""
+    def _kernel_params(self) -> np.void:
+        """The kernels' parameter record (frame_kernels.PARAMS)."""
         s, skin, tab = self.sim, self.skin, self.tab
         prm = fk.transduction_params(s.fsr, s.readout, skin.adc_bits)
-        prm[fk.P_N], prm[fk.P_NQ], prm[fk.P_ROD] = skin.n_taxels, self._nq, float(self.kind == "rod")
-        prm[fk.P_X0], prm[fk.P_PITCH], prm[fk.P_HALF_EL] = self._centres[0], skin.pitch_mm, self._half_electrode
-        prm[fk.P_DDELTA], prm[fk.P_XMAX_DELTA] = tab.d_delta, len(tab.delta_mm) - 1.000001
-        prm[fk.P_LK_ORIGIN], prm[fk.P_LK_SCALE] = self._lk_origin, self._lk_scale
-        prm[fk.P_LK_SCALE_DEEP], prm[fk.P_LK_ORIGIN_DEEP] = self._lk_scale_deep, self._lk_origin_deep
-        prm[fk.P_HALF_PAD] = self._half
-        prm[fk.P_PERIOD] = skin.frame_period_ms * 1e-3
-        prm[fk.P_REUSE] = 1.0
+        prm["n_taxels"], prm["quad_points"], prm["rod"] = skin.n_taxels, self._nq, float(self.kind == "rod")
+        prm["first_centre_mm"], prm["pitch_mm"] = self._centres[0], skin.pitch_mm
+        prm["half_electrode_mm"], prm["half_pad_mm"] = self._half_electrode, self._half
+        prm["delta_step_mm"], prm["last_delta_row"] = tab.d_delta, len(tab.delta_mm) - 1.000001
+        prm["lk_origin"], prm["lk_scale"] = self._lk_origin, self._lk_scale
+        prm["lk_origin_deep"], prm["lk_scale_deep"] = self._lk_origin_deep, self._lk_scale_deep
+        prm["frame_period_s"] = skin.frame_period_ms * 1e-3
+        prm["reuse_maps"] = 1.0
         return prm
 
     @property
     def reuse_maps(self) -> bool:
         """Whether states repeating the previous loading configuration (holds) reuse its maps."""
-        return bool(self._params[fk.P_REUSE])
+        return bool(self._params["reuse_maps"])
 
     @reuse_maps.setter
     def reuse_maps(self, on: bool) -> None:
-        self._params[fk.P_REUSE] = 1.0 if on else 0.0
+        self._params["reuse_maps"] = 1.0 if on else 0.0
 
     @property
     def _maps_cache(self) -> tuple | None:
