@@ -36,6 +36,7 @@ from analysis.markdown import counted, json_safe, write_markdown
 from analysis.sections import characterisation as characterisation_section
 from analysis.sections import force as force_section
 from analysis.sections import slip as slip_section
+from analysis.sections import streams as streams_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import Campaign, load_campaign, sessions_problem
 from layerskin_exp.cli import CONF_DIR as _CONF_DIR
@@ -95,6 +96,7 @@ class Analysis:
                                 "grip_frames": int(sum(len(t.t_s) for t in camp.grip))}
         log.info("sessions: %d used, %d skipped (%s)", self.results["data"]["sessions_used"],
                  len(camp.skipped_files), dict(camp.skipped) or "none")
+        streams_section.stream_health(self)
         # Per-layer scale from the calibration campaign (else the grip sessions), applied to all.
         self.pre = Preprocessor.from_config(self.a.preprocess)
         src = [t.maps for t in camp.calibration] or [t.maps for t in camp.grip]

@@ -47,6 +47,7 @@ def describe(s: Session) -> str:
         lines.append(f"  recovered: {s.metadata['recovered']}")
     lines.append(f"  labels: {s.labels}")
     lines.append(f"  backend: {s.metadata.get('backend')}   version: {s.metadata.get('version')}")
+    lines += _health(s.stream_health)
     starts = [a["t_ns"][0] for a in s.streams.values() if len(a["t_ns"])]
     ends = [a["t_ns"][-1] for a in s.streams.values() if len(a["t_ns"])]
     if starts:
@@ -81,8 +82,27 @@ def describe(s: Session) -> str:
     return "\n".join(lines)
 
 
+HEALTH_COUNTERS = ("received", "lost", "dropped", "duplicate", "out_of_order", "corrupt", "reconnects")
+
+
+def _health(health: dict | None) -> list[str]:
+    """The drivers' stream-health counters over the trial, one row per device."""
+    if health is None:
+        return ["  stream health: not recorded (a file written before the drivers' counters were stored, "
+                "or not closed by its writer)"]
+    if not health:
+        return ["  stream health: no device counters"]
+    lines = ["  stream health (the drivers' counters over the trial; lost = sequence gaps, dropped = "
+             "overflowed the driver's buffer):",
+             "    " + f"{'device':<12}" + "".join(f"{c.replace('_', ' '):>13}" for c in HEALTH_COUNTERS)]
+    for device, counters in sorted(health.items()):
+        lines.append("    " + f"{device:<12}" + "".join(
+            f"{counters[c] if c in counters else '-':>13}" for c in HEALTH_COUNTERS))
+    return lines
+
+
 EXIT_COMPLETE = 0
-EXIT_INCOMPLETE = 1  # readable, but damaged, cut off (no outcome) or aborted
+EXIT_INCOMPLETE = 1  # readable, but damaged, cut off (no outcome), incomplete or aborted
 EXIT_UNREADABLE = 2
 
 

@@ -276,7 +276,7 @@ class SessionWriter:
             else:
                 session[str(key)] = value
         reserved = {S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_RECOVERED,
-                    S.META_LAYOUT, S.META_LOG_TIME}
+                    S.META_LAYOUT, S.META_LOG_TIME, S.META_STREAM_HEALTH}
         clash = reserved & set(records)
         if clash:
             raise ValueError(f"metadata keys {sorted(clash)} are reserved by the session log; rename them")
@@ -666,18 +666,24 @@ class SessionWriter:
         self._mcap.add_metadata(S.META_LAYOUT, {"": layout.to_json()})
         self._mcap.add_metadata(S.META_LAYOUT_APP, {"": S.dumps(app_layout(layout)).decode()})
 
-    def close(self, outcome: str = "complete", *, move_to=None) -> None:
-        """Record the clock sync, the Foxglove layout of what was written and the outcome
-        ("complete", "complete (<note>)", e.g. a safety stop the trial finished after, or
-        "aborted: <reason>"), write the MCAP summary and close the file. Closing twice is a no-op.
+    def close(self, outcome: str = "complete", *, move_to=None, stream_health: dict | None = None) -> None:
+        """Record the clock sync, the Foxglove layout of what was written, the stream health and
+        the outcome ("complete", "complete (<note>)", e.g. a safety stop the trial finished after,
+        "incomplete: <reason>", a trial that ran to its end with data missing, e.g. more lost
+        frames than allowed, or "aborted: <reason>"), write the MCAP summary and close the file.
+        Closing twice is a no-op.
 
         move_to: rename the finished file to this path (atomically, fsynced) while the lock is
         still held, so no other writer can claim the old name between closing and renaming.
+        stream_health: {device: {counter: int}}, what each device's driver counted over the trial
+        (protocols.runner.trial_health); stored as the checked "stream_health" record, one field
+        per device.
         """
         if self._closed:
             return
-        if not (outcome == "complete" or outcome.startswith(("complete (", "aborted"))):
-            raise ValueError(f"outcome {outcome!r}: use 'complete', 'complete (<note>)' or 'aborted: <reason>'")
+        if not (outcome == "complete" or outcome.startswith(("complete (", "incomplete: ", "aborted"))):
+            raise ValueError(f"outcome {outcome!r}: use 'complete', 'complete (<note>)', 'incomplete: <reason>' "
+                             "or 'aborted: <reason>'")
         try:
             self.flush()
             try:
@@ -685,6 +691,8 @@ class SessionWriter:
             except Exception as exc:  # never lose the session over a failed fit
                 maps = {"error": f"{type(exc).__name__}: {exc}"}
             self._add_metadata(S.META_CLOCK_SYNC, maps)
+            if stream_health is not None:
+                self._add_metadata(S.META_STREAM_HEALTH, stream_health)
             self._write_layout()
             self._add_metadata(S.META_OUTCOME, {"outcome": outcome})
             self._mcap.finish()
