@@ -17,7 +17,8 @@ from layerskin_exp.log.session.reader import Session, load_session
 
 
 def describe(s: Session) -> str:
-    """Human-readable summary: outcome, labels, and per stream count, rate, duration, gaps."""
+    """Human-readable summary: outcome, labels, the drivers' stream-health counters, and per stream
+    count, rate, duration, gaps."""
     lines = [
         f"{s.path}",
         f"  outcome: {s.outcome or 'none (writer did not close the file)'}   complete: {s.complete}",
@@ -135,8 +136,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m layerskin_exp.log", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p_inspect = sub.add_parser(
-        "inspect", help="print streams, rates, gaps, duration, outcome, labels; exit 0 for a complete "
-        "trial, 1 for a readable one that is damaged, cut off or aborted, 2 for an unreadable file")
+        "inspect", help="print streams, rates, gaps, duration, outcome, labels, the drivers' stream-health "
+        "counters; exit 0 for a complete trial, 1 for a readable one that is damaged, cut off, incomplete or "
+        "aborted, 2 for an unreadable file")
     p_inspect.add_argument("file")
     p_recover = sub.add_parser("recover", help="rewrite a file whose writer died into a valid MCAP")
     p_recover.add_argument("input")
