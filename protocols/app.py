@@ -3,9 +3,10 @@
 Exit codes: 0 done; 2 configuration refused (nothing connected, nothing written); 1 a device
 error, a refused motion or a timeout stopped the run (motion stopped, trial file closed
 "aborted: ..."), or a trial ran to its end with more lost skin frames than `max_lost_skin_frames`
-allows (closed "incomplete: ...", kept as .partial; the run went on with the next trial); 130 Ctrl-C, 143 SIGTERM (same; SIGTERM is what SLURM and process managers
-send). Rerunning the same command resumes. In a multirun a job that fails is recorded and the
-next one runs (`sweep_job`); the command then exits 1.
+allows (closed "incomplete: ...", kept as .partial; the run went on with the next trial); 130
+Ctrl-C, 143 SIGTERM (same; SIGTERM is what SLURM and process managers send). Rerunning the same
+command resumes. In a multirun a job that fails is recorded and the next one runs (`sweep_job`);
+the command then exits 1.
 
 Ctrl-C and SIGTERM take one path: the first asks the control loop to stop at its next tick (a
 safe point); a second one, or for SIGTERM `STOP_GRACE_S` without a tick (a wait on a device, a

@@ -12,9 +12,10 @@ analysed, and a rerun does not repeat it); "incomplete: <n> skin frames lost (..
 to its end, but its skin stream lost more frames than `max_lost_skin_frames` allows: kept as
 `.partial`, run again by a rerun, the run goes on with the next trial); "aborted: <reason>" (kept
 as `.partial`, run again by a rerun). Every trial's file stores what each device's driver counted
-over the trial (received, lost, duplicate, out of order, corrupt, reconnects; `trial_health`). A complete file is never replaced: a rerun skips it when its identity matches and
-refuses (`TrialConflictError`) when the same path holds a trial of another identity, read from
-the parts that survive when the file is damaged. A damaged file whose identity matches or cannot
+over the trial (received, lost, duplicate, out of order, corrupt, reconnects; `trial_health`).
+A complete file is never replaced: a rerun skips it when its identity matches and refuses
+(`TrialConflictError`) when the same path holds a trial of another identity, read from the parts
+that survive when the file is damaged. A damaged file whose identity matches or cannot
 be read is moved aside (`<name>.mcap.damaged`, reported) before the trial is recorded again.
 """
 
