@@ -289,6 +289,28 @@ def _slip_causal(r) -> list[str]:
     return lines + [""]
 
 
+HEALTH_COUNTERS = ("received", "lost", "dropped", "duplicate", "out_of_order", "corrupt", "reconnects")
+
+
+def _stream_health(r) -> list[str]:
+    """The drivers' stream-health counters summed over the sessions used, one row per device."""
+    h = r.get("stream_health")
+    if not h or not h.get("sessions"):
+        return []
+    lines = ["## Stream health", "",
+             f"The drivers' counters summed over {counted(h['sessions'], 'session')} used (lost: sequence gaps; "
+             f"dropped: frames a full driver buffer let go); {h['sessions_with_lost_skin_frames']} with lost skin "
+             "frames (within their run's max_lost_skin_frames)"
+             + (f"; {h['not_recorded']} without the counters (written before they were stored)" if h["not_recorded"]
+                else "") + ".", ""]
+    if h["devices"]:
+        lines += ["| device | " + " | ".join(c.replace("_", " ") for c in HEALTH_COUNTERS) + " |",
+                  "|---" * (len(HEALTH_COUNTERS) + 1) + "|"]
+        lines += [f"| {d} | " + " | ".join(str(c.get(k, "–")) for k in HEALTH_COUNTERS) + " |"
+                  for d, c in h["devices"].items()]
+    return lines + [""]
+
+
 def write_markdown(path, r: dict, figures: list[str]) -> None:
     s = r["study"]
     inp = r.get("inputs", {})
@@ -296,6 +318,7 @@ def write_markdown(path, r: dict, figures: list[str]) -> None:
     lines += [f"Sessions: `{inp.get('sessions_dir')}` — {inp.get('files')} files, {inp.get('calibration_trials')} "
               f"calibration trials ({inp.get('press_trials')} press, {inp.get('slide_trials')} slide), "
               f"{inp.get('grip_trials')} grip trials. Skipped files: {inp.get('skipped') or 'none'}.", ""]
+    lines += _stream_health(r)
     lines += _force(r, s) + _characterization(r, s) + _tracking(r, s) + _slip(r, s) + _slip_causal(r)
     if r.get("skipped"):
         lines += ["## Skipped sections", ""] + [f"- **{k}**: {v}" for k, v in r["skipped"].items()] + [""]

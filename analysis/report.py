@@ -33,6 +33,7 @@ from analysis.report_run import ReportRun
 from analysis.sections import characterisation as characterisation_section
 from analysis.sections import force as force_section
 from analysis.sections import slip as slip_section
+from analysis.sections import streams as streams_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import sessions_problem
 from layerskin_exp.cli import EXIT_CONFIG, hydra_main, refuse, run_command
@@ -47,6 +48,10 @@ class Analysis(ReportRun):
     """One report run: loads the sessions, runs the sections (analysis.sections: force,
     characterisation, tracking, slip) in order, writes results.json and report.md. Sections fill
     self.results and leave what later ones need on it (ts5, calib_feats); figures go to self.out."""
+
+    def load(self) -> None:
+        super().load()
+        streams_section.stream_health(self)
 
     def force(self) -> None:
         force_section.force(self)

@@ -36,6 +36,7 @@ class CalibrationTrial:
     maps: np.ndarray
     force_n: np.ndarray
     identity: str = ""
+    stream_health: dict | None = None  # the drivers' counters over the trial (Session.stream_health)
 
 
 @dataclass
@@ -56,6 +57,7 @@ class GripTrial:
     vision_t_s: np.ndarray
     vision_sig: np.ndarray
     identity: str = ""
+    stream_health: dict | None = None  # the drivers' counters over the trial (Session.stream_health)
 
     @property
     def grip_depth_mm(self) -> float:
@@ -248,6 +250,7 @@ def load_trial(path, root, pp: PreprocessConfig) -> CalibrationTrial | GripTrial
     if isinstance(trial, str):
         return Skipped(name, trial)
     trial.identity = trial_identity(s.metadata, s.labels)
+    trial.stream_health = s.stream_health
     return trial
 
 

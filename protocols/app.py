@@ -2,9 +2,11 @@
 
 Exit codes: 0 done; 2 configuration refused (nothing connected, nothing written); 1 a device
 error, a refused motion or a timeout stopped the run (motion stopped, trial file closed
-"aborted: ..."); 130 Ctrl-C, 143 SIGTERM (same; SIGTERM is what SLURM and process managers
-send). Rerunning the same command resumes. In a multirun a job that fails is recorded and the
-next one runs (`sweep_job`); the command then exits 1.
+"aborted: ..."), or a trial ran to its end with more lost skin frames than `max_lost_skin_frames`
+allows (closed "incomplete: ...", kept as .partial; the run went on with the next trial); 130
+Ctrl-C, 143 SIGTERM (same; SIGTERM is what SLURM and process managers send). Rerunning the same
+command resumes. In a multirun a job that fails is recorded and the next one runs (`sweep_job`);
+the command then exits 1.
 
 Ctrl-C and SIGTERM take one path: the first asks the control loop to stop at its next tick (a
 safe point); a second one, or for SIGTERM `STOP_GRACE_S` without a tick (a wait on a device, a
@@ -257,6 +259,11 @@ def _run_connected(cfg: DictConfig, setup: str, rig, typed, body):
         check_termination()  # SIGTERM while connecting
         result = body(typed, rig, metadata, **({"live": live} if live is not None else {}))
         finished = True
+        if RUN_FILES.incomplete:
+            n = len(RUN_FILES.incomplete)
+            _fail(f"{n} trial{'' if n == 1 else 's'} incomplete ({RUN_FILES.incomplete[0]}"
+                  f"{'' if n == 1 else ', ...'}); kept as .mcap.partial, rerun the same command to record "
+                  f"{'it' if n == 1 else 'them'} again")
         return result
     except KeyboardInterrupt:
         rig.stop_motion()

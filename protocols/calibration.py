@@ -331,7 +331,8 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=Non
 
             meta = {**metadata, "protocol": PROTOCOL, "plan": trial.labels}
             result = run_trial(rig, root / f"{trial.name}.mcap", trial.labels, meta, body,
-                               identity=identity[trial.name], live=live, slot_s=slot_s)
+                               identity=identity[trial.name], live=live, slot_s=slot_s,
+                               max_lost_skin_frames=cfg.max_lost_skin_frames)
             results.append(result)
             bar.update(1)
             if cfg.progress:

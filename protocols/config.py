@@ -67,6 +67,9 @@ MAX_SKIN_SUM_COUNTS = len(rig.LAYERS) * rig.N_TAXELS**2 * rig.ADC_MAX
 # The study ran 7 trials per grip depth and motion; a trial index past 999 is a typo (1000 trials of
 # one condition are ~33 h of arm motion), and past 2**32 it would draw another trial's numbers.
 MAX_TRIAL = 999
+# A trial whose skin stream lost more frames than max_lost_skin_frames is incomplete. A limit is a
+# count of frames within one trial: a million is 39 min of frames at 424 Hz, past any sensible one.
+MAX_LOST_SKIN_FRAMES = 1_000_000
 # The skin baseline averages the frames of approach.baseline_s; with fewer, its noise (or, with
 # none, a baseline of 0 counts) decides when contact is "detected".
 MIN_BASELINE_FRAMES = 5
@@ -105,6 +108,11 @@ def _check_finite(node, prefix: str = "", skip: tuple[str, ...] = ("hardware", "
 
 def _check_count(key: str, value: int, low: int, ceiling: int, why: str) -> None:
     require(low <= value <= ceiling, key, value, f"must be in [{low}, {ceiling}] ({why})")
+
+
+def _check_lost_frames(value: int) -> None:
+    _check_count("max_lost_skin_frames", value, 0, MAX_LOST_SKIN_FRAMES,
+                 "skin frames one trial may lose and still be complete; 0: none")
 
 
 def _check_live_port(port: int) -> None:
@@ -277,6 +285,11 @@ class ForceCalibrationConfig:
     control_period_s: float = 0.01  # protocol loop tick; the force limit is checked per F/T sample
     trial_timeout_s: float = 60.0
     tare_each_trial: bool = True
+    # The most skin frames a trial may lose (sequence gaps the skin driver counts, plus frames its
+    # full buffer let go) and still be complete. 0 (default): any lost frame makes the trial
+    # "incomplete: <n> skin frames lost ..."; it is kept as .partial and a rerun records it again.
+    # Every trial stores all devices' stream-health counters whatever this is (`inspect` shows them).
+    max_lost_skin_frames: int = 0
     progress: bool = True
     live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
     live_port: int = 8765
@@ -318,6 +331,7 @@ class ForceCalibrationConfig:
                 self.trial_timeout_s, f"must be in [{TRIAL_TIMEOUT_S[0]}, {TRIAL_TIMEOUT_S[1]}] s")
         _check_duration("press.hold_s", self.press.hold_s, self.trial_timeout_s)
         require_seed("seed", self.seed)
+        _check_lost_frames(self.max_lost_skin_frames)
         _check_live_port(self.live_port)
         _check_finite(self)
         _check_fault_devices(self.hardware, "platform")
@@ -435,6 +449,9 @@ class GripDepthConfig:
     hold_s: float = 0.5  # pause before and after the motion
     control_period_s: float = 0.01
     trial_timeout_s: float = 300.0
+    # The most skin frames the trial may lose and still be complete; 0 (default): none (see
+    # ForceCalibrationConfig.max_lost_skin_frames).
+    max_lost_skin_frames: int = 0
     progress: bool = True
     live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
     live_port: int = 8765
@@ -514,6 +531,7 @@ class GripDepthConfig:
             _check_motion_time("trajectory.torsion.speed_deg_s", to.speed_deg_s, to.waypoints_deg, "deg",
                                self.trial_timeout_s)
         require_seed("seed", self.seed)
+        _check_lost_frames(self.max_lost_skin_frames)
         _check_live_port(self.live_port)
         _check_finite(self)
         _check_fault_devices(self.hardware, "gripper")

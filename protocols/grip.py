@@ -228,6 +228,7 @@ def run_grip_trial(cfg: GripDepthConfig, rig: Rig, metadata: dict, live=None) ->
     write_manifest(path.parent, metadata["config"])
     result = run_trial(rig, path, labels, meta, body,
                        identity=trial_identity(metadata["config"], labels), save_images=cfg.save_images, live=live,
-                       slot_s=trial_slot_s(cfg.trial, cfg.trial_timeout_s))
+                       slot_s=trial_slot_s(cfg.trial, cfg.trial_timeout_s),
+                       max_lost_skin_frames=cfg.max_lost_skin_frames)
     print(result.summary(), flush=True)
     return result

@@ -31,6 +31,8 @@ import yaml
 
 # Keys that never shape the data (dotted paths into the resolved config).
 RUN_ONLY_KEYS = ("data_root", "progress", "trial_timeout_s", "hydra", "live", "live_port", "live_hold",
+                 # how many lost skin frames a trial may have and still be complete: judges the data
+                 "max_lost_skin_frames",
                  # add a view of the same trial: images from the camera, estimates from a model
                  "save_images", "sim.rig.camera.keep_images", "estimator")
 # Keys whose values are written in the trial's file name (protocols/grip.py trial_name).

@@ -8,15 +8,20 @@ complete is read back from the file itself.
 
 Outcomes: "complete" (the trial ran as planned); "complete (safety stop: <trip>)" (a safety
 limit stopped the motion, the protocol retracted and finished the trial: its data are kept and
-analysed, and a rerun does not repeat it); "aborted: <reason>" (kept as `.partial`, run again by
-a rerun). A complete file is never replaced: a rerun skips it when its identity matches and
-refuses (`TrialConflictError`) when the same path holds a trial of another identity, read from
-the parts that survive when the file is damaged. A damaged file whose identity matches or cannot
+analysed, and a rerun does not repeat it); "incomplete: <n> skin frames lost (...)" (the trial ran
+to its end, but its skin stream lost more frames than `max_lost_skin_frames` allows: kept as
+`.partial`, run again by a rerun, the run goes on with the next trial); "aborted: <reason>" (kept
+as `.partial`, run again by a rerun). Every trial's file stores what each device's driver counted
+over the trial (received, lost, duplicate, out of order, corrupt, reconnects; `trial_health`).
+A complete file is never replaced: a rerun skips it when its identity matches and refuses
+(`TrialConflictError`) when the same path holds a trial of another identity, read from the parts
+that survive when the file is damaged. A damaged file whose identity matches or cannot
 be read is moved aside (`<name>.mcap.damaged`, reported) before the trial is recorded again.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import zlib
 from collections.abc import Callable
@@ -75,9 +80,38 @@ class TrialConflictError(ProtocolError):
     """The trial's file holds a complete trial of another identity; it is left untouched."""
 
 
-def outcome_after(safety_trip: str | None) -> str:
-    """The outcome of a trial that ran to its end: plain complete, or complete with the trip."""
+def outcome_after(safety_trip: str | None, health: dict | None = None, max_lost_skin_frames: int | None = None) -> str:
+    """The outcome of a trial that ran to its end: plain complete, or complete with the trip;
+    incomplete when the skin lost more frames than max_lost_skin_frames (None: no limit) by the
+    trial's stream health (trial_health): sequence gaps plus frames a full driver buffer let go."""
+    skin = (health or {}).get("skin", {})
+    lost = skin.get("lost", 0) + skin.get("dropped", 0)
+    if max_lost_skin_frames is not None and lost > max_lost_skin_frames:
+        return f"incomplete: {lost} skin frames lost (limit max_lost_skin_frames={max_lost_skin_frames})"
     return COMPLETE if safety_trip is None else f"{COMPLETE} (safety stop: {safety_trip})"
+
+
+def device_health(rig: Rig) -> dict[str, dict[str, int]]:
+    """Each device's stream-health counters as they stand now (drivers count from connect): the
+    StreamHealth fields, and "dropped" where the driver counts frames its full buffer let go."""
+    out = {}
+    for d in rig.devices():
+        counters = {k: int(v) for k, v in dataclasses.asdict(d.health).items()}
+        dropped = getattr(d, "ring_dropped", None)
+        if isinstance(dropped, int):
+            counters["dropped"] = dropped
+        out[d.name] = counters
+    return out
+
+
+def trial_health(before: dict[str, dict[str, int]], now: dict[str, dict[str, int]]) -> dict[str, dict[str, int]]:
+    """What each device counted between two device_health readings (a counter that went back,
+    a driver that started counting again, counts from zero)."""
+    out = {}
+    for device, counters in now.items():
+        start = before.get(device, {})
+        out[device] = {k: v - start.get(k, 0) if v >= start.get(k, 0) else v for k, v in counters.items()}
+    return out
 
 
 class Terminated(BaseException):
@@ -124,18 +158,21 @@ class RunFiles:
     folder: Path | None = None
     written: int = 0  # complete, under their final names
     interrupted: list[Path] = field(default_factory=list)  # closed aborted, kept as <name>.mcap.partial
+    incomplete: list[str] = field(default_factory=list)  # "<name>: <outcome>" of trials closed incomplete
     already_complete: int = 0
     set_aside: list[Path] = field(default_factory=list)  # damaged files moved to <name>.mcap.damaged
 
     def reset(self) -> None:
         self.folder, self.written, self.interrupted, self.already_complete = None, 0, [], 0
-        self.set_aside = []
+        self.set_aside, self.incomplete = [], []
 
-    def record(self, path: Path, how: str) -> None:
-        """how: "written", "interrupted" (path: the .partial), "already_complete" or "set_aside"
-        (path: where the damaged file now is)."""
+    def record(self, path: Path, how: str, outcome: str = "") -> None:
+        """how: "written", "interrupted" (path: the .partial), "incomplete" (path: the .partial;
+        outcome: why), "already_complete" or "set_aside" (path: where the damaged file now is)."""
         self.folder = path.parent
-        if how == "set_aside":
+        if how == "incomplete":
+            self.incomplete.append(f"{path.name.removesuffix('.mcap' + PARTIAL_SUFFIX)}: {outcome}")
+        elif how == "set_aside":
             self.set_aside.append(path)
         elif how == "written":
             self.written += 1
@@ -156,6 +193,9 @@ class RunFiles:
         s = f"{self.written} session file{'' if self.written == 1 else 's'} written to {self.folder}"
         if self.interrupted:
             s += f", {len(self.interrupted)} interrupted (kept as .mcap.partial; a rerun runs it again)"
+        if self.incomplete:
+            s += (f", {len(self.incomplete)} incomplete (kept as .mcap.partial; a rerun runs it again): "
+                  + "; ".join(self.incomplete))
         if self.already_complete:
             s += f"; {self.already_complete} already complete there"
         if self.set_aside:
@@ -397,12 +437,16 @@ def _describe(exc: BaseException) -> str:
 
 
 def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable[[TrialLog], None], *,
-              identity: str | None = None, save_images: bool = False, live=None, slot_s: float = 0.0) -> TrialResult:
+              identity: str | None = None, save_images: bool = False, live=None, slot_s: float = 0.0,
+              max_lost_skin_frames: int | None = 0) -> TrialResult:
     """Run one trial into `path` (skipped when a complete file of the same identity is there).
 
     identity: the trial identity (protocols.identity), stored in the file's metadata.
     slot_s: where the trial starts in its campaign (trial_slot_s), for a simulated clock.
     live: a layerskin_exp.log.live.LiveView that also serves what the trial writes.
+    max_lost_skin_frames: the most skin frames the trial may lose and still be complete (None:
+    no limit); one that loses more is closed "incomplete: ..." and left as `<path>.partial`.
+    Every outcome stores the devices' stream health over the trial (trial_health).
 
     body(log) drives the rig and calls log.drain() as the clock advances. If it raises (a device
     error, a refused command, Ctrl-C), motion is stopped first, the file is closed
@@ -432,6 +476,7 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     tmp = path.with_name(path.name + PARTIAL_SUFFIX)
     log.info("trial %s -> %s", name, path)
     rig.begin_trial(labels, slot_s)
+    health0 = device_health(rig)
     t0_ns = rig.clock.now_ns()
     offset, how = rig.log_time() or (None, "given")
     writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True, epoch_offset_ns=offset,
@@ -452,17 +497,23 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
             trial.event("error", reason, **({} if first is None else {"fault": first[0], "detected_ns": int(first[1])}))
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
-        writer.close(f"aborted: {reason}")
+        writer.close(f"aborted: {reason}", stream_health=trial_health(health0, device_health(rig)))
         RUN_FILES.record(tmp, "interrupted")
         log.warning("trial %s aborted: %s (kept as %s)", name, reason, tmp)
         raise
-    outcome = outcome_after(trial.safety_trip)
-    writer.close(outcome, move_to=path)  # renamed under the writer's lock, fsynced
-    RUN_FILES.record(path, "written")
+    health = trial_health(health0, device_health(rig))
+    outcome = outcome_after(trial.safety_trip, health, max_lost_skin_frames)
+    if outcome.startswith(COMPLETE):
+        writer.close(outcome, move_to=path, stream_health=health)  # renamed under the writer's lock, fsynced
+        RUN_FILES.record(path, "written")
+    else:  # ran to its end with data missing: kept beside, run again by a rerun
+        writer.close(outcome, stream_health=health)
+        RUN_FILES.record(tmp, "incomplete", outcome)
+        path = tmp
     result = TrialResult(name, labels, str(path), outcome, duration_s=(rig.clock.now_ns() - t0_ns) / 1e9,
                          peak_fz_n=trial.peak_fz_n, peak_shear_n=trial.peak_shear_n,
                          stop_reason=trial.stop_reason)
-    log.log(logging.INFO if trial.safety_trip is None else logging.WARNING, "trial %s", result.summary())
+    log.log(logging.INFO if outcome == COMPLETE else logging.WARNING, "trial %s", result.summary())
     return result
 
 

@@ -17,7 +17,8 @@ from layerskin_exp.log.session.reader import Session, load_session
 
 
 def describe(s: Session) -> str:
-    """Human-readable summary: outcome, labels, and per stream count, rate, duration, gaps."""
+    """Human-readable summary: outcome, labels, the drivers' stream-health counters, and per stream
+    count, rate, duration, gaps."""
     lines = [
         f"{s.path}",
         f"  outcome: {s.outcome or 'none (writer did not close the file)'}   complete: {s.complete}",
@@ -47,6 +48,7 @@ def describe(s: Session) -> str:
         lines.append(f"  recovered: {s.metadata['recovered']}")
     lines.append(f"  labels: {s.labels}")
     lines.append(f"  backend: {s.metadata.get('backend')}   version: {s.metadata.get('version')}")
+    lines += _health(s.stream_health)
     starts = [a["t_ns"][0] for a in s.streams.values() if len(a["t_ns"])]
     ends = [a["t_ns"][-1] for a in s.streams.values() if len(a["t_ns"])]
     if starts:
@@ -81,8 +83,27 @@ def describe(s: Session) -> str:
     return "\n".join(lines)
 
 
+HEALTH_COUNTERS = ("received", "lost", "dropped", "duplicate", "out_of_order", "corrupt", "reconnects")
+
+
+def _health(health: dict | None) -> list[str]:
+    """The drivers' stream-health counters over the trial, one row per device."""
+    if health is None:
+        return ["  stream health: not recorded (a file written before the drivers' counters were stored, "
+                "or not closed by its writer)"]
+    if not health:
+        return ["  stream health: no device counters"]
+    lines = ["  stream health (the drivers' counters over the trial; lost = sequence gaps, dropped = "
+             "overflowed the driver's buffer):",
+             "    " + f"{'device':<12}" + "".join(f"{c.replace('_', ' '):>13}" for c in HEALTH_COUNTERS)]
+    for device, counters in sorted(health.items()):
+        lines.append("    " + f"{device:<12}" + "".join(
+            f"{counters[c] if c in counters else '-':>13}" for c in HEALTH_COUNTERS))
+    return lines
+
+
 EXIT_COMPLETE = 0
-EXIT_INCOMPLETE = 1  # readable, but damaged, cut off (no outcome) or aborted
+EXIT_INCOMPLETE = 1  # readable, but damaged, cut off (no outcome), incomplete or aborted
 EXIT_UNREADABLE = 2
 
 
@@ -115,8 +136,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m layerskin_exp.log", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p_inspect = sub.add_parser(
-        "inspect", help="print streams, rates, gaps, duration, outcome, labels; exit 0 for a complete "
-        "trial, 1 for a readable one that is damaged, cut off or aborted, 2 for an unreadable file")
+        "inspect", help="print streams, rates, gaps, duration, outcome, labels, the drivers' stream-health "
+        "counters; exit 0 for a complete trial, 1 for a readable one that is damaged, cut off, incomplete or "
+        "aborted, 2 for an unreadable file")
     p_inspect.add_argument("file")
     p_recover = sub.add_parser("recover", help="rewrite a file whose writer died into a valid MCAP")
     p_recover.add_argument("input")

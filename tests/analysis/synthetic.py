@@ -39,7 +39,8 @@ def _write_skin(w, sup, deep, t_ns):
         w.write(TwoLayerFrame(sup[i], deep[i], i, int(t_ns[i]), int(t_ns[i])))
 
 
-def calibration_trial(path, pos_index, kind, repeat, rng, n=500, h_mm=2.0, gain=1.0, config=None):
+def calibration_trial(path, pos_index, kind, repeat, rng, n=500, h_mm=2.0, gain=1.0, config=None,
+                      stream_health=None):
     x0, y0 = rng.uniform(-6, 6, 2)
     s = np.linspace(0, 1, n)
     if kind == "press":
@@ -61,7 +62,7 @@ def calibration_trial(path, pos_index, kind, repeat, rng, n=500, h_mm=2.0, gain=
         for i in range(0, n, 2):
             f = np.array([fxy[i, 0], fxy[i, 1], fz[i]]) + rng.normal(0, 0.01, 3)
             w.write(Wrench(f, np.zeros(3), i, int(t_ns[i]), int(t_ns[i])))
-        w.close("complete")
+        w.close("complete", stream_health=stream_health)
 
 
 def _stick_slip(arm, limit, rng):

@@ -45,6 +45,43 @@ def test_grip_on_loopback_with_the_ur_rtde_client(tmp_path, hydra_dirs):
     check_grip_session(s, typed, rate_tol=0.1)
 
 
+LOSSY_CAL = [*LOOPBACK_CAL, "slide.repeats=0", "+hardware.faults.skin_board.p_drop_frame=0.05"]
+
+
+def _skin_frames_missing(s) -> int:
+    """Skin frames the file lacks between its first and last (gaps in the sequence numbers)."""
+    d = np.diff(s.streams["skin"]["seq"])
+    return int(np.sum(d[d > 1] - 1))
+
+
+def test_lost_skin_frames_on_loopback_make_the_trial_incomplete(tmp_path, hydra_dirs):
+    # The board's TX drops 5% of its frames: the driver counts the gaps, the file stores the
+    # counts, and with the default max_lost_skin_frames=0 the trial is not complete.
+    data = tmp_path / "data"
+    r = run_cli("protocols.force_calibration", [*LOSSY_CAL, f"data_root={data}", *hydra_dirs], tmp_path)
+    assert r.returncode == 1, r.stderr[-3000:]
+    (partial,) = data.glob("force_calibration/*/*.mcap.partial")
+    assert not list(data.glob("force_calibration/*/*.mcap"))
+    s = load_session(partial, warn=False)
+    skin = s.stream_health["skin"]
+    assert skin["lost"] > 0 and _skin_frames_missing(s) > 0
+    n = skin["lost"] + skin["dropped"]
+    assert s.outcome == f"incomplete: {n} skin frames lost (limit max_lost_skin_frames=0)" and not s.complete
+    assert "1 trial incomplete (pos000_press0: incomplete: " in r.stderr
+    assert set(s.stream_health) == {"skin", "ft", "platform"}
+
+
+def test_lost_skin_frames_within_the_limit_keep_the_trial_complete_and_recorded(tmp_path, hydra_dirs):
+    data = tmp_path / "data"
+    r = run_cli("protocols.force_calibration", [*LOSSY_CAL, "max_lost_skin_frames=1000000", f"data_root={data}",
+                                                *hydra_dirs], tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    (f,) = data.glob("force_calibration/*/*.mcap*")
+    s = load_session(f, warn=False)
+    assert s.complete and s.outcome == "complete" and f.suffix == ".mcap"
+    assert s.stream_health["skin"]["lost"] > 0 and _skin_frames_missing(s) > 0
+
+
 STALL_CASES = [  # (protocol, device, stream in the file, seconds after power-on)
     ("force_calibration", "skin_board", "skin", 2.5),
     ("force_calibration", "netft", "wrench", 2.5),

@@ -19,6 +19,13 @@ DEVICE0_NS = 5_000_000_000
 HOST0_NS = 90_000_000_000
 
 
+def flip_value(raw: bytes, record: bytes, key: bytes) -> bytes:
+    """raw with the first character of `key`'s stored value in metadata record `record` changed
+    (a digit stays a digit: the value still parses, only the check can tell)."""
+    at = raw.index(key, raw.index(record)) + len(key) + 4  # the value follows its u32 length
+    return raw[:at] + bytes([raw[at] ^ 0x01]) + raw[at + 1:]
+
+
 def frame(i: int) -> TwoLayerFrame:
     """Frame i: both layers a deterministic function of i, including the extremes 0 and 4095."""
     k = np.arange(256, dtype=np.int64).reshape(16, 16)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from log_records import HOST0_NS, frame, records
+from log_records import HOST0_NS, flip_value, frame, records
 
 from layerskin_exp.log import SessionWarning, SessionWriter, load_session
 from layerskin_exp.log.cli import main as cli_main
@@ -251,11 +251,22 @@ def test_a_chunk_present_twice_is_read_once_and_reported(tmp_path):
     assert any(f"repeated messages dropped then: {{'skin': {2 * in_chunk}}}" in m for m in r.warnings)
 
 
-def _flip_value(raw: bytes, record: bytes, key: bytes) -> bytes:
-    """raw with the first character of `key`'s stored value in metadata record `record` changed
-    (a digit stays a digit: the value still parses, only the check can tell)."""
-    at = raw.index(key, raw.index(record)) + len(key) + 4  # the value follows its u32 length
-    return raw[:at] + bytes([raw[at] ^ 0x01]) + raw[at + 1:]
+def test_one_host_record_written_twice_at_one_time_is_two_messages_not_a_repeat(tmp_path):
+    """Stage samples parsed from one serial read share a host time; at rest their derived frame
+    transforms are identical. Host-side records (transforms, events, views) number their own
+    messages, so the reader keeps both and the file stays complete (it read as damaged before)."""
+    from layerskin_exp.types import FrameTransform, ProtocolEvent
+
+    path = tmp_path / "same.mcap"
+    tf = FrameTransform("base", "skin", np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), HOST0_NS)
+    ev = ProtocolEvent("phase", "hold", HOST0_NS, HOST0_NS, {})
+    with SessionWriter(path) as w:
+        w.write(frame(0))
+        for record in (tf, tf, ev, ev):
+            w.write(record)
+    s = load_session(path, warn=False)
+    assert s.complete and not s.damaged and not s.repeats
+    assert len(s.streams["transforms"]["host_t_ns"]) == 2 and s.streams["events"]["message"] == ["hold", "hold"]
 
 
 @pytest.mark.parametrize(("record", "key", "field"), [(b"log_time", b"offset_ns", "log_time.offset_ns"),
@@ -267,7 +278,7 @@ def test_a_damaged_metadata_field_is_named_left_out_and_not_recovered(tmp_path, 
             w.write(frame(i))
     clean = load_session(path, warn=False)
     assert clean.complete and not clean.damaged_fields and not clean.unchecked
-    path.write_bytes(_flip_value(path.read_bytes(), record, key))
+    path.write_bytes(flip_value(path.read_bytes(), record, key))
     s = load_session(path, warn=False)
     assert s.damaged_fields == [field] and s.damaged and not s.complete
     assert any(field in m for m in s.warnings)

@@ -70,6 +70,9 @@ from tests.protocols.conftest import compose_app
     ("force_calibration", ["seed=-1"], r"seed=-1: must be an integer in \[0, 4294967295\]"),
     ("force_calibration", ["sim.seed=4294967296"], r"sim\.seed=4294967296: must be an integer in"),
     ("grip_depth", ["trial=99999999999999999999"], r"trial=99999999999999999999: must be a trial index in \[0, 999\]"),
+    # issue 31: how many lost skin frames a trial may have and still be complete
+    ("grip_depth", ["max_lost_skin_frames=-1"], r"max_lost_skin_frames=-1: must be in \[0, 1000000\] \(skin frames"),
+    ("force_calibration", ["max_lost_skin_frames=10000000"], r"max_lost_skin_frames=10000000: must be in \[0, 1000000\]"),
 ])
 def test_refused_at_validation(app, overrides, key):
     with pytest.raises(ConfigError, match=key if "\\" in key else key.replace(".", r"\.")):

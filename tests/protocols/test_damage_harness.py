@@ -63,7 +63,8 @@ def sim_sessions(tmp_path_factory):
                                           f"hydra.run.dir={root / app}"], root)
         assert r.returncode == 0, r.stderr[-2000:]
         path = sorted((root / "data" / app).glob("*/*.mcap"))[0]
-        assert load_session(path, warn=False).complete
+        clean = load_session(path, warn=False)
+        assert clean.complete and clean.stream_health  # the harness damages the health record too
         out[app] = path.read_bytes()
     return out
 
@@ -86,6 +87,9 @@ def problems(s, clean) -> list[str]:
             found += [f"metadata {k}.{f} altered" for f in got if got[f] != v.get(f)]
         elif got != v:
             found.append(f"metadata {k} altered")
+    for device, counters in (s.stream_health or {}).items():  # the drivers' counts, as recorded
+        if counters != (clean.stream_health or {}).get(device):
+            found.append(f"stream_health {device} altered")
     if s.outcome is not None and s.outcome != clean.outcome:
         found.append("outcome altered")
     if s.epoch_offset_ns not in (0, clean.epoch_offset_ns):
@@ -110,7 +114,8 @@ def test_damaged_copies_never_return_duplicates_or_altered_metadata(sim_sessions
         except SessionFileError:
             continue
         found = problems(s, clean)
-        lost_meta = set(clean.labels) - set(s.labels) or {k for k in clean.metadata if k not in s.metadata}
+        lost_meta = set(clean.labels) - set(s.labels) or {k for k in clean.metadata if k not in s.metadata} or {
+            f"stream_health.{d}" for d in clean.stream_health if d not in (s.stream_health or {})}
         if kind.startswith("bit flip") and lost_meta and not (s.damaged_fields or s.damaged):
             found.append(f"metadata {sorted(lost_meta)} gone without a word")
         dst = tmp_path / f"case{i}.recovered.mcap"

@@ -39,7 +39,8 @@ def test_run_switches_and_the_motion_preset_keep_the_design(tmp_path):
     artifact = tmp_path / "T-s5.pt"
     artifact.write_bytes(b"")  # validation only checks that it is a file
     for override in ("save_images=true", f"estimator={artifact}", "sim.rig.camera.keep_images=true",
-                     f"data_root={tmp_path}", "progress=false", "live=true", "trajectory=torsion"):
+                     f"data_root={tmp_path}", "progress=false", "live=true", "trajectory=torsion",
+                     "max_lost_skin_frames=100"):
         _, config = _grip("grip_depth=9", override)
         assert design_id(config) == design_id(base), override
     labels = {"grip_depth_mm": 9.0, "motion": "translation", "trial": 0}

@@ -71,6 +71,10 @@ class Session:
         as they are, neither vouched for nor damaged.
     epoch_offset_ns: MCAP log_time - host_t_ns, the session's place on the Unix epoch (0 for a
         file written before log times were Unix times, or whose "log_time" record is lost).
+    stream_health: what each device's driver counted over the trial, {device: {"received",
+        "lost", "duplicate", "out_of_order", "corrupt", "reconnects"[, "dropped"]: int}} (a device
+        whose field fails its check is left out and named in damaged_fields); None for a file
+        written before the counters were stored (or by a writer that did not close it).
     """
 
     path: Path
@@ -88,6 +92,7 @@ class Session:
     damaged_fields: list[str] = field(default_factory=list)
     unchecked: list[str] = field(default_factory=list)
     epoch_offset_ns: int = 0
+    stream_health: dict[str, dict[str, int]] | None = None
 
     def unix_ns(self, host_t_ns):
         """Unix ns (the file's log time) of host times (int or array)."""
@@ -140,7 +145,7 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
     metadata = {k: v for k, v in session_meta.items() if k not in ("format", "format_version")}
     for name, values in records.items():
         if name not in (S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_LAYOUT,
-                        S.META_LAYOUT_APP, S.META_LOG_TIME):
+                        S.META_LAYOUT_APP, S.META_LOG_TIME, S.META_STREAM_HEALTH):
             metadata[name] = values
     epoch = records.get(S.META_LOG_TIME, {}).get("offset_ns", 0)
     if any(f in (S.META_LOG_TIME, f"{S.META_LOG_TIME}.offset_ns") for f in damaged_fields):
@@ -154,6 +159,7 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         msgs.append(f"outcome record holds {outcome!r}, not a string; treated as absent")
         outcome = None
     labels = records.get(S.META_LABELS, {})
+    stream_health = _stream_health(records.get(S.META_STREAM_HEALTH), msgs)
     wanted = None if streams is None else ({streams} if isinstance(streams, str) else set(streams))
     lost = [_lost_range(x, sc, epoch) for x in sc.lost]
     streams = _decode_streams(sc, msgs, wanted, lost, epoch)
@@ -215,7 +221,22 @@ def load_session(path, *, streams=None, warn: bool = True) -> Session:
         damaged_fields=damaged_fields,
         unchecked=unchecked,
         epoch_offset_ns=epoch,
+        stream_health=stream_health,
     )
+
+
+def _stream_health(record: dict | None, msgs: list[str]) -> dict[str, dict[str, int]] | None:
+    """The stream_health record's devices whose counters are whole numbers; others are named."""
+    if record is None:
+        return None
+    out = {}
+    for device, counters in record.items():
+        if isinstance(counters, dict) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0
+                                              for v in counters.values()):
+            out[device] = counters
+        else:
+            msgs.append(f"stream_health of {device} holds {counters!r}, not counters; left out")
+    return out
 
 
 def _stream_of(sc: McapScan, cid: int) -> str:

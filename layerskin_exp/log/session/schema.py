@@ -78,6 +78,9 @@ META_OUTCOME = "outcome"
 META_CLOCK_SYNC = "clock_sync"
 META_RECOVERED = "recovered"
 META_LOG_TIME = "log_time"  # {"epoch": "unix", "offset_ns": log_time - host_t_ns, "chosen": how}
+# What each device's driver counted over the trial: {device: {"received", "lost", "duplicate",
+# "out_of_order", "corrupt", "reconnects", and "dropped" where the driver's buffer can overflow}}.
+META_STREAM_HEALTH = "stream_health"
 META_LAYOUT = "foxglove.layout"  # the Foxglove layout, as the SDK's MCAPWriter.write_layout stores it
 META_LAYOUT_APP = "layerskin.foxglove_app_layout"  # the same layout in the app's Layouts > Import format
 

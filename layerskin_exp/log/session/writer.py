@@ -249,6 +249,10 @@ class SessionWriter:
         self._channels: dict[str, int] = {}
         # Per-stream (device_t, host_t) pairs for the clock map computed at close.
         self._clock_pairs: dict[str, tuple[list[int], list[int]]] = {}
+        # Host-side records (events, transforms, views) have no device sequence number: each
+        # channel numbers its own, so two writes of one record at one time are two messages, never
+        # an exact repeat the reader drops as a chunk present twice.
+        self._host_seq: dict[int, int] = {}
         self._write_metadata(metadata, labels)
         skin = {
             layer: self._channel(topic, RawImage, {"stream": "skin", "layer": layer})
@@ -272,7 +276,7 @@ class SessionWriter:
             else:
                 session[str(key)] = value
         reserved = {S.META_SESSION, S.META_LABELS, S.META_OUTCOME, S.META_CLOCK_SYNC, S.META_RECOVERED,
-                    S.META_LAYOUT, S.META_LOG_TIME}
+                    S.META_LAYOUT, S.META_LOG_TIME, S.META_STREAM_HEALTH}
         clash = reserved & set(records)
         if clash:
             raise ValueError(f"metadata keys {sorted(clash)} are reserved by the session log; rename them")
@@ -333,6 +337,12 @@ class SessionWriter:
             )
         if not 0 <= seq <= _U32_MAX:
             raise ValueError(f"sequence number {seq} does not fit MCAP's u32 sequence field")
+
+    def _next_seq(self, channel: int) -> int:
+        """The next sequence number of a host-side channel (0, 1, 2, ... wrapping at 2**32)."""
+        seq = self._host_seq.get(channel, 0)
+        self._host_seq[channel] = (seq + 1) & _U32_MAX
+        return seq
 
     def _add(self, channel: int, host_t_ns: int, device_t_ns: int, seq: int, payload: bytes) -> None:
         self._check_times(host_t_ns, device_t_ns, seq)
@@ -562,7 +572,7 @@ class SessionWriter:
         t = host + self.epoch_offset_ns
         payload = S.transform_payload(parent, child, _vec(translation_m, 3, "translation_m"),
                                       _vec(rotation_xyzw, 4, "rotation_xyzw"), t)
-        self._add(channel, host, host, 0, payload)
+        self._add(channel, host, host, self._next_seq(channel), payload)
         if self.live is not None:
             self.live.message(S.TF_TOPIC, FrameTransformMsg, payload, t, key=child)
 
@@ -578,7 +588,7 @@ class SessionWriter:
         if callable(payload):
             payload = payload(t)
         channel = self._channel(topic, schema, {"view": "foxglove"})
-        self._add(channel, host, host, 0, payload)
+        self._add(channel, host, host, self._next_seq(channel), payload)
         if self.live is not None:
             self.live.message(topic, schema, payload, t)
 
@@ -594,12 +604,12 @@ class SessionWriter:
             "detail": dict(e.detail),
         }
         channel = self._channel(S.EVENTS_TOPIC, "layerskin.ProtocolEvent", {"stream": "events"})
-        self._add(channel, host, dev, 0, S.dumps(body))
+        self._add(channel, host, dev, self._next_seq(channel), S.dumps(body))
         # The same event for Foxglove's Log panel.
         log_channel = self._channel(S.LOG_TOPIC, Log, {"view": "foxglove"})
         t = host + self.epoch_offset_ns
         log_payload = S.log_payload(body["kind"], body["message"], body["detail"], t)
-        self._add(log_channel, host, host, 0, log_payload)
+        self._add(log_channel, host, host, self._next_seq(log_channel), log_payload)
         if self.live is not None:
             self.live.message(S.LOG_TOPIC, Log, log_payload, t, key=None)
         self.flush()
@@ -656,18 +666,24 @@ class SessionWriter:
         self._mcap.add_metadata(S.META_LAYOUT, {"": layout.to_json()})
         self._mcap.add_metadata(S.META_LAYOUT_APP, {"": S.dumps(app_layout(layout)).decode()})
 
-    def close(self, outcome: str = "complete", *, move_to=None) -> None:
-        """Record the clock sync, the Foxglove layout of what was written and the outcome
-        ("complete", "complete (<note>)", e.g. a safety stop the trial finished after, or
-        "aborted: <reason>"), write the MCAP summary and close the file. Closing twice is a no-op.
+    def close(self, outcome: str = "complete", *, move_to=None, stream_health: dict | None = None) -> None:
+        """Record the clock sync, the Foxglove layout of what was written, the stream health and
+        the outcome ("complete", "complete (<note>)", e.g. a safety stop the trial finished after,
+        "incomplete: <reason>", a trial that ran to its end with data missing, e.g. more lost
+        frames than allowed, or "aborted: <reason>"), write the MCAP summary and close the file.
+        Closing twice is a no-op.
 
         move_to: rename the finished file to this path (atomically, fsynced) while the lock is
         still held, so no other writer can claim the old name between closing and renaming.
+        stream_health: {device: {counter: int}}, what each device's driver counted over the trial
+        (protocols.runner.trial_health); stored as the checked "stream_health" record, one field
+        per device.
         """
         if self._closed:
             return
-        if not (outcome == "complete" or outcome.startswith(("complete (", "aborted"))):
-            raise ValueError(f"outcome {outcome!r}: use 'complete', 'complete (<note>)' or 'aborted: <reason>'")
+        if not (outcome == "complete" or outcome.startswith(("complete (", "incomplete: ", "aborted"))):
+            raise ValueError(f"outcome {outcome!r}: use 'complete', 'complete (<note>)', 'incomplete: <reason>' "
+                             "or 'aborted: <reason>'")
         try:
             self.flush()
             try:
@@ -675,6 +691,8 @@ class SessionWriter:
             except Exception as exc:  # never lose the session over a failed fit
                 maps = {"error": f"{type(exc).__name__}: {exc}"}
             self._add_metadata(S.META_CLOCK_SYNC, maps)
+            if stream_health is not None:
+                self._add_metadata(S.META_STREAM_HEALTH, stream_health)
             self._write_layout()
             self._add_metadata(S.META_OUTCOME, {"outcome": outcome})
             self._mcap.finish()
