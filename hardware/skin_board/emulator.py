@@ -30,19 +30,11 @@ every 10 ms). The board's log lines go to this process's log (the run's log).
 
 from __future__ import annotations
 
-import json
 import logging
-import os
-import socket
-import subprocess
-import sys
-import threading
 import time
 from collections import Counter, deque
-from multiprocessing.connection import Connection
-from pathlib import Path
 
-from hardware.emulation import Emulator
+from hardware.emulation import DeviceProcess, Emulator
 from hardware.interfaces import DeviceError
 from hardware.skin_board.board import CORRUPTIONS
 from layerskin_exp.types import TwoLayerFrame
@@ -52,7 +44,6 @@ log = logging.getLogger(__name__)
 EMULATOR_SETUP = "platform"
 
 START_TIMEOUT_S = 20.0
-_ROOT = Path(__file__).resolve().parents[2]
 _TWIN_KEEP = 8192  # twin frames kept to fill `sent` from the board's read-out
 
 
@@ -94,16 +85,10 @@ class SkinBoardEmulator(Emulator):
         self.sent: deque = deque(maxlen=sent_maxlen)  # TwoLayerFrames written intact, as the board sent them
         self.counts: Counter = Counter()  # the board's read-out: frames written, faults, frames lost
         self.path: str | None = None
-        self._proc: subprocess.Popen | None = None
-        self._conn: Connection | None = None
-        self._send_lock = threading.Lock()
-        self._ready = threading.Event()
-        self._start_error: str | None = None
+        self._board: DeviceProcess | None = None
         self._twin: dict[int, TwoLayerFrame] = {}
         self._twin_order: deque = deque()
         self._info: dict = {}
-        self._acks: dict = {}
-        self._info_cv = threading.Condition()
 
     # ---- life cycle ------------------------------------------------------------------------
     def _open(self) -> str:
@@ -115,19 +100,16 @@ class SkinBoardEmulator(Emulator):
         opts = {"frame_period_s": period_s, "seq_offset": self.seq_offset, "seed": self.seed, "p": self.p,
                 "p_drop_frame": self.p_drop_frame, "garbage_max": self.garbage_max,
                 "stalls": self.stalls, "t0_us": t0_us}
-        parent, child = socket.socketpair()
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(_ROOT), os.environ.get("PYTHONPATH", "")]))
-        self._proc = subprocess.Popen([sys.executable, "-m", "hardware.skin_board.board", str(child.fileno()),
-                                       json.dumps(opts)], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
-        child.close()
-        self._conn = Connection(parent.detach())
+        self._board = DeviceProcess("hardware.skin_board.board", opts, self.DEVICE, log)
         self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
-        if not self._ready.wait(START_TIMEOUT_S) or self._start_error is not None:
-            why = self._start_error or f"no answer within {START_TIMEOUT_S} s"
+        try:
+            self._board.wait_ready(START_TIMEOUT_S)
+        except DeviceError:
             self._stop.set()
             for t in self._threads:
                 t.join(timeout=2.0)
-            raise DeviceError(f"skin board emulator: the board process did not start ({why})")
+            raise
+        self.path = self._board.where
         with self._fault_lock:  # drop/corrupt scheduled before start go to the board
             planned, self._planned = list(self._planned), deque()
         if planned:
@@ -135,21 +117,9 @@ class SkinBoardEmulator(Emulator):
         return self.path
 
     def _close(self) -> None:
-        if self._conn is not None:
-            try:
-                self._send(("quit",))
-            except OSError:
-                pass
-        if self._proc is not None:
-            try:
-                self._proc.wait(timeout=3.0)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-                self._proc.wait()
-            self._proc = None
-        if self._conn is not None:
-            self._conn.close()
-            self._conn = None
+        if self._board is not None:
+            self._board.close()
+            self._board = None
 
     @property
     def unplugged(self) -> bool:
@@ -159,66 +129,55 @@ class SkinBoardEmulator(Emulator):
     def _on_stall(self, stalled: bool) -> None:
         """Stall or resume the board and wait until it has taken it (a driver that connects after
         stall() returns finds the board silent)."""
-        if self._conn is None:
+        if self._board is None:
             return
         if stalled:
             left = self._stall_until - time.monotonic()
             self._send(("stall", None if left == float("inf") else max(left, 0.0)))
         else:
             self._send(("resume",))
-        self._wait_ack("stall", lambda v: v == stalled)
+        self._board.wait_ack("stall", lambda v: v == stalled)
 
     def _on_disconnect(self) -> None:
-        if self._conn is not None:
+        if self._board is not None:
             self._send(("disconnect",))
 
     def schedule(self, *entries) -> None:
         super().schedule(*entries)
-        if self._conn is not None:
+        if self._board is not None:
             with self._fault_lock:
                 planned, self._planned = list(self._planned), deque()
             self._plan(planned)
 
     def _plan(self, planned: list) -> None:
         self._send(("plan", planned))
-        self._wait_ack("plan", lambda v: True)
+        self._board.wait_ack("plan", lambda v: True)
 
     @property
     def scheduled(self) -> int:
-        if self._conn is None:
+        if self._board is None:
             return super().scheduled
         return int(self._info.get("planned", 0))
 
     @property
     def stalled(self) -> bool:
-        if self._conn is None:
+        if self._board is None:
             return super().stalled
         return bool(self._info.get("stalled"))
 
     # ---- bridge ----------------------------------------------------------------------------------
     def _send(self, msg: tuple) -> None:
-        if self._conn is None:
+        if self._board is None:
             raise DeviceError("skin board emulator: not started")
-        with self._send_lock:
-            self._conn.send(msg)
-
-    def _wait_ack(self, kind: str, ok, timeout_s: float = 5.0) -> None:
-        deadline = time.monotonic() + timeout_s
-        with self._info_cv:
-            while not (kind in self._acks and ok(self._acks[kind])):
-                left = deadline - time.monotonic()
-                if left <= 0 or self._stop.is_set():
-                    raise DeviceError(f"skin board emulator: the board process did not take {kind!r} "
-                                      f"within {timeout_s} s")
-                self._info_cv.wait(left)
-            del self._acks[kind]
+        self._board.send(msg)
 
     def _bridge(self) -> None:
+        board = self._board
         try:
             while not self._stop.is_set():
-                while self._conn.poll():
-                    self._handle(self._conn.recv())
-                if self._ready.is_set() and self._start_error is None:
+                for msg in board.poll(self.period_s):
+                    self._readout(*msg[1:-1])
+                if board.ready.is_set() and board.error is None:
                     with self.rt.lock:
                         frames = self.rt.rig.skin.read_available()
                     if frames:
@@ -227,38 +186,20 @@ class SkinBoardEmulator(Emulator):
                             self._twin_order.append(f.seq)
                         while len(self._twin_order) > _TWIN_KEEP:
                             self._twin.pop(self._twin_order.popleft(), None)
-                        self._send(("frames", [(f.seq, f.superficial, f.deep) for f in frames]))
-                self._conn.poll(self.period_s)
+                        board.send(("frames", [(f.seq, f.superficial, f.deep) for f in frames]))
         except (EOFError, OSError) as exc:
             if not self._stop.is_set():
                 log.warning("skin board emulator: the board process went away (%s)", exc)
-                self._start_error = self._start_error or str(exc)
                 self.error = self.error or exc
-                self._ready.set()
+                board.went_away(exc)
 
-    def _handle(self, msg: tuple) -> None:
-        kind = msg[0]
-        if kind == "info":
-            counts, fault_counts, planned, sent, stalled, disconnected, ack = msg[1:]
-            for k, t_us, twin_seq in sent:
-                twin = self._twin.get(twin_seq)
-                if twin is not None:
-                    self.sent.append(TwoLayerFrame(twin.superficial, twin.deep, k, t_us * 1000, 0))
-            self.counts = Counter(counts)
-            for k in ("drop", "corrupt"):  # drawn in the board; stall and disconnect are counted here
-                if fault_counts.get(k):
-                    self.fault_counts[k] = fault_counts[k]
-            with self._info_cv:
-                self._info = {"planned": planned, "stalled": stalled, "disconnected": disconnected}
-                if ack is not None:
-                    self._acks[ack[0]] = ack[1]
-                self._info_cv.notify_all()
-        elif kind == "log":
-            log.log(msg[1], "skin board (emulated): %s", msg[2])
-        elif kind == "ready":
-            self.path = msg[1]
-            self._ready.set()
-        elif kind == "error":
-            self._start_error = msg[1]
-            log.error("skin board emulator: the board process failed: %s", msg[1])
-            self._ready.set()
+    def _readout(self, counts, fault_counts, planned, sent, stalled, disconnected) -> None:
+        for k, t_us, twin_seq in sent:
+            twin = self._twin.get(twin_seq)
+            if twin is not None:
+                self.sent.append(TwoLayerFrame(twin.superficial, twin.deep, k, t_us * 1000, 0))
+        self.counts = Counter(counts)
+        for k in ("drop", "corrupt"):  # drawn in the board; stall and disconnect are counted here
+            if fault_counts.get(k):
+                self.fault_counts[k] = fault_counts[k]
+        self._info = {"planned": planned, "stalled": stalled, "disconnected": disconnected}
