@@ -358,7 +358,8 @@ class DeviceProcess:
 
     The child sends ("ready", where), ("error", text), ("log", level, text) (logged here under
     `logger`, so its lines reach the run's log) and ("info", ..., ack) read-outs, the last item an
-    acknowledgement (kind, value) or None; `handle` returns the other messages (the caller's). A
+    acknowledgement (kind, value) or None; `poll` hands the read-outs and the child's other
+    messages (commands to apply) to the caller's handler. A
     bridge thread of the emulator calls `poll` in its loop; wait_ack blocks until the child has
     taken a command (a fault in force before the call returns)."""
 
@@ -388,12 +389,12 @@ class DeviceProcess:
         with self._send_lock:
             self.conn.send(msg)
 
-    def poll(self, timeout_s: float = 0.0) -> list[tuple]:
-        """Handle what the child sent (waiting up to timeout_s for the first); returns the
-        read-outs ("info", ...) for the caller. EOFError/OSError: the child went away."""
-        out = []
+    def poll(self, timeout_s: float, handle) -> None:
+        """Take what the child sent (waiting up to timeout_s for the first): read-outs ("info",
+        ...) and the child's other messages go to handle(msg), before a read-out's
+        acknowledgement is recorded. EOFError/OSError: the child went away."""
         if not self.conn.poll(timeout_s):
-            return out
+            return
         while self.conn.poll():
             msg = self.conn.recv()
             kind = msg[0]
@@ -407,13 +408,12 @@ class DeviceProcess:
                 self.log.error("%s emulator: its process failed: %s", self.device, msg[1])
                 self.ready.set()
             else:
-                out.append(msg)
-                ack = msg[-1]
+                handle(msg)
+                ack = msg[-1] if kind == "info" else None
                 if ack is not None:
                     with self._cv:
                         self._acks[ack[0]] = ack[1]
                         self._cv.notify_all()
-        return out
 
     def went_away(self, exc: BaseException) -> None:
         """The pipe broke: whoever waits for the child learns it."""

@@ -216,8 +216,7 @@ class NetFTEmulator(Emulator):
         box = self._box
         try:
             while not self._stop.is_set():
-                for msg in box.poll(POLL_S):
-                    self._readout(*msg[1:-1])
+                box.poll(POLL_S, lambda msg: self._readout(*msg[1:-1]))
                 if box.ready.is_set() and box.error is None:
                     with self.rt.lock:
                         samples = self.rt.rig.ft.read_available()

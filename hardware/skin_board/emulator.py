@@ -175,8 +175,7 @@ class SkinBoardEmulator(Emulator):
         board = self._board
         try:
             while not self._stop.is_set():
-                for msg in board.poll(self.period_s):
-                    self._readout(*msg[1:-1])
+                board.poll(self.period_s, lambda msg: self._readout(*msg[1:-1]))
                 if board.ready.is_set() and board.error is None:
                     with self.rt.lock:
                         frames = self.rt.rig.skin.read_available()
