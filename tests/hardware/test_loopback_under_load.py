@@ -9,15 +9,18 @@ import pytest
 from tests.hardware import test_loopback as unloaded
 from tests.load import CpuLoad
 
-# The skin board, Net F/T and UR5e emulators run in processes of their own, on their own clocks;
-# the GRBL and Hand-E emulators still run in the trial's interpreter and, under this load, are
-# not scheduled to answer a poll within the bound (calibration: 'platform stalled: a ? unanswered
-# for 94 ms'; grip: 'gripper stalled ... 64 ms'), which a real device never is. Expected to pass
-# once they have their own processes too (issue 30, part 2).
-IN_PROCESS_EMULATORS = "GRBL and Hand-E emulators still in the trial's interpreter (issue 30: own processes)"
+# The skin board, Net F/T, GRBL and UR5e emulators run in processes of their own, on their own
+# clocks. Under this load the calibration's trials now run to the end, but the reader marks their
+# files damaged: derived /tf transforms are written with sequence 0 and the stage sample's host
+# time, so two GRBL status reports read in one batch at an unchanged position are byte-identical
+# messages, dropped as "a chunk present twice" (layerskin_exp/log, another session's area).
+# The Hand-E emulator still runs in the trial's interpreter: the grip trial aborts on
+# "gripper stalled" under this load, which a real device never is (issue 30, part 2).
+LOG_REPEAT_CHECK = "derived /tf transforms repeat byte for byte under load; the reader marks the file damaged"
+IN_PROCESS_EMULATORS = "the Hand-E emulator still runs in the trial's interpreter (issue 30: own processes)"
 
 
-@pytest.mark.xfail(strict=False, reason=IN_PROCESS_EMULATORS)
+@pytest.mark.xfail(strict=False, reason=LOG_REPEAT_CHECK)
 def test_calibration_on_loopback_under_load(tmp_path, hydra_dirs):
     with CpuLoad() as load:
         assert load.running == load.n
