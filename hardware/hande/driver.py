@@ -275,8 +275,8 @@ class HandEGripper(Gripper):
             if sock is None:
                 raise DeviceError("gripper: socket closed")
             try:
-                self._replies.asked(time.monotonic_ns())
                 sock.sendall(request)
+                self._replies.asked(time.monotonic_ns())  # once sent: a thread descheduled before asked nothing
                 while True:
                     got = wire.take_ack(self._rx) if var is None else wire.take_value(self._rx, var)
                     if got is not None:

@@ -101,6 +101,7 @@ class Box:
                 break
             now = time.monotonic()
             if self.disconnected:
+                k = int((now - start) / self.period_s) + 1  # no ticks now; the wait below stays a period
                 if self.sock.fileno() >= 0:
                     self.sock.close()  # off the network: no requests, no records
                     self.log(logging.INFO, "left the network (disconnect)")

@@ -43,7 +43,7 @@ from hardware.netft import web, wire
 log = logging.getLogger(__name__)
 
 EMULATOR_SETUP = "platform"
-POLL_S = 0.001  # how often the bridge looks for new twin samples
+POLL_S = 0.002  # how often the bridge looks for new twin samples (the box samples on its own clock)
 START_TIMEOUT_S = 20.0
 DEFAULT_CALIBRATION = wire.Calibration(1_000_000.0, 1_000_000.0, "N", "N-m")
 DEFAULT_SERIAL = "FT00001"  # the emulated transducer's calibration serial (calsn)

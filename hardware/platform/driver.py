@@ -391,11 +391,12 @@ class GrblPlatform(Platform):
             next_t += period
             if next_t < time.monotonic():
                 next_t = time.monotonic() + period
-            self._replies.asked(time.monotonic_ns())
             try:
                 self._write(wire.STATUS_QUERY)
             except DeviceError:
                 return
+            # asked once the byte is on its way: a poller descheduled before writing asked nothing yet
+            self._replies.asked(time.monotonic_ns())
 
     def _handle(self, line: str, host_ns: int) -> None:
         self._recent.append(line)

@@ -73,6 +73,7 @@ EMULATOR_SETUP = "platform"
 _LINE_KEEP = 4 * wire.LINE_BUFFER_SIZE  # raw bytes of a line kept for parsing (beyond: error:11 anyway)
 _NOISE = b"\x00\xff\x13#~garbage\r\n"
 _STARTUP_LINES = 2  # config.h N_STARTUP_LINE
+_BRIDGE_PERIOD_S = 0.002  # how often the bridge looks at the stage (it sends what changed)
 _Pending = Generator[None, None, bytes]  # a line's execution waiting on the machine; returns its response
 _FEED_OVR_STEP = {wire.FEED_OVR_COARSE_PLUS[0]: 10, wire.FEED_OVR_COARSE_MINUS[0]: -10,
                   wire.FEED_OVR_FINE_PLUS[0]: 1, wire.FEED_OVR_FINE_MINUS[0]: -1}
@@ -778,14 +779,18 @@ class GrblEmulator(Emulator):
     # ---- bridge ----------------------------------------------------------------------------------
     def _bridge(self) -> None:
         machine = self._machine
+        last, last_t = None, 0.0
         try:
             while not self._stop.is_set():
-                machine.poll(self.tick_s, self._handle)
+                machine.poll(max(self.tick_s, _BRIDGE_PERIOD_S), self._handle)
                 if machine.ready.is_set() and machine.error is None:
                     with self.rt.lock:
                         stage = self.rt.rig.platform
-                        pos, moving = stage.position_mm().tolist(), bool(stage.is_moving())
-                    machine.send(("state", pos, moving, self._applied_id))
+                        state = (stage.position_mm().tolist(), bool(stage.is_moving()), self._applied_id)
+                    now = time.monotonic()
+                    if state != last or now - last_t > 0.01:  # what changed, and a heartbeat
+                        machine.send(("state", *state))
+                        last, last_t = state, now
         except (EOFError, OSError) as exc:
             if not self._stop.is_set():
                 log.warning("GRBL emulator: the controller process went away (%s)", exc)

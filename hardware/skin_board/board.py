@@ -103,6 +103,7 @@ class Board:
                 break
             now = time.monotonic()
             if self.disconnected:
+                k = int((now - t0) / self.period_s) + 1  # no scans now; the wait below stays a period
                 if not pty.closed:
                     self.counts["unplug"] += 1
                     pty.close()
