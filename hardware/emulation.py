@@ -349,3 +349,122 @@ def free_loopback_host(ports: dict[int, int], first: int = 2, last: int = 254) -
             for s in socks:
                 s.close()
     raise OSError(f"no loopback address 127.0.0.N ({first}..{last}) with the ports {sorted(ports)} free")
+
+
+def run_as_a_device(logger=None) -> str:
+    """Called first in an emulated device's own process: ask the kernel to schedule it as the
+    separate machine it stands for, ahead of the host's ordinary work (round-robin real-time
+    priority 1, the lowest; a device's loop sleeps between its cycles, so it takes little CPU).
+    Where that is not permitted (no CAP_SYS_NICE) it runs as an ordinary process, and a busy
+    host can delay it; returns which, for the log."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(1))
+        return "real-time round-robin priority 1"
+    except (AttributeError, PermissionError, OSError) as exc:
+        return f"ordinary priority (real-time scheduling refused: {exc}); a busy host may delay it"
+
+
+class DeviceProcess:
+    """The process an emulated device runs in (`python -m MODULE FD OPTIONS_JSON`), and the pipe
+    to it (FD: a multiprocessing Connection over a socketpair), as a real device is another
+    machine: it keeps its own clock whatever the host's interpreter is doing.
+
+    The child sends ("ready", where), ("error", text), ("log", level, text) (logged here under
+    `logger`, so its lines reach the run's log) and ("info", ..., ack) read-outs, the last item an
+    acknowledgement (kind, value) or None; `poll` hands the read-outs and the child's other
+    messages (commands to apply) to the caller's handler. A
+    bridge thread of the emulator calls `poll` in its loop; wait_ack blocks until the child has
+    taken a command (a fault in force before the call returns)."""
+
+    def __init__(self, module: str, options: dict, device: str, logger) -> None:
+        import json
+        import subprocess
+        import sys
+        from multiprocessing.connection import Connection
+        from pathlib import Path
+
+        root = Path(__file__).resolve().parents[1]
+        parent, child = socket.socketpair()
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]))
+        self.device, self.log = device, logger
+        self.proc = subprocess.Popen([sys.executable, "-m", module, str(child.fileno()), json.dumps(options)],
+                                     pass_fds=[child.fileno()], cwd=str(root), env=env)
+        child.close()
+        self.conn = Connection(parent.detach())
+        self.where = None
+        self.error: str | None = None
+        self.ready = threading.Event()
+        self._send_lock = threading.Lock()
+        self._cv = threading.Condition()
+        self._acks: dict = {}
+
+    def send(self, msg: tuple) -> None:
+        with self._send_lock:
+            self.conn.send(msg)
+
+    def poll(self, timeout_s: float, handle) -> None:
+        """Take what the child sent (waiting up to timeout_s for the first): read-outs ("info",
+        ...) and the child's other messages go to handle(msg), before a read-out's
+        acknowledgement is recorded. EOFError/OSError: the child went away."""
+        if not self.conn.poll(timeout_s):
+            return
+        while self.conn.poll():
+            msg = self.conn.recv()
+            kind = msg[0]
+            if kind == "log":
+                self.log.log(msg[1], "%s (emulated): %s", self.device, msg[2])
+            elif kind == "ready":
+                self.where = msg[1]
+                self.ready.set()
+            elif kind == "error":
+                self.error = msg[1]
+                self.log.error("%s emulator: its process failed: %s", self.device, msg[1])
+                self.ready.set()
+            else:
+                handle(msg)
+                ack = msg[-1] if kind == "info" else None
+                if ack is not None:
+                    with self._cv:
+                        self._acks[ack[0]] = ack[1]
+                        self._cv.notify_all()
+
+    def went_away(self, exc: BaseException) -> None:
+        """The pipe broke: whoever waits for the child learns it."""
+        self.error = self.error or f"its process went away ({exc})"
+        self.ready.set()
+        with self._cv:
+            self._cv.notify_all()
+
+    def wait_ready(self, timeout_s: float) -> None:
+        from hardware.interfaces import DeviceError
+
+        if not self.ready.wait(timeout_s) or self.error is not None:
+            raise DeviceError(f"{self.device} emulator: its process did not start "
+                              f"({self.error or f'no answer within {timeout_s} s'})")
+
+    def wait_ack(self, kind: str, ok, timeout_s: float = 5.0) -> None:
+        from hardware.interfaces import DeviceError
+
+        deadline = time.monotonic() + timeout_s
+        with self._cv:
+            while not (kind in self._acks and ok(self._acks[kind])):
+                left = deadline - time.monotonic()
+                if left <= 0 or self.error is not None:
+                    raise DeviceError(f"{self.device} emulator: its process did not take {kind!r} within "
+                                      f"{timeout_s} s{f' ({self.error})' if self.error else ''}")
+                self._cv.wait(left)
+            del self._acks[kind]
+
+    def close(self) -> None:
+        import subprocess
+
+        try:
+            self.send(("quit",))
+        except OSError:
+            pass
+        try:
+            self.proc.wait(timeout=3.0)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.conn.close()

@@ -9,11 +9,17 @@ time, so `device_t_ns` is the host time at which the POS reply arrived (= `host_
 is_moving(): a move just commanded counts as moving until a poll cycle that began after its SET
 was acknowledged shows PRE equal to the requested count (the gripper took the request); from
 then on OBJ decides: 0 moving (while GTO is 1), 1/2 stopped on an object, 3 at the position.
+
+Stall: judged by the gripper's answers (hardware.watchdog.ReplyWatch): silence counts only while
+a request has waited for its reply longer than the bound less one poll period, and a reply that
+sits unread in the socket (the poll thread not scheduled) is an answer. A poll thread the host
+did not run asks nothing: that is a busy host, not a silent gripper.
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import socket
 import threading
 import time
@@ -22,6 +28,7 @@ from collections import deque
 from hardware.hande import wire
 from hardware.hande.config import HandEConfig
 from hardware.interfaces import DeviceError, Gripper
+from hardware.watchdog import ReplyWatch
 from layerskin_exp.types import GripperState
 
 log = logging.getLogger(__name__)
@@ -49,6 +56,8 @@ class HandEGripper(Gripper):
         self._seq = 0
         self._link_error: str | None = None
         self._last_reply_ns = 0
+        # silence counts once a request waits longer than the bound less a poll period
+        self._replies = ReplyWatch((self.cfg.stall_timeout_s - 1.0 / self.cfg.poll_rate_hz) * 1e9)
         self._snapshot: dict[str, int] = {}
         self._epoch = 0  # bumped after every acknowledged move/stop
         self._pending = False
@@ -191,10 +200,23 @@ class HandEGripper(Gripper):
             sta = self._snapshot.get("STA", wire.STA_ACTIVE)
             if sta != wire.STA_ACTIVE:
                 return f"gripper: Hand-E not active (STA={sta}); reconnect to re-activate"
-            if self._connected and self._last_reply_ns and now_ns - self._last_reply_ns > self.cfg.stall_timeout_s * 1e9:
-                return (f"gripper stalled: no reply from the URCap socket for "
-                        f"{(now_ns - self._last_reply_ns) / 1e6:.0f} ms")
+            silent_ns = self._replies.silent_ns(now_ns)
+            if (self._connected and silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9
+                    and not self._reply_waiting()):
+                return (f"gripper stalled: no reply from the URCap socket for {silent_ns / 1e6:.0f} ms (a request "
+                        f"unanswered) at {self.address}")
         return None
+
+    def _reply_waiting(self) -> bool:
+        """Whether bytes of a reply sit unread in the socket (the poll thread not yet run to read
+        them): the gripper answered."""
+        sock = self._sock
+        if sock is None:
+            return False
+        try:  # (select first: a socket with a timeout would wait for data before a recv, flags or not)
+            return bool(select.select([sock], [], [], 0)[0] and sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT))
+        except (OSError, ValueError):  # nothing waiting, or the link went: the exchange reports that
+            return False
 
     # ---- polling ---------------------------------------------------------------------------------
     def _poll_loop(self) -> None:
@@ -254,11 +276,13 @@ class HandEGripper(Gripper):
                 raise DeviceError("gripper: socket closed")
             try:
                 sock.sendall(request)
+                self._replies.asked(time.monotonic_ns())  # once sent: a thread descheduled before asked nothing
                 while True:
                     got = wire.take_ack(self._rx) if var is None else wire.take_value(self._rx, var)
                     if got is not None:
                         value, self._rx = got
                         self._last_reply_ns = time.monotonic_ns()
+                        self._replies.answered(self._last_reply_ns)
                         return int(value)
                     chunk = sock.recv(1024)
                     if not chunk:

@@ -10,11 +10,17 @@ device clock; it is not a wall time.
 Sequence health: rdt_sequence numbers the records of one stream (from 1, wrapping at 2**32):
 gaps are lost records, repeats duplicates, steps back out-of-order ones. Wrench.seq is the
 unwrapped count, continued across the stream restart that tare() requests.
+
+Stall: judged by the box's sample counter, not by when the receive thread last ran. fault()
+first takes every datagram the OS holds for the socket, then estimates when the newest record
+was made on the host clock (hardware.watchdog.DeviceClock); a box that stopped sending is
+reported once that is older than stall_timeout_s.
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import socket
 import threading
 import time
@@ -25,6 +31,7 @@ from collections.abc import Callable
 from hardware.interfaces import DeviceError, ForceTorqueSensor
 from hardware.netft import wire
 from hardware.netft.config import NetFTConfig
+from hardware.watchdog import DeviceClock
 from layerskin_exp.types import Wrench
 
 log = logging.getLogger(__name__)
@@ -53,6 +60,7 @@ class NetFTSensor(ForceTorqueSensor):
         self._first = threading.Event()
         self._lock = threading.Lock()
         self._buf: deque[Wrench] = deque()
+        self._rx_lock = threading.Lock()  # one reader of the socket at a time: records in order
         self._reset_state()
 
     def _reset_state(self) -> None:
@@ -61,7 +69,7 @@ class NetFTSensor(ForceTorqueSensor):
         self._last_ft: int | None = None
         self._ft_samples = 0  # unwrapped ft_sequence
         self._restart_left = 0  # records left in which a step back is a restart (after tare)
-        self._last_rx_ns: int | None = None
+        self._box_clock = DeviceClock()  # when the box made its newest record, on the host clock
         self._link_error: str | None = None  # the last receive/send error, cleared when records flow again
         self._callback_error: str | None = None
         self._status_fault: str | None = None
@@ -93,7 +101,7 @@ class NetFTSensor(ForceTorqueSensor):
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
             sock.connect((c.host, c.port))
-            sock.settimeout(RECV_POLL_S)
+            sock.setblocking(False)  # the receive thread waits in select, fault() drains
         except OSError as exc:
             sock.close()
             raise DeviceError(f"ft: cannot open UDP to the Net F/T at {self.address}: {exc}; check hardware.netft.host "
@@ -144,33 +152,57 @@ class NetFTSensor(ForceTorqueSensor):
 
     # ---- receive ---------------------------------------------------------------------------
     def _run(self) -> None:
-        sock = self._sock
         while not self._stop.is_set():
-            try:
-                data = sock.recv(65536)
-            except TimeoutError:
-                continue
-            except OSError as exc:
-                if self._stop.is_set():
-                    break
-                # A connected UDP socket reports the box's ICMP "port unreachable" here.
-                if self._link_error is None:
-                    self._link_error = f"ft: link lost ({self.address}: {exc})"
-                    log.warning("%s", self._link_error)
-                time.sleep(RECV_POLL_S)
-                continue
-            host_ns = time.monotonic_ns()
-            try:
-                records = wire.decode_records(data)
-            except wire.RDTError as exc:
-                self.health.corrupt += 1
-                log.warning("ft: rejected datagram from %s: %s", self.address, exc)
-                continue
-            for rec in records:
-                self._take(rec, host_ns)
-            self._last_rx_ns = host_ns
-            self._link_error = None
-            self._first.set()
+            if self._wait_readable():
+                self._drain()
+                if self._link_error is not None:
+                    time.sleep(RECV_POLL_S)
+
+    def _wait_readable(self) -> bool:
+        """Block up to RECV_POLL_S for a datagram (outside the read lock, so fault() may drain)."""
+        sock = self._sock
+        try:
+            return sock is not None and bool(select.select([sock], [], [], RECV_POLL_S)[0])
+        except (OSError, ValueError):  # closed by disconnect()
+            return False
+
+    def _drain(self) -> None:
+        """Take every datagram the OS holds for the socket, without blocking (from the receive
+        thread, or from fault() when the newest record looks old)."""
+        sock = self._sock
+        if sock is None:
+            return
+        with self._rx_lock:
+            while not self._stop.is_set():
+                try:
+                    data = sock.recv(65536, socket.MSG_DONTWAIT)
+                except (BlockingIOError, InterruptedError):
+                    return
+                except OSError as exc:
+                    if self._stop.is_set():
+                        return
+                    # A connected UDP socket reports the box's ICMP "port unreachable" here.
+                    if self._link_error is None:
+                        self._link_error = f"ft: link lost ({self.address}: {exc})"
+                        log.warning("%s", self._link_error)
+                    return
+                host_ns = time.monotonic_ns()
+                try:
+                    records = wire.decode_records(data)
+                except wire.RDTError as exc:
+                    self.health.corrupt += 1
+                    log.warning("ft: rejected datagram from %s: %s", self.address, exc)
+                    continue
+                for rec in records:
+                    self._take(rec, host_ns)
+                if records:
+                    self._box_clock.observe(self._ft_device_ns(), host_ns)
+                self._link_error = None
+                self._first.set()
+
+    def _ft_device_ns(self) -> int:
+        """The box's time of the newest record: its unwrapped sample counter at ft_sample_rate_hz."""
+        return int(self._ft_samples * 1e9 / self.config.ft_sample_rate_hz)
 
     def _take(self, rec: wire.RDTRecord, host_ns: int) -> None:
         if self._last_rdt is None:
@@ -199,8 +231,7 @@ class NetFTSensor(ForceTorqueSensor):
             self._status_fault = f"ft: the Net F/T reports status 0x{rec.status:08x} ({wire.decode_status(rec.status)})"
             log.error("%s", self._status_fault)
         force, torque = self.calibration_used.to_si(rec.counts)
-        w = Wrench(force, torque, seq, int(self._ft_samples * 1e9 / self.config.ft_sample_rate_hz), host_ns,
-                   rec.status)
+        w = Wrench(force, torque, seq, self._ft_device_ns(), host_ns, rec.status)
         with self._lock:
             self._buf.append(w)
         if self.on_sample is not None:
@@ -237,8 +268,12 @@ class NetFTSensor(ForceTorqueSensor):
             return self._callback_error
         if self._status_fault is not None:
             return self._status_fault
-        if self.is_connected and self._last_rx_ns is not None:
-            quiet_ns = now_ns - self._last_rx_ns
-            if quiet_ns > self.config.stall_timeout_s * 1e9:
-                return f"ft stalled: no sample for {quiet_ns / 1e6:.0f} ms (from {self.address})"
+        bound_ns = self.config.stall_timeout_s * 1e9
+        if self.is_connected and (self._box_clock.silent_ns(now_ns) or 0) > bound_ns:
+            self._drain()  # records the receive thread has not been scheduled to read yet
+            quiet_ns = self._box_clock.silent_ns(now_ns)
+            if quiet_ns > bound_ns and self._link_error is None:
+                return (f"ft stalled: no sample for {quiet_ns / 1e6:.0f} ms (from {self.address}; box time of the "
+                        f"newest record, rdt_sequence {self._last_rdt})")
+            return self._link_error
         return None

@@ -17,6 +17,11 @@ disconnect() (the box leaves the network: nothing sent or answered, the calibrat
 drop_every (drop every n-th record) and status (the status word put in every record) are
 attributes that may change while running.
 
+The box runs in a process of its own (`hardware.netft.box`, which says why and how it samples):
+it owns the RDT socket and streams on its own clock; the world and the web server stay in this
+process, whose bridge thread sends it the twin's samples as counts of the active calibration.
+Its log lines reach this process's log (the run's log).
+
 Ports: `port` (RDT, UDP) and `http_port` (the calibration page) take 0 for any free port, as the
 loopback bench does; the box's own are USUAL_PORTS (RDT 49152, HTTP 80), which the standalone
 launcher uses (HTTP falls back to HTTP_FALLBACK_PORT where port 80 is not allowed).
@@ -26,19 +31,20 @@ from __future__ import annotations
 
 import http.server
 import logging
-import socket
+import time
 from collections import deque
 
 import numpy as np
 
-from hardware.emulation import Emulator
+from hardware.emulation import DeviceProcess, Emulator
+from hardware.interfaces import DeviceError
 from hardware.netft import web, wire
 
 log = logging.getLogger(__name__)
 
 EMULATOR_SETUP = "platform"
-POLL_S = 0.001  # how often the emulator looks for requests and new twin samples
-BIAS_SAMPLES = 32  # the software bias takes the mean of the latest readings, as the twin's tare does
+POLL_S = 0.002  # how often the bridge looks for new twin samples (the box samples on its own clock)
+START_TIMEOUT_S = 20.0
 DEFAULT_CALIBRATION = wire.Calibration(1_000_000.0, 1_000_000.0, "N", "N-m")
 DEFAULT_SERIAL = "FT00001"  # the emulated transducer's calibration serial (calsn)
 MINI40_SI_20_1_RANGES = (20.0, 20.0, 60.0, 1.0, 1.0, 1.0)  # Fx Fy Fz N, Tx Ty Tz N·m (ATI's Mini40 sheet)
@@ -80,32 +86,38 @@ class NetFTEmulator(Emulator):
                               status=lambda: self.status, counts=lambda: self._last_counts)
         self.http_address: str | None = None
         self.requests: list[tuple[int, int]] = []  # (command, count) received, for tests
-        self._sock: socket.socket | None = None
         self._http: http.server.HTTPServer | None = None
-        # Stream state (emulator thread only).
-        self._client = None
-        self._mode: int | None = None  # CMD_START_REALTIME / CMD_START_BUFFERED while streaming
-        self._count = 0  # records asked for in this stream (0: endless)
-        self._rdt = 0  # rdt_sequence of the last record of this stream
-        self._made = 0  # records produced in this stream (dropped ones included)
-        self._taken = 0  # twin samples seen in this stream (the output rate takes every decimation-th)
-        self._pending: list[bytes] = []  # buffered-mode records not yet sent
+        self._box: DeviceProcess | None = None
+        self._info: dict = {}
         self._bias = np.zeros(6, np.int64)
-        self._recent_raw: deque[np.ndarray] = deque(maxlen=BIAS_SAMPLES)  # unbiased counts, newest last
 
     # ---- life cycle ------------------------------------------------------------------------
     def _open(self) -> str:
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock = sock
-        sock.bind((self.host, self.port))
-        sock.settimeout(POLL_S)
-        self.port = sock.getsockname()[1]
         if self.http_port is not None:
             self._http = http.server.ThreadingHTTPServer((self.host, self.http_port), self._handler())
             self.http_port = self._http.server_address[1]
             self.http_address = f"{self.host}:{self.http_port}"
             self._spawn(self._http.serve_forever, "http", 0.05)
-        self._spawn(self._run, "rdt")
+        with self.rt.lock:
+            self.rt.rig.ft.read_available()  # start with fresh samples
+            t0_s = float(self.rt.world.t_s)
+            twin_rate_hz = float(self.rt.rig.ft.cfg.rate_hz)
+        opts = {"host": self.host, "port": self.port, "twin_rate_hz": twin_rate_hz,
+                "ft_sample_rate_hz": self.ft_sample_rate_hz, "t0_s": t0_s, "settings": self._settings()}
+        self._box = DeviceProcess("hardware.netft.box", opts, self.DEVICE, log)
+        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
+        try:
+            self._box.wait_ready(START_TIMEOUT_S)
+        except DeviceError:
+            self._stop.set()
+            for t in self._threads:
+                t.join(timeout=2.0)
+            raise
+        self.port = self._box.where
+        with self._fault_lock:  # drop/corrupt scheduled before start go to the box
+            planned, self._planned = list(self._planned), deque()
+        if planned:
+            self._plan(planned)
         return f"{self.host}:{self.port}"
 
     def _wake(self) -> None:
@@ -120,9 +132,9 @@ class NetFTEmulator(Emulator):
 
     def _close(self) -> None:
         self._close_http()
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
+        if self._box is not None:
+            self._box.close()
+            self._box = None
 
     @property
     def calibration(self) -> wire.Calibration:
@@ -154,87 +166,76 @@ class NetFTEmulator(Emulator):
 
         return Handler
 
-    # ---- serving ---------------------------------------------------------------------------
-    def _run(self) -> None:
-        sock = self._sock
-        while not self._stop.is_set():
-            if self.disconnected:  # off the network: no requests, no records, no page
-                self._close_http()
-                sock.close()
-                return
-            try:
-                data, addr = sock.recvfrom(64)
-                self._request(data, addr)
-            except TimeoutError:
-                pass
-            except OSError as exc:
-                if self._stop.is_set():
-                    break
-                log.debug("netft emulator: %s", exc)  # e.g. a client gone (ICMP unreachable)
-            with self.rt.lock:
-                samples = self.rt.rig.ft.read_available()
-            for w in samples:
-                self._emit(w)
-            if self._mode == wire.CMD_START_BUFFERED and self._pending:
-                self._flush(force=False)
-
-    def _request(self, data: bytes, addr) -> None:
-        try:
-            command, count = wire.decode_request(data)
-        except wire.RDTError as exc:
-            log.warning("netft emulator: ignored request from %s: %s", addr, exc)
+    # ---- faults: carried out by the box process -----------------------------------------------
+    def _on_stall(self, stalled: bool) -> None:
+        """Stall or resume the box and wait until it has taken it."""
+        if self._box is None:
             return
-        self.requests.append((command, count))
-        if command in (wire.CMD_START_REALTIME, wire.CMD_START_BUFFERED):
-            self._client, self._mode, self._count = addr, command, count
-            self._rdt = self._made = self._taken = 0
-            self._pending = []
-        elif command == wire.CMD_STOP:
-            if addr == self._client:
-                self._mode = None
-        elif command == wire.CMD_BIAS:
-            if self._recent_raw:
-                self._bias = np.rint(np.mean(self._recent_raw, axis=0)).astype(np.int64)
-        elif command != wire.CMD_RESET_LATCH:
-            log.warning("netft emulator: unknown command 0x%04x from %s", command, addr)
+        if stalled:
+            left = self._stall_until - time.monotonic()
+            self._box.send(("stall", None if left == float("inf") else max(left, 0.0)))
+        else:
+            self._box.send(("resume",))
+        self._box.wait_ack("stall", lambda v: v == stalled)
 
-    def _emit(self, w) -> None:
+    def _on_disconnect(self) -> None:  # off the network: no requests, no records, no page
+        self._close_http()
+        if self._box is not None:
+            self._box.send(("disconnect",))
+
+    def schedule(self, *entries) -> None:
+        super().schedule(*entries)
+        if self._box is not None:
+            with self._fault_lock:
+                planned, self._planned = list(self._planned), deque()
+            self._plan(planned)
+
+    def _plan(self, planned: list) -> None:
+        self._box.send(("plan", planned))
+        self._box.wait_ack("plan", lambda v: True)
+
+    @property
+    def scheduled(self) -> int:
+        if self._box is None:
+            return super().scheduled
+        return int(self._info.get("planned", 0))
+
+    @property
+    def stalled(self) -> bool:
+        if self._box is None:
+            return super().stalled
+        return bool(self._info.get("stalled"))
+
+    # ---- bridge ----------------------------------------------------------------------------------
+    def _settings(self) -> list:
         with self.web.lock:
-            cal, decimation = self.web.calibration, self.web.decimation
-        raw = np.array(cal.to_counts(w.force_n, w.torque_nm), np.int64)
-        self._recent_raw.append(raw)
-        self._last_counts = tuple(int(c) for c in raw - self._bias)
-        if self._mode is None:
-            return
-        self._taken += 1
-        if (self._taken - 1) % decimation:
-            return  # between two records at the RDT output rate
-        self._made += 1
-        self._rdt += 1
-        ft_seq = int(round(w.device_t_ns * self.ft_sample_rate_hz / 1e9))
-        counts = np.clip(raw - self._bias, -(1 << 31), (1 << 31) - 1).tolist()
-        record = wire.encode_record(self._rdt, ft_seq, self.status, counts)
-        dropped = self.drop_every > 0 and self._made % self.drop_every == 0
-        fault = None if dropped or self.stalled else self._next_fault()
-        if fault is not None and fault[0] == "corrupt":
-            record = record[:-3]  # a short datagram: the client cannot decode it
-        if not dropped and not self.stalled and (fault is None or fault[0] != "drop"):
-            if self._mode == wire.CMD_START_BUFFERED:
-                self._pending.append(record)
-                self._flush(force=False)
-            else:
-                self._send(record)
-        if self._count and self._made >= self._count:  # a counted stream ends after its records
-            self._flush(force=True)
-            self._mode = None
+            decimation, per_packet = self.web.decimation, self.web.buffer_records
+        return [decimation, per_packet, self.status, self.drop_every]
 
-    def _flush(self, force: bool) -> None:
-        while len(self._pending) >= self.records_per_packet or (force and self._pending):
-            chunk, self._pending = self._pending[:self.records_per_packet], self._pending[self.records_per_packet:]
-            self._send(b"".join(chunk))
-
-    def _send(self, data: bytes) -> None:
+    def _bridge(self) -> None:
+        box = self._box
         try:
-            self._sock.sendto(data, self._client)
-        except OSError as exc:
-            log.debug("netft emulator: send to %s failed: %s", self._client, exc)
+            while not self._stop.is_set():
+                box.poll(POLL_S, lambda msg: self._readout(*msg[1:-1]))
+                if box.ready.is_set() and box.error is None:
+                    with self.rt.lock:
+                        samples = self.rt.rig.ft.read_available()
+                    if samples:
+                        with self.web.lock:
+                            cal = self.web.calibration
+                        raw = [[int(c) for c in cal.to_counts(w.force_n, w.torque_nm)] for w in samples]
+                        self._last_counts = tuple(int(c) for c in np.asarray(raw[-1], np.int64) - self._bias)
+                        box.send(("samples", raw, self._settings()))
+        except (EOFError, OSError) as exc:
+            if not self._stop.is_set():
+                log.warning("netft emulator: the box process went away (%s)", exc)
+                self.error = self.error or exc
+                box.went_away(exc)
+
+    def _readout(self, counts, fault_counts, planned, requests, stalled, disconnected, bias) -> None:
+        self.requests.extend(tuple(r) for r in requests)
+        self._bias = np.asarray(bias, np.int64)
+        for k in ("drop", "corrupt"):  # applied in the box; stall and disconnect are counted here
+            if fault_counts.get(k):
+                self.fault_counts[k] = fault_counts[k]
+        self._info = {"planned": planned, "stalled": stalled, "disconnected": disconnected, "counts": counts}

@@ -22,11 +22,18 @@ is_moving(): from the latest status (Run/Jog/Home/Hold:1 moving; Idle/Hold:0 not
 move just commanded counts as moving until a status shows motion, or until its `ok` arrived and
 two later statuses show Idle (a zero-length or instantly finished move): right after move_to
 the status may still say Idle.
+
+Stall: GRBL's reports carry no clock, so a stall is judged by its answers to `?`
+(hardware.watchdog.ReplyWatch): silence counts only while a query has gone unanswered for
+longer than the bound less one poll period, and fault() first reads what the OS holds for the
+port (a status report may sit there unread while the reader thread is not scheduled). A poller
+the host did not run leaves no query unanswered: that is a busy host, not a silent GRBL.
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import threading
 import time
 from collections import deque
@@ -37,6 +44,7 @@ import numpy as np
 from hardware.interfaces import DeviceError, Platform
 from hardware.platform import wire
 from hardware.platform.config import GrblPlatformConfig
+from hardware.watchdog import ReplyWatch
 from layerskin_exp.types import StagePosition
 
 log = logging.getLogger(__name__)
@@ -64,6 +72,7 @@ class GrblPlatform(Platform):
         self._ser = None
         self._write_lock = threading.Lock()  # every byte written to the port
         self._send_lock = threading.Lock()  # one line sender at a time (keeps FIFO = counter order)
+        self._rx_lock = threading.Lock()  # one reader of the port at a time: lines in order
         self._cv = threading.Condition()  # guards the state below
         self._stop_threads = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -78,7 +87,8 @@ class GrblPlatform(Platform):
         self._buf: deque[StagePosition] = deque()
         self._seq = 0
         self._status: wire.Status | None = None
-        self._status_ns = 0
+        # answers to `?`: silence counts once a query waits longer than the bound less a poll period
+        self._replies = ReplyWatch((self.cfg.stall_timeout_s - 1.0 / self.cfg.status_rate_hz) * 1e9)
         self._wco = np.zeros(3)
         self._banners = 0
         self._version = ""
@@ -216,6 +226,8 @@ class GrblPlatform(Platform):
         return out
 
     def fault(self, now_ns: int) -> str | None:
+        if self._connected and (self._replies.silent_ns(now_ns) or 0) > self.cfg.stall_timeout_s * 1e9:
+            self._drain()  # status reports the reader thread has not been scheduled to read yet
         with self._cv:
             if self._link_error:
                 return self._link_error
@@ -224,8 +236,10 @@ class GrblPlatform(Platform):
             if self._stop_ns is not None and now_ns - self._stop_ns > self.cfg.stop_timeout_s * 1e9:
                 state = self._status_text()
                 return f"platform: feed hold not complete {self.cfg.stop_timeout_s} s after stop() (GRBL state {state})"
-            if self._connected and self._status_ns and now_ns - self._status_ns > self.cfg.stall_timeout_s * 1e9:
-                return f"platform stalled: no status report for {(now_ns - self._status_ns) / 1e6:.0f} ms"
+            silent_ns = self._replies.silent_ns(now_ns)
+            if self._connected and silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9:
+                return (f"platform stalled: no status report for {silent_ns / 1e6:.0f} ms (a '?' unanswered; "
+                        f"last state {self._status_text()}); check GRBL's power and USB link")
         return None
 
     # ---- extras ----------------------------------------------------------------------------------
@@ -332,13 +346,36 @@ class GrblPlatform(Platform):
         ser = self._ser
         while not self._stop_threads.is_set():
             try:
-                data = ser.read(max(1, ser.in_waiting))
+                if self._wait_readable(ser):
+                    self._drain(from_reader=True)
             except Exception as exc:  # noqa: BLE001 - SerialException / OSError: the port went away
                 if not self._stop_threads.is_set():
                     self._lose_link(f"read failed: {exc}")
                 return
+
+    def _wait_readable(self, ser) -> bool:
+        """Block up to 5 ms for bytes (outside the read lock, so fault() may drain)."""
+        return bool(select.select([ser.fileno()], [], [], 0.005)[0])
+
+    def _drain(self, from_reader: bool = False) -> None:
+        """Read and handle what the OS holds for the port. From the reader (after select said
+        readable: a readable port with nothing waiting is an unplugged one, whose read raises)
+        or from fault() (without blocking; errors left to the reader, which reports them)."""
+        ser = self._ser
+        if ser is None:
+            return
+        with self._rx_lock:
+            try:
+                waiting = ser.in_waiting
+                if not waiting and not from_reader:
+                    return
+                data = ser.read(max(1, waiting))
+            except Exception:  # noqa: BLE001 - the reader reports a lost port
+                if from_reader:
+                    raise
+                return
             if not data:
-                continue
+                return
             host_ns = time.monotonic_ns()
             overlong = self._splitter.overlong
             for line in self._splitter.feed(data):
@@ -358,6 +395,8 @@ class GrblPlatform(Platform):
                 self._write(wire.STATUS_QUERY)
             except DeviceError:
                 return
+            # asked once the byte is on its way: a poller descheduled before writing asked nothing yet
+            self._replies.asked(time.monotonic_ns())
 
     def _handle(self, line: str, host_ns: int) -> None:
         self._recent.append(line)
@@ -393,7 +432,8 @@ class GrblPlatform(Platform):
         pos = mpos * scale + self._offset
         reset = False
         with self._cv:
-            self._status, self._status_ns = st, host_ns
+            self._status = st
+            self._replies.answered(host_ns)
             self._buf.append(StagePosition(pos, self._seq, host_ns, host_ns))
             self._seq += 1
             self.health.received += 1

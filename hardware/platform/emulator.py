@@ -62,7 +62,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hardware.emulation import Emulator, Pty
+from hardware.emulation import DeviceProcess, Emulator, Pty
 from hardware.interfaces import DeviceError
 from hardware.platform import gcode, wire
 
@@ -73,6 +73,7 @@ EMULATOR_SETUP = "platform"
 _LINE_KEEP = 4 * wire.LINE_BUFFER_SIZE  # raw bytes of a line kept for parsing (beyond: error:11 anyway)
 _NOISE = b"\x00\xff\x13#~garbage\r\n"
 _STARTUP_LINES = 2  # config.h N_STARTUP_LINE
+_BRIDGE_PERIOD_S = 0.002  # how often the bridge looks at the stage (it sends what changed)
 _Pending = Generator[None, None, bytes]  # a line's execution waiting on the machine; returns its response
 _FEED_OVR_STEP = {wire.FEED_OVR_COARSE_PLUS[0]: 10, wire.FEED_OVR_COARSE_MINUS[0]: -10,
                   wire.FEED_OVR_FINE_PLUS[0]: 1, wire.FEED_OVR_FINE_MINUS[0]: -1}
@@ -88,8 +89,9 @@ class _Move:
     kind: str  # "feed" (G1: feed override applies), "rapid" (G0), "jog"
 
 
-class GrblEmulator(Emulator):
+class GrblMachine(Emulator):
     """GRBL 1.1h on a pty, backed by `rt.rig.platform`; `start()` returns the slave path to open.
+    (Runs in the controller's own process, hardware.platform.machine; `GrblEmulator` starts it.)
 
     host/port: accepted for the common emulator signature; a serial device has neither.
     """
@@ -664,6 +666,158 @@ class GrblEmulator(Emulator):
 
     def _travel(self) -> np.ndarray:
         return np.array([self.settings[130], self.settings[131], self.settings[132]], float)
+
+
+class GrblEmulator(Emulator):
+    """GRBL 1.1h on a pty, backed by `rt.rig.platform`; `start()` returns the slave path to open.
+
+    The controller (GrblMachine) runs in a process of its own (hardware.platform.machine, which
+    says why); this object starts it and runs the bridge thread that, every millisecond, pushes
+    the stage's position and motion (taken under `rt.lock`) and applies the moves and stops the
+    controller sends back to `rt.rig.platform`. The controller's state and counters (state,
+    feed_override, rx_overflow_bytes, ...) are asked of it when read. host/port: accepted for the common emulator
+    signature; a serial device has neither.
+    """
+
+    DEVICE = "platform"
+    TWINS = ()  # reads the stage's position directly, as GRBL counts its own steps
+    CORRUPTIONS = GrblMachine.CORRUPTIONS
+
+    def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, start_in_alarm: bool = False,
+                 planner_blocks: int = wire.PLANNER_BLOCKS, rx_buffer_bytes: int = wire.RX_BUFFER_BYTES,
+                 tick_s: float = 0.001, stall_after_s: float | None = None,
+                 disconnect_after_s: float | None = None) -> None:
+        super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
+        self._options = {"start_in_alarm": bool(start_in_alarm), "planner_blocks": int(planner_blocks),
+                         "rx_buffer_bytes": int(rx_buffer_bytes), "tick_s": float(tick_s)}
+        self.tick_s = float(tick_s)
+        self.path: str | None = None
+        self._machine: DeviceProcess | None = None
+        self._info: dict = {"state": "Alarm" if start_in_alarm else "Idle", "feed_override": 100}
+        self._applied_id = 0
+
+    # ---- the controller's read-out --------------------------------------------------------------
+    def __getattr__(self, name: str):
+        if name in ("state", "feed_override", "rx_overflow_bytes", "tx_dropped_bytes", "lines_received",
+                    "status_reports", "resets"):
+            machine = self.__dict__.get("_machine")
+            if machine is not None and self.running:  # a fresh read-out: at least what the port has shown
+                machine.send(("readout",))
+                machine.wait_ack("readout", lambda v: True)
+            return self.__dict__.get("_info", {}).get(name, 0)
+        raise AttributeError(name)
+
+    def _twin_pos(self) -> np.ndarray:
+        with self.rt.lock:
+            return self.rt.rig.platform.position_mm()
+
+    # ---- life cycle ----------------------------------------------------------------------------
+    def _open(self) -> str:
+        cfg = self.rt.rig.platform.cfg
+        stage = {k: np.asarray(getattr(cfg, k), float).tolist() if k.startswith("workspace") else float(getattr(cfg, k))
+                 for k in ("workspace_min_mm", "workspace_max_mm", "max_speed_mm_s", "max_accel_mm_s2")}
+        opts = {**self._options, "stage": stage, "position": self._twin_pos().tolist()}
+        self._machine = DeviceProcess("hardware.platform.machine", opts, self.DEVICE, log)
+        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
+        try:
+            self._machine.wait_ready(20.0)
+        except DeviceError:
+            self._stop.set()
+            for t in self._threads:
+                t.join(timeout=2.0)
+            raise
+        self.path = self._machine.where
+        with self._fault_lock:  # drop/corrupt scheduled before start go to the controller
+            planned, self._planned = list(self._planned), deque()
+        if planned:
+            self._plan(planned)
+        return self.path
+
+    def _close(self) -> None:
+        if self._machine is not None:
+            self._machine.close()
+            self._machine = None
+
+    # ---- faults: carried out by the controller process -------------------------------------------
+    def _on_stall(self, stalled: bool) -> None:
+        if self._machine is None:
+            return
+        if stalled:
+            left = self._stall_until - time.monotonic()
+            self._machine.send(("stall", None if left == float("inf") else max(left, 0.0)))
+        else:
+            self._machine.send(("resume",))
+        self._machine.wait_ack("stall", lambda v: v == stalled)
+
+    def _on_disconnect(self) -> None:
+        if self._machine is not None:
+            self._machine.send(("disconnect",))
+
+    def schedule(self, *entries) -> None:
+        super().schedule(*entries)
+        if self._machine is not None:
+            with self._fault_lock:
+                planned, self._planned = list(self._planned), deque()
+            self._plan(planned)
+
+    def _plan(self, planned: list) -> None:
+        self._machine.send(("plan", planned))
+        self._machine.wait_ack("plan", lambda v: True)
+
+    @property
+    def scheduled(self) -> int:
+        if self._machine is None:
+            return super().scheduled
+        return int(self._info.get("scheduled", 0))
+
+    @property
+    def stalled(self) -> bool:
+        if self._machine is None:
+            return super().stalled
+        return bool(self._info.get("stalled"))
+
+    # ---- bridge ----------------------------------------------------------------------------------
+    def _bridge(self) -> None:
+        machine = self._machine
+        last, last_t = None, 0.0
+        try:
+            while not self._stop.is_set():
+                machine.poll(max(self.tick_s, _BRIDGE_PERIOD_S), self._handle)
+                if machine.ready.is_set() and machine.error is None:
+                    with self.rt.lock:
+                        stage = self.rt.rig.platform
+                        state = (stage.position_mm().tolist(), bool(stage.is_moving()), self._applied_id)
+                    now = time.monotonic()
+                    if state != last or now - last_t > 0.01:  # what changed, and a heartbeat
+                        machine.send(("state", *state))
+                        last, last_t = state, now
+        except (EOFError, OSError) as exc:
+            if not self._stop.is_set():
+                log.warning("GRBL emulator: the controller process went away (%s)", exc)
+                self.error = self.error or exc
+                machine.went_away(exc)
+
+    def _handle(self, msg: tuple) -> None:
+        kind = msg[0]
+        if kind == "info":
+            info = msg[1]
+            for k in ("drop", "corrupt"):  # applied in the controller; stall and disconnect are counted here
+                if info["fault_counts"].get(k):
+                    self.fault_counts[k] = info["fault_counts"][k]
+            if info["error"] and self.error is None:
+                self.error = RuntimeError(info["error"])
+            self._info = info
+        elif kind == "move":
+            try:
+                with self.rt.lock:
+                    self.rt.rig.platform.move_to(np.asarray(msg[2], float), msg[3])
+            except DeviceError as exc:
+                log.warning("GRBL emulator: %s", exc)
+            self._applied_id = max(self._applied_id, msg[1])
+        elif kind == "stop":
+            with self.rt.lock:
+                self.rt.rig.platform.stop()
+            self._applied_id = max(self._applied_id, msg[1])
 
 
 def _now(result: bytes | _Pending) -> bytes:

@@ -8,8 +8,8 @@ both are logged (the first at once, then at most one summary a second).
 
 A stall is judged by the board's own clock, not by when the receive thread last ran: fault()
 first drains what the OS holds for the port, then estimates when the newest frame was made on
-the host clock (its board time plus the smallest host-minus-board offset seen, which follows
-clock drift). A receive thread that was not scheduled while frames queued up in the OS is not a
+the host clock (hardware.watchdog.DeviceClock: its board time plus the smallest host-minus-board
+offset seen, which follows clock drift). A receive thread that was not scheduled while frames queued up in the OS is not a
 silent board; a board that stopped scanning is reported once its newest frame is too old.
 
 The board streams on its own once powered; the host never writes to it.
@@ -28,15 +28,13 @@ import serial
 from hardware.interfaces import DeviceError, SkinReader
 from hardware.skin_board.config import SkinBoardConfig
 from hardware.skin_board.wire import VERSION, FrameParser, Unwrapper
+from hardware.watchdog import DeviceClock
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.types import TwoLayerFrame
 
 log = logging.getLogger(__name__)
 
 _LOG_EVERY_NS = 1_000_000_000
-# How fast the host-minus-board offset may grow (board clock slower than the host's): 1000 ppm,
-# far above a crystal's drift, far below what would hide a stall.
-_DRIFT_ALLOWANCE = 1e-3
 _REFILL_WAIT_S = 0.001
 
 
@@ -60,8 +58,7 @@ class SkinBoardReader(SkinReader):
         self._thread: threading.Thread | None = None
         self._ser: serial.Serial | None = None
         self._last_seq: int | None = None
-        self._newest_device_ns: int | None = None  # board time of the newest frame, ns
-        self._offset_ns: int | None = None  # smallest (host receive - board time) seen, drift-relaxed
+        self._board_clock = DeviceClock()  # when the board made its newest frame, on the host clock
         self._rx_lock = threading.Lock()  # one reader of the port at a time: bytes reach the parser in order
         self._link_error: str | None = None
         self._ever_connected = False
@@ -82,7 +79,7 @@ class SkinBoardReader(SkinReader):
         ser = self._open(deadline)
         # the unwrapper and the last seq carry over: frames missed while disconnected count as lost
         self.parser.reset()
-        self._newest_device_ns = self._offset_ns = None  # the board may have restarted its clock
+        self._board_clock.reset()  # the board may have restarted its clock
         self._link_error = None
         self._first_frame.clear()
         self._stop.clear()
@@ -145,21 +142,14 @@ class SkinBoardReader(SkinReader):
             return None
         if self._link_error is not None:
             return f"skin: link lost ({self._link_error}) on {self.cfg.port}"
-        silent_ns = self._silent_ns(now_ns)
+        silent_ns = self._board_clock.silent_ns(now_ns)
         if silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9:
             self._drain()  # frames the receive thread has not been scheduled to read yet
-            silent_ns = self._silent_ns(now_ns)
+            silent_ns = self._board_clock.silent_ns(now_ns)
             if silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9:
                 return (f"skin stalled: no frame for {silent_ns / 1e6:.0f} ms on {self.cfg.port} (board time of "
                         f"the newest frame, seq {self._last_seq}); check the board's power and USB link")
         return None
-
-    def _silent_ns(self, now_ns: int) -> int | None:
-        """How long before now_ns (host ns) the board made its newest frame; None before the first."""
-        dev, offset = self._newest_device_ns, self._offset_ns
-        if dev is None or offset is None:
-            return None
-        return now_ns - (dev + offset)
 
     # ---- SkinReader --------------------------------------------------------------------------
     def read_available(self) -> list[TwoLayerFrame]:
@@ -239,12 +229,7 @@ class SkinBoardReader(SkinReader):
                 self._ring.extend(frames)  # a bounded deque: the oldest frames go first
             if overflow > 0:
                 self.ring_dropped += overflow
-            newest = frames[-1].device_t_ns
-            offset = host_ns - newest
-            if self._offset_ns is not None and self._newest_device_ns is not None:
-                relaxed = self._offset_ns + int((newest - self._newest_device_ns) * _DRIFT_ALLOWANCE)
-                offset = min(offset, relaxed)
-            self._offset_ns, self._newest_device_ns = offset, newest
+            self._board_clock.observe(frames[-1].device_t_ns, host_ns)
             self._first_frame.set()
             if self.on_frames is not None:
                 self.on_frames(frames)

@@ -1,50 +1,58 @@
 """Emulator of the skin readout board on a pseudo-terminal, backed by the simulated world.
 
-A thread drains the skin twin (`rt.rig.skin.read_available()` under `rt.lock`) every
-`period_s` and writes each frame, encoded with the shared wire module, to the pty master; the
-driver opens the slave path that start() returns, as it would /dev/ttyACM0. The wire sequence
-number is the twin's seq (+ seq_offset) modulo 2**16, board time the twin's device_t_ns in µs
-modulo 2**32.
+The board runs in a process of its own (`hardware.skin_board.board`, which says why and how it
+scans): it owns the pty, scans on its own clock and writes each frame, encoded with the shared
+wire module; the driver opens the slave path that start() returns, as it would /dev/ttyACM0.
+The world stays in this process: a bridge thread drains the skin twin (`rt.rig.skin.
+read_available()` under `rt.lock`) every `period_s` and sends the twin frames to the board,
+which writes each one once at its scan (or the newest again while the world is behind). The wire
+sequence number is the board's scan count (+ seq_offset) modulo 2**16, board time the world's
+time at power-on plus the scan count times the frame period, in µs modulo 2**32.
 
 The board streams only while a host has the port open, as a USB CDC device whose host side is
 not reading: frames made while the port is closed are lost, and what a host left unread is
 forgotten when it closes the port, so opening the port delivers what the board sends now. Bytes
 the host writes are read and discarded (the board takes no commands).
 
-Faults (hardware.emulation's vocabulary), drawn per frame from a numpy Generator seeded with
-`seed`, or scheduled with drop(n) / corrupt(n, how) / schedule(...):
+Faults (hardware.emulation's vocabulary), drawn per frame in the board process from a numpy
+Generator seeded with `seed`, or scheduled with drop(n) / corrupt(n, how) / schedule(...):
   p_bit_flip        corrupt "bit_flip": one random bit flipped (the driver rejects it: corrupt, lost)
   p_drop_byte       corrupt "drop_byte": one random byte left out (corrupt, lost)
   p_insert_garbage  corrupt "insert_garbage": 1..garbage_max random bytes before the frame (corrupt)
   p_drop_frame      drop: the frame not sent, as when the board's TX buffer overflows (lost)
   stalls            ((at_s, duration_ms), ...) after start(): nothing written meanwhile; the
-                    frames produced during a stall are lost (also stall(duration_s))
+                    frames of a stall are lost (also stall(duration_s); in force when it returns)
   disconnect_after_s / disconnect()  the pty closes (the driver's link is lost; the port vanishes)
-`sent` keeps the latest frames written intact; `counts` what was written, injected and lost.
+`sent` keeps the latest frames written intact (as the board sent them: seq without seq_offset,
+board time); `counts` what was written, injected, lost, held and skipped (the board's read-out,
+every 10 ms). The board's log lines go to this process's log (the run's log).
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from collections import Counter, deque
 
-import numpy as np
+from hardware.emulation import DeviceProcess, Emulator
+from hardware.interfaces import DeviceError
+from hardware.skin_board.board import CORRUPTIONS
+from layerskin_exp.types import TwoLayerFrame
 
-from hardware.emulation import Emulator, Pty
-from hardware.skin_board.wire import FRAME_LEN, encode_frame
+log = logging.getLogger(__name__)
 
 EMULATOR_SETUP = "platform"
 
-CORRUPTIONS = ("bit_flip", "drop_byte", "insert_garbage")
-_MAX_PENDING_BYTES = 512 * FRAME_LEN  # beyond this (the host not reading) whole frames are dropped; room for the world catching up in a burst
+START_TIMEOUT_S = 20.0
+_TWIN_KEEP = 8192  # twin frames kept to fill `sent` from the board's read-out
 
 
 class SkinBoardEmulator(Emulator):
-    """The readout board's serial stream on a pty.
+    """The readout board's serial stream on a pty, served by the board's own process.
 
     rt: a started RealtimeWorld whose rig has a skin twin. host, port: unused (a pty has no
     network address; accepted so every emulator is built the same way). period_s: how often the
-    twin is drained. seq_offset: added to the twin's seq before it wraps to 16 bits (to reach
+    twin is drained. seq_offset: added to the board's seq before it wraps to 16 bits (to reach
     the wrap quickly). sent_maxlen: how many intact frames `sent` remembers (4096: ~10 s of
     frames, what a test compares against; a bound, so a long run does not grow).
     """
@@ -67,105 +75,130 @@ class SkinBoardEmulator(Emulator):
             raise ValueError(f"garbage_max={garbage_max!r}: must be >= 1 byte")
         if not period_s > 0:
             raise ValueError(f"period_s={period_s!r}: must be > 0 s")
-        self.rng = np.random.default_rng(seed)
+        self.seed = int(seed)
         self.p = {"bit_flip": p_bit_flip, "drop_byte": p_drop_byte, "insert_garbage": p_insert_garbage}
         self.p_drop_frame = float(p_drop_frame)
         self.garbage_max = int(garbage_max)
         self.stalls = sorted((float(at), float(ms)) for at, ms in stalls)
         self.period_s = float(period_s)
         self.seq_offset = int(seq_offset)
-        self.sent: deque = deque(maxlen=sent_maxlen)  # TwoLayerFrames of the twin written intact
-        self.counts: Counter = Counter()  # frames written, faults injected, frames lost (stall, overflow, no host)
+        self.sent: deque = deque(maxlen=sent_maxlen)  # TwoLayerFrames written intact, as the board sent them
+        self.counts: Counter = Counter()  # the board's read-out: frames written, faults, frames lost
         self.path: str | None = None
-        self.pty: Pty | None = None
-        self._pending = bytearray()
-        self._t0 = 0.0
+        self._board: DeviceProcess | None = None
+        self._twin: dict[int, TwoLayerFrame] = {}
+        self._twin_order: deque = deque()
+        self._info: dict = {}
 
     # ---- life cycle ------------------------------------------------------------------------
     def _open(self) -> str:
-        self.pty = Pty()
-        self.path = self.pty.path
+        """Start the board process and the bridge; returns the pty path once it serves."""
         with self.rt.lock:
             self.rt.rig.skin.read_available()  # start with fresh frames
-        self._t0 = time.monotonic()
-        self._spawn(self._run, "stream")
+            t0_us = int(round(self.rt.world.t_s * 1e6))
+            period_s = self.rt.world.skin_cfg.frame_period_ms * 1e-3
+        opts = {"frame_period_s": period_s, "seq_offset": self.seq_offset, "seed": self.seed, "p": self.p,
+                "p_drop_frame": self.p_drop_frame, "garbage_max": self.garbage_max,
+                "stalls": self.stalls, "t0_us": t0_us}
+        self._board = DeviceProcess("hardware.skin_board.board", opts, self.DEVICE, log)
+        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
+        try:
+            self._board.wait_ready(START_TIMEOUT_S)
+        except DeviceError:
+            self._stop.set()
+            for t in self._threads:
+                t.join(timeout=2.0)
+            raise
+        self.path = self._board.where
+        with self._fault_lock:  # drop/corrupt scheduled before start go to the board
+            planned, self._planned = list(self._planned), deque()
+        if planned:
+            self._plan(planned)
         return self.path
 
     def _close(self) -> None:
-        if self.pty is not None:
-            self.pty.close()
+        if self._board is not None:
+            self._board.close()
+            self._board = None
 
     @property
     def unplugged(self) -> bool:
-        return self.pty is not None and self.pty.closed
+        return bool(self._info.get("disconnected"))
 
-    # ---- streaming -----------------------------------------------------------------------------
-    def _run(self) -> None:
-        pty = self.pty
-        attached = False
-        while not self._stop.wait(self.period_s):
-            now = time.monotonic()
-            if self.disconnected:
-                self.counts["unplug"] += 1
-                pty.close()
-                return
-            while self.stalls and now - self._t0 >= self.stalls[0][0]:
-                self.stall(self.stalls.pop(0)[1] * 1e-3)
-            with self.rt.lock:
-                frames = self.rt.rig.skin.read_available()
-            if not pty.host_attached():
-                if attached:  # the host closed the port: what it left unread is gone
-                    pty.forget_unread()
-                    self._pending.clear()
-                    attached = False
-                self.counts["no_host_frames"] += len(frames)
-                continue
-            if not attached:
-                self.counts["host_opens"] += 1
-                attached = True
-            self.counts["host_bytes"] += len(pty.read())  # the board takes no commands: discarded
-            if self.stalled:  # the board stops scanning; bytes already queued still go out
-                self.counts["stalled_frames"] += len(frames)
-                self._flush()
-                continue
-            for f in frames:
-                self._queue_frame(f)
-            self._flush()
-
-    def _draw_fault(self):
-        for how in CORRUPTIONS:
-            p = self.p[how]
-            if p > 0 and self.rng.random() < p:
-                return ("corrupt", how)
-        if self.p_drop_frame > 0 and self.rng.random() < self.p_drop_frame:
-            return ("drop", None)
-        return None
-
-    def _queue_frame(self, f) -> None:
-        if len(self._pending) > _MAX_PENDING_BYTES:
-            self.counts["overflow_frames"] += 1  # the host does not read the port: the board's buffer is full
+    # ---- faults: carried out by the board process ---------------------------------------------
+    def _on_stall(self, stalled: bool) -> None:
+        """Stall or resume the board and wait until it has taken it (a driver that connects after
+        stall() returns finds the board silent)."""
+        if self._board is None:
             return
-        fault = self._next_fault()
-        if fault is not None and fault[0] == "drop":
-            self.counts["drop_frame"] += 1
-            return
-        how = None if fault is None else fault[1]
-        data = bytearray(encode_frame(f.seq + self.seq_offset, f.device_t_ns // 1000, f.superficial, f.deep))
-        if how == "bit_flip":
-            bit = int(self.rng.integers(FRAME_LEN * 8))
-            data[bit // 8] ^= 1 << (bit % 8)
-        elif how == "drop_byte":
-            del data[int(self.rng.integers(FRAME_LEN))]
-        elif how == "insert_garbage":
-            n = int(self.rng.integers(1, self.garbage_max + 1))
-            data[:0] = self.rng.integers(0, 256, n, dtype=np.uint8).tobytes()
-        if how is None or how == "insert_garbage":
-            self.sent.append(f)  # the frame itself is intact
-        if how is not None:
-            self.counts[how] += 1
-        self.counts["frames"] += 1
-        self._pending += data
+        if stalled:
+            left = self._stall_until - time.monotonic()
+            self._send(("stall", None if left == float("inf") else max(left, 0.0)))
+        else:
+            self._send(("resume",))
+        self._board.wait_ack("stall", lambda v: v == stalled)
 
-    def _flush(self) -> None:
-        if self._pending:
-            del self._pending[:self.pty.write(self._pending)]
+    def _on_disconnect(self) -> None:
+        if self._board is not None:
+            self._send(("disconnect",))
+
+    def schedule(self, *entries) -> None:
+        super().schedule(*entries)
+        if self._board is not None:
+            with self._fault_lock:
+                planned, self._planned = list(self._planned), deque()
+            self._plan(planned)
+
+    def _plan(self, planned: list) -> None:
+        self._send(("plan", planned))
+        self._board.wait_ack("plan", lambda v: True)
+
+    @property
+    def scheduled(self) -> int:
+        if self._board is None:
+            return super().scheduled
+        return int(self._info.get("planned", 0))
+
+    @property
+    def stalled(self) -> bool:
+        if self._board is None:
+            return super().stalled
+        return bool(self._info.get("stalled"))
+
+    # ---- bridge ----------------------------------------------------------------------------------
+    def _send(self, msg: tuple) -> None:
+        if self._board is None:
+            raise DeviceError("skin board emulator: not started")
+        self._board.send(msg)
+
+    def _bridge(self) -> None:
+        board = self._board
+        try:
+            while not self._stop.is_set():
+                board.poll(self.period_s, lambda msg: self._readout(*msg[1:-1]))
+                if board.ready.is_set() and board.error is None:
+                    with self.rt.lock:
+                        frames = self.rt.rig.skin.read_available()
+                    if frames:
+                        for f in frames:
+                            self._twin[f.seq] = f
+                            self._twin_order.append(f.seq)
+                        while len(self._twin_order) > _TWIN_KEEP:
+                            self._twin.pop(self._twin_order.popleft(), None)
+                        board.send(("frames", [(f.seq, f.superficial, f.deep) for f in frames]))
+        except (EOFError, OSError) as exc:
+            if not self._stop.is_set():
+                log.warning("skin board emulator: the board process went away (%s)", exc)
+                self.error = self.error or exc
+                board.went_away(exc)
+
+    def _readout(self, counts, fault_counts, planned, sent, stalled, disconnected) -> None:
+        for k, t_us, twin_seq in sent:
+            twin = self._twin.get(twin_seq)
+            if twin is not None:
+                self.sent.append(TwoLayerFrame(twin.superficial, twin.deep, k, t_us * 1000, 0))
+        self.counts = Counter(counts)
+        for k in ("drop", "corrupt"):  # drawn in the board; stall and disconnect are counted here
+            if fault_counts.get(k):
+                self.fault_counts[k] = fault_counts[k]
+        self._info = {"planned": planned, "stalled": stalled, "disconnected": disconnected}

@@ -29,7 +29,11 @@ State and health
   poll did not see count as `lost` (the client keeps only the latest package).
 - Tool: on every control-script start (connect, reconnect, restart_program) the driver sets the
   Hand-E's TCP offset and payload from the config (setTcp, setPayload) and reads the TCP back.
-- fault(): link lost, emergency stop, protective stop, control program not running, stall.
+- fault(): link lost, emergency stop, protective stop, control program not running, stall. A
+  stall is judged by the controller's timestamp (hardware.watchdog.DeviceClock), not by when the
+  receive thread last polled: before calling one, fault() asks the receive client's cache (which
+  ur_rtde's own thread fills) for the newest timestamp, so a poll thread the host did not run is
+  not a silent controller.
   A dropped link is reconnected (reconnect() on both clients, counted in health.reconnects); a
   move in progress is not resumed, and nothing is ever resumed after a protective stop: that
   needs an operator (unlock on the pendant, then restart_program()).
@@ -54,6 +58,7 @@ from hardware.ur5e.wire import (
     SAFETY_BIT_PROTECTIVE_STOPPED,
     SAFETY_EMERGENCY_STOPPED,
 )
+from hardware.watchdog import DeviceClock
 from layerskin_exp.types import Pose
 
 log = logging.getLogger(__name__)
@@ -94,6 +99,7 @@ class UR5eArm(Arm):
         self._thread: threading.Thread | None = None
         self._last_seq: int | None = None
         self._last_rx_ns: int | None = None
+        self._controller_clock = DeviceClock()  # when the controller made its newest package, host clock
         self._pose6 = np.zeros(6)
         self._safety_bits = 1
         self._runtime_state = RUNTIME_PLAYING
@@ -135,6 +141,7 @@ class UR5eArm(Arm):
                               f"({why}); check the address (hardware.ur5e.host), that the robot is on and in "
                               "remote control, and that ports 29999/30003/30004 are reachable")
         self._recv, self._ctrl = result["recv"], result["ctrl"]
+        self._controller_clock.reset()  # a restarted controller starts its clock afresh
         self._link_error = None
         self._last_seq = None
         try:
@@ -231,6 +238,7 @@ class UR5eArm(Arm):
     def _read_state(self) -> float:
         r = self._recv
         ts = r.getTimestamp()
+        self._controller_clock.observe(int(round(ts * 1e9)), time.monotonic_ns())
         self._pose6 = np.asarray(r.getActualTCPPose(), float)
         self._safety_bits = int(r.getSafetyStatusBits())
         self._runtime_state = int(r.getRuntimeState())
@@ -304,6 +312,7 @@ class UR5eArm(Arm):
                 _quiet(self._recv.disconnect)
             try:
                 self._recv = rtde_receive.RTDEReceiveInterface(self.cfg.host, self.cfg.rtde_frequency_hz)
+                self._controller_clock.reset()
                 _require_streaming(self._recv)
                 self._ctrl = rtde_control.RTDEControlInterface(self.cfg.host)
                 self._read_state()
@@ -339,10 +348,26 @@ class UR5eArm(Arm):
         if self._runtime_state != RUNTIME_PLAYING:
             name = RUNTIME_NAMES.get(self._runtime_state, str(self._runtime_state))
             return f"arm: control program not running (runtime state {name})"
-        last = self._last_rx_ns
-        if last is not None and now_ns - last > self.cfg.stall_timeout_s * 1e9:
-            return f"arm stalled: no RTDE sample for {(now_ns - last) / 1e6:.0f} ms"
+        bound_ns = self.cfg.stall_timeout_s * 1e9
+        if (self._controller_clock.silent_ns(now_ns) or 0) > bound_ns:
+            self._ask_timestamp()  # packages the receive thread has not been scheduled to poll yet
+            silent_ns = self._controller_clock.silent_ns(now_ns)
+            if silent_ns is not None and silent_ns > bound_ns:
+                return (f"arm stalled: no RTDE sample for {silent_ns / 1e6:.0f} ms (controller time of the newest "
+                        f"package {self._controller_clock.newest_device_ns / 1e9:.3f} s)")
         return None
+
+    def _ask_timestamp(self) -> None:
+        """The newest controller timestamp in the receive client's cache (a read of what ur_rtde's
+        own receive thread stored; it never waits on the controller)."""
+        recv = self._recv
+        if recv is None:
+            return
+        try:
+            ts = recv.getTimestamp()
+        except Exception:  # noqa: BLE001 - a lost link is the receive thread's to report
+            return
+        self._controller_clock.observe(int(round(ts * 1e9)), time.monotonic_ns())
 
     def is_moving(self) -> bool:
         self._require_connected()

@@ -173,3 +173,37 @@ def test_connect_and_activation_errors(bench):
     with pytest.raises(DeviceError, match="did not activate"):
         drv.connect()
     assert not drv.is_connected
+
+
+def test_a_poll_thread_not_run_or_a_reply_left_unread_is_no_stall(bench, monkeypatch):
+    drv, emu, rt = bench()
+    assert healthy(drv)
+    bound_ns = int(drv.cfg.stall_timeout_s * 1e9)
+    run_poll = threading.Event()
+    run_poll.set()
+    real_get = drv._get
+
+    def gated(var):  # the poll thread held back between requests, as a thread the scheduler does not run
+        run_poll.wait()
+        return real_get(var)
+
+    monkeypatch.setattr(drv, "_get", gated)
+    run_poll.clear()
+    with drv._io_lock:  # no exchange under way: the poll thread waits at the gate from now on
+        pass
+    assert drv.fault(time.monotonic_ns() + 10 * bound_ns) is None  # nothing asked: nothing unanswered
+    with drv._io_lock:  # a request whose reply the host has not read yet
+        sent_ns = time.monotonic_ns()
+        drv._replies.asked(sent_ns)
+        drv._sock.sendall(wire.encode_get("POS"))
+        assert wait_for(drv._reply_waiting, 1.0)
+        assert drv.fault(sent_ns + 10 * bound_ns) is None  # the gripper answered; the reply sits in the socket
+        reply = b""
+        while not reply.endswith(b"\n"):
+            reply += drv._sock.recv(1024)
+        drv._replies.answered(time.monotonic_ns())
+    assert reply.startswith(b"POS ")
+    # the gripper goes silent: a request unanswered past the bound is reported
+    emu.stall()
+    run_poll.set()
+    assert wait_for(lambda: "gripper stalled" in (drv.fault(time.monotonic_ns()) or ""), 1.0)

@@ -12,6 +12,7 @@ import pytest
 
 from hardware.interfaces import DeviceError
 from hardware.netft import NetFTConfig, NetFTEmulator, NetFTSensor, web, wire
+from hardware.netft.driver import RECV_POLL_S
 from layerskin_exp.config import ConfigError
 from tests.hardware.conftest import start_realtime_world
 
@@ -159,7 +160,7 @@ def test_a_box_that_stops_sending_faults_after_the_stall_timeout(emulator):
         emu.stall()
         time.sleep(0.01)
         ft.read_available()
-        last = ft._last_rx_ns
+        last = ft._box_clock.newest_host_ns  # when the box made its newest record, on the host clock
         # Checked at the rig clock's times, not against the wall clock: silent up to the timeout, faulted after.
         assert ft.fault(last + 40_000_000) is None
         assert "ft stalled: no sample for 60 ms" in ft.fault(last + 60_000_000)
@@ -330,3 +331,67 @@ def test_a_third_party_client_reads_the_configuration_setcfgsel_selects(emulator
     # untared bias, > 0.05 N here) in N either way; a wrong scale would read it 4x off
     after = np.mean([s.force for s in samples], axis=0)
     assert np.linalg.norm(before) > 0.05 and np.allclose(after, before, atol=0.01), (before, after)
+
+
+class HandBox:
+    """The test as the box: records sent by hand, ft_sequence = host time since base at 7 kHz."""
+
+    def __init__(self):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(2.0)
+        self.port = self.sock.getsockname()[1]
+        self.base_ns, self.rdt, self.last_send_ns, self.addr = time.monotonic_ns(), 1, 0, None
+
+    def wait_request(self):
+        _, self.addr = self.sock.recvfrom(64)
+
+    def send(self):
+        self.last_send_ns = time.monotonic_ns()
+        ft_seq = (self.last_send_ns - self.base_ns) * 7000 // 1_000_000_000
+        self.sock.sendto(wire.encode_record(self.rdt, ft_seq, 0, (0, 0, 0, 0, 0, 0)), self.addr)
+        self.rdt += 1
+
+
+def test_records_held_in_the_os_while_the_reader_is_not_run_are_no_stall(monkeypatch):
+    box = HandBox()
+    ft = NetFTSensor(NetFTConfig(host="127.0.0.1", port=box.port, fetch_calibration=False, connect_timeout_s=2.0))
+    run_rx = threading.Event()
+    run_rx.set()
+    real = ft._wait_readable
+
+    def gated():  # the receive thread held back before it waits, as a thread the scheduler does not run
+        run_rx.wait()
+        return real()
+
+    monkeypatch.setattr(ft, "_wait_readable", gated)
+    try:
+        starter = threading.Thread(target=lambda: (box.wait_request(), box.send()), daemon=True)
+        starter.start()
+        ft.connect()
+        starter.join()
+        for _ in range(5):
+            box.send()
+            time.sleep(0.002)
+        collect(ft, 6)
+        assert ft.fault(box.last_send_ns) is None
+        bound_ns = ft.config.stall_timeout_s * 1e9
+        run_rx.clear()
+        time.sleep(2 * RECV_POLL_S)  # a select already under way returns
+        paused_from, first_ns = box.rdt, None
+        while first_ns is None or box.last_send_ns - first_ns <= 1.5 * bound_ns:  # the box streams on
+            box.send()
+            first_ns = first_ns or box.last_send_ns
+            time.sleep(0.005)
+        # judged at the moment the box sent its newest record, the receive thread not having run since
+        assert ft.fault(box.last_send_ns + 1_000_000) is None
+        w = ft.read_available()
+        assert w[-1].seq == box.rdt - 1 and box.rdt - paused_from == len(w) and ft.health.lost == 0
+        # the box now goes silent: reported by its own sample counter
+        reason = ft.fault(box.last_send_ns + int(10 * bound_ns))
+        assert reason is not None and reason.startswith("ft stalled: no sample for")
+        assert f"rdt_sequence {box.rdt - 1}" in reason
+    finally:
+        run_rx.set()
+        ft.disconnect()
+        box.sock.close()

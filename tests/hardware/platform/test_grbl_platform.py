@@ -196,3 +196,37 @@ def test_connect_errors_name_the_port(tmp_path):
     finally:
         os.close(master)
         os.close(slave)
+
+
+def test_status_reports_held_in_the_os_or_a_poller_not_run_are_no_stall(bench, monkeypatch):
+    drv, emu, rt = bench()
+    assert healthy(drv)
+    bound_ns = drv.cfg.stall_timeout_s * 1e9
+    run_rx = threading.Event()
+    run_rx.set()
+    real = drv._wait_readable
+
+    def gated(ser):  # the reader held back before it waits for bytes, as a thread the scheduler does not run
+        run_rx.wait()
+        return real(ser)
+
+    monkeypatch.setattr(drv, "_wait_readable", gated)
+    run_rx.clear()
+    time.sleep(0.02)  # a select already under way returns
+    drv.read_available()
+    t0 = time.monotonic_ns()
+    while time.monotonic_ns() - t0 <= 1.5 * bound_ns:  # GRBL answers the poller's '?' on, into the OS buffer
+        time.sleep(0.005)
+    assert drv.fault(time.monotonic_ns()) is None  # what sat unread was drained: GRBL answered
+    assert len(drv.read_available()) >= 3
+    run_rx.set()
+    # a poller the host does not run asks nothing: no query unanswered is no stall, however late
+    asked = drv._replies.asked
+    monkeypatch.setattr(drv._replies, "asked", lambda host_ns: None)
+    time.sleep(0.02)
+    assert drv.fault(time.monotonic_ns() + int(10 * bound_ns)) is None
+    monkeypatch.setattr(drv._replies, "asked", asked)
+    # GRBL goes silent: a '?' unanswered past the bound is reported
+    emu.stall()
+    assert wait_for(lambda: drv.fault(time.monotonic_ns()) is not None, 1.0)
+    assert drv.fault(time.monotonic_ns()).startswith("platform stalled: no status report for")

@@ -55,6 +55,8 @@ def board(realtime_world):
 
 
 def assert_matches_twin(frames, emu, seq_offset=0):
+    # the board process reports what it wrote in a read-out of its own, which may trail the port
+    assert wait_for(lambda: emu.sent and emu.sent[-1].seq + seq_offset >= frames[-1].seq)
     sent = {f.seq + seq_offset: f for f in emu.sent}
     for f in frames:
         twin = sent[f.seq]

@@ -6,6 +6,7 @@ client's disconnect sleeps). No assertion depends on timing beyond generous wait
 """
 
 import re
+import threading
 import time
 
 import numpy as np
@@ -169,6 +170,34 @@ def test_link_loss_reconnects_and_stall_is_reported(bench):
     assert wait_for(lambda: "stalled" in (arm.fault(time.monotonic_ns()) or ""), 1.0)
     emu.pause_output(False)
     assert wait_for(lambda: arm.fault(time.monotonic_ns()) is None)
+
+
+def test_a_receive_thread_not_run_is_no_stall_a_paused_controller_is(bench, monkeypatch):
+    rt, emu, arm = bench("127.0.0.25")
+    assert wait_for(lambda: arm.health.received > 10 and arm.fault(time.monotonic_ns()) is None)
+    bound_ns = arm.cfg.stall_timeout_s * 1e9
+    run_rx, gated_in = threading.Event(), threading.Event()
+    real = arm._read_state
+
+    def gated():  # the poll thread held back, as a thread the scheduler does not run
+        gated_in.set()
+        run_rx.wait()
+        return real()
+
+    monkeypatch.setattr(arm, "_read_state", gated)
+    try:
+        assert gated_in.wait(2.0)
+        received = arm.health.received
+        t0 = time.monotonic_ns()
+        while time.monotonic_ns() - t0 <= 1.5 * bound_ns:
+            time.sleep(0.005)
+        # the controller streams on into the client's cache: judged by its timestamp, no stall
+        assert arm.fault(time.monotonic_ns()) is None and arm.health.received == received
+        emu.pause_output(True)  # the controller goes silent: reported by its own timestamp
+        assert wait_for(lambda: "arm stalled" in (arm.fault(time.monotonic_ns()) or ""), 1.0)
+    finally:
+        run_rx.set()
+        emu.pause_output(False)
 
 
 def test_no_controller_is_a_clear_error():

@@ -1,0 +1,48 @@
+"""`hardware=loopback` beside a CPU load of twice the core count: trials of healthy devices
+complete (the watchdogs judge the devices, not the scheduler), and a device that genuinely goes
+silent is still caught. One loaded run each, on the tiny configs."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.hardware import test_loopback as unloaded
+from tests.load import CpuLoad
+
+# The skin board, Net F/T, GRBL and UR5e emulators run in processes of their own, on their own
+# clocks. Under this load the calibration's trials now run to the end, but the reader marks their
+# files damaged: derived /tf transforms are written with sequence 0 and the stage sample's host
+# time, so two GRBL status reports read in one batch at an unchanged position are byte-identical
+# messages, dropped as "a chunk present twice" (layerskin_exp/log, another session's area).
+# The Hand-E emulator still runs in the trial's interpreter: the grip trial aborts on
+# "gripper stalled" under this load, which a real device never is (issue 30, part 2).
+LOG_REPEAT_CHECK = "derived /tf transforms repeat byte for byte under load; the reader marks the file damaged"
+IN_PROCESS_EMULATORS = "the Hand-E emulator still runs in the trial's interpreter (issue 30: own processes)"
+
+
+@pytest.mark.xfail(strict=False, reason=LOG_REPEAT_CHECK)
+def test_calibration_on_loopback_under_load(tmp_path, hydra_dirs):
+    with CpuLoad() as load:
+        assert load.running == load.n
+        unloaded.test_calibration_on_loopback(tmp_path, hydra_dirs)
+
+
+# not run in the suite while it is expected to fail: a loaded grip trial costs ~2 min
+@pytest.mark.xfail(strict=False, run=False, reason=IN_PROCESS_EMULATORS)
+def test_grip_on_loopback_under_load(tmp_path, hydra_dirs):
+    with CpuLoad() as load:
+        assert load.running == load.n
+        unloaded.test_grip_on_loopback_with_the_ur_rtde_client(tmp_path, hydra_dirs)
+
+
+# Passed under load before the emulators moved (the stall was caught within the bound); at the
+# end of this session's work, on this shared 2-core machine at load 4-7 plus the generator, the
+# loaded rig failed to connect (skin board: no valid frame within the 2 s connect timeout, though
+# the same bench started under the same load without the CLI streams) or GRBL left a '?'
+# unanswered 58 ms before the stall came. Not yet explained: issue 30.
+@pytest.mark.xfail(strict=False, reason="the loaded rig's connect is not yet reliable (see the comment)")
+def test_stalled_skin_board_is_caught_under_load(tmp_path, hydra_dirs):
+    with CpuLoad() as load:
+        assert load.running == load.n
+        unloaded.test_stalled_stream_on_loopback_stops_safely(tmp_path, hydra_dirs, "force_calibration",
+                                                              "skin_board", "skin", 2.5)
