@@ -351,19 +351,6 @@ def free_loopback_host(ports: dict[int, int], first: int = 2, last: int = 254) -
     raise OSError(f"no loopback address 127.0.0.N ({first}..{last}) with the ports {sorted(ports)} free")
 
 
-def run_as_a_device(logger=None) -> str:
-    """Called first in an emulated device's own process: ask the kernel to schedule it as the
-    separate machine it stands for, ahead of the host's ordinary work (round-robin real-time
-    priority 1, the lowest; a device's loop sleeps between its cycles, so it takes little CPU).
-    Where that is not permitted (no CAP_SYS_NICE) it runs as an ordinary process, and a busy
-    host can delay it; returns which, for the log."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(1))
-        return "real-time round-robin priority 1"
-    except (AttributeError, PermissionError, OSError) as exc:
-        return f"ordinary priority (real-time scheduling refused: {exc}); a busy host may delay it"
-
-
 class DeviceProcess:
     """The process an emulated device runs in (`python -m MODULE FD OPTIONS_JSON`), and the pipe
     to it (FD: a multiprocessing Connection over a socketpair), as a real device is another

@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import socket
 import sys
 import time
@@ -28,7 +27,6 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
-from hardware.emulation import run_as_a_device
 from hardware.netft import wire
 
 BIAS_SAMPLES = 32  # the software bias takes the mean of the latest readings, as the twin's tare does
@@ -206,7 +204,6 @@ class Box:
 
 def main(argv: list[str]) -> int:
     conn = Connection(int(argv[0]))
-    conn.send(("log", logging.INFO, f"box process {os.getpid()}: {run_as_a_device()}"))
     try:
         box = Box(conn, **json.loads(argv[1]))
         box.run()

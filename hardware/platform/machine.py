@@ -15,14 +15,12 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import sys
 import threading
 from types import SimpleNamespace
 
 import numpy as np
 
-from hardware.emulation import run_as_a_device
 from hardware.interfaces import DeviceError
 
 
@@ -79,7 +77,6 @@ def main(argv: list[str]) -> int:
     from hardware.platform.emulator import GrblMachine
 
     conn = Connection(int(argv[0]))
-    conn.send(("log", logging.INFO, f"controller process {os.getpid()}: {run_as_a_device()}"))
     opts = json.loads(argv[1])
     lock = threading.Lock()
 

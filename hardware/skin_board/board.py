@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import sys
 import time
 from collections import Counter, deque
@@ -30,7 +29,7 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
-from hardware.emulation import Pty, run_as_a_device
+from hardware.emulation import Pty
 from hardware.skin_board.wire import FRAME_LEN, encode_frame
 
 CORRUPTIONS = ("bit_flip", "drop_byte", "insert_garbage")
@@ -200,7 +199,6 @@ class Board:
 
 def main(argv: list[str]) -> int:
     conn = Connection(int(argv[0]))
-    conn.send(("log", logging.INFO, f"board process {os.getpid()}: {run_as_a_device()}"))
     board = Board(conn, **json.loads(argv[1]))
     try:
         board.run()
