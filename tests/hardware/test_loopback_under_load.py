@@ -10,17 +10,18 @@ from tests.hardware import test_loopback as unloaded
 from tests.load import CpuLoad
 
 # The skin board, Net F/T, GRBL and UR5e emulators run in processes of their own, on their own
-# clocks. Under this load the calibration's trials now run to the end, but the reader marks their
-# files damaged: derived /tf transforms are written with sequence 0 and the stage sample's host
-# time, so two GRBL status reports read in one batch at an unchanged position are byte-identical
-# messages, dropped as "a chunk present twice" (layerskin_exp/log, another session's area).
+# clocks. Under this load the calibration's trials run to the end; the reader used to mark their
+# files damaged (host-side records all had sequence 0, so two /tf messages from one GRBL batch at
+# an unchanged position were byte-identical); since the writer numbers them per channel (issue 31)
+# the loaded calibration passed in the merge's run, but some loaded runs still fail to connect
+# (skin board: no valid frame within 2 s), so it stays an expected failure until that is explained.
 # The Hand-E emulator still runs in the trial's interpreter: the grip trial aborts on
 # "gripper stalled" under this load, which a real device never is (issue 30, part 2).
-LOG_REPEAT_CHECK = "derived /tf transforms repeat byte for byte under load; the reader marks the file damaged"
+LOADED_CONNECT = "some loaded runs fail to connect (skin board: no valid frame within 2 s), not yet explained"
 IN_PROCESS_EMULATORS = "the Hand-E emulator still runs in the trial's interpreter (issue 30: own processes)"
 
 
-@pytest.mark.xfail(strict=False, reason=LOG_REPEAT_CHECK)
+@pytest.mark.xfail(strict=False, reason=LOADED_CONNECT)
 def test_calibration_on_loopback_under_load(tmp_path, hydra_dirs):
     with CpuLoad() as load:
         assert load.running == load.n
