@@ -57,6 +57,7 @@ from hardware.ur5e.wire import (
     RUNTIME_PLAYING,
     SAFETY_BIT_PROTECTIVE_STOPPED,
     SAFETY_EMERGENCY_STOPPED,
+    probe_stream,
 )
 from hardware.watchdog import DeviceClock
 from layerskin_exp.types import Pose
@@ -64,6 +65,7 @@ from layerskin_exp.types import Pose
 log = logging.getLogger(__name__)
 
 CONTROLLER_PERIOD_S = 0.002
+PROBE_TIMEOUT_S = 2.0  # for the controller's first RTDE data package (it streams at 125-500 Hz)
 ASYNC_RUNNING_BIT = 1 << 15
 
 
@@ -120,6 +122,20 @@ class UR5eArm(Arm):
             raise DeviceError("arm: the ur_rtde package is not installed (pip install ur_rtde)") from exc
         host, cfg = self.cfg.host, self.cfg
         result: dict = {}
+
+        # A controller that accepts RTDE but sends no data would trap ur_rtde's control client
+        # in its constructor, reconnecting for ever with the interpreter lock held (no signal
+        # could end the run): ask for one data package first, on plain sockets.
+        try:
+            missing = probe_stream(host, min(cfg.connect_timeout_s, PROBE_TIMEOUT_S), cfg.rtde_frequency_hz)
+        except OSError as exc:
+            missing = f"RTDE port: {exc}"
+        if missing is not None:
+            raise DeviceError(f"arm: cannot connect to the UR controller at {host}: it "
+                              + ("accepted the RTDE connection but sends no data (stalled"
+                                 if missing.startswith("no data") else f"answered no RTDE request ({missing}")
+                              + "); check the address (hardware.ur5e.host), that the robot is on and in remote "
+                              "control, and that ports 29999/30003/30004 are reachable")
 
         def open_clients() -> None:
             try:

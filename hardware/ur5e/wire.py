@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import re
 import struct
+import time
 from dataclasses import dataclass
 
 HEADER = struct.Struct(">HB")
@@ -260,6 +261,11 @@ def decode_controller_version(payload: bytes) -> tuple[int, int, int, int]:
     return struct.unpack(">IIII", payload)
 
 
+def encode_setup_outputs_request(frequency_hz: float, names: list[str]) -> bytes:
+    """An 'O' request (protocol version 2): output frequency and the variables wanted."""
+    return pack(RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS, struct.pack(">d", frequency_hz) + ",".join(names).encode())
+
+
 def decode_setup_outputs_request(payload: bytes) -> tuple[float, list[str]]:
     """(frequency in Hz, variable names) of an 'O' request (protocol version 2)."""
     (freq,) = struct.unpack_from(">d", payload)
@@ -292,6 +298,47 @@ def encode_text_message(text: str, source: str = "emulator", level: int = 1) -> 
 def _names(raw: bytes) -> list[str]:
     text = raw.decode("ascii", errors="replace").strip("\x00")
     return [n for n in text.split(",") if n]
+
+
+def probe_stream(host: str, timeout_s: float, frequency_hz: float = 125.0) -> str | None:
+    """Ask the controller at host for one RTDE data package, as a client does (protocol version 2,
+    an output recipe of `timestamp`, start) on plain sockets, so a signal can end the wait.
+    Returns None when a data package arrived within timeout_s, else what was missing."""
+    import socket
+
+    deadline = time.monotonic() + timeout_s
+    reader = PacketReader()
+    with socket.create_connection((host, PORT_RTDE), timeout=timeout_s) as sock:
+
+        def reply(kind: int) -> bytes | None:
+            while (left := deadline - time.monotonic()) > 0:
+                sock.settimeout(left)
+                try:
+                    data = sock.recv(4096)
+                except TimeoutError:
+                    return None
+                if not data:
+                    return None
+                for k, payload in reader.feed(data):
+                    if k == kind:
+                        return payload
+            return None
+
+        steps = ((encode_protocol_version_request(2), RTDE_REQUEST_PROTOCOL_VERSION, "protocol version"),
+                 (encode_setup_outputs_request(frequency_hz, ["timestamp"]), RTDE_CONTROL_PACKAGE_SETUP_OUTPUTS,
+                  "output set-up"),
+                 (pack(RTDE_CONTROL_PACKAGE_START), RTDE_CONTROL_PACKAGE_START, "start"),
+                 (b"", RTDE_DATA_PACKAGE, "data"))
+        for request, kind, what in steps:
+            if request:
+                sock.sendall(request)
+            if reply(kind) is None:
+                return f"no {what} reply within {timeout_s:g} s"
+        try:
+            sock.sendall(pack(RTDE_CONTROL_PACKAGE_PAUSE))
+        except OSError:
+            pass
+    return None
 
 
 # ---- dashboard server (29999): one text line per request and per answer --------------------
