@@ -2,6 +2,7 @@
 
     python -m layerskin_exp.sim.fem_reference               # the section (~5 min on a free core)
     python -m layerskin_exp.sim.fem_reference --refinement  # + the same on a coarser and a finer mesh
+    python -m layerskin_exp.sim.fem_reference --shear3d     # the 3D half-model's press and shear (shear3d.py)
 
 The cap pressed in to DEPTHS_MM (frictionless), then, from SHEAR_FROM_MM, sheared along +x
 with the contact sticking until the tangential force reaches SHEAR_RATIO of the normal force
@@ -233,12 +234,14 @@ def main(argv=None) -> int:
                     help="solve on every mesh and write reference/convergence.json")
     ap.add_argument("--axisymmetric", action="store_true",
                     help="the hemisphere's press as a solid of revolution (the 3D check), beside the section")
+    ap.add_argument("--shear3d", action="store_true",
+                    help="the hemisphere's press and shear as a 3D half-model (homogenised lattice), beside the section")
     ap.add_argument("--convergence-only", action="store_true",
                     help="recompute reference/convergence.json from the data already there")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: the package's reference/)")
     args = ap.parse_args(argv)
     sim = load_sim([])
-    if not args.convergence_only and not args.axisymmetric:
+    if not args.convergence_only and not args.axisymmetric and not args.shear3d:
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -252,6 +255,21 @@ def main(argv=None) -> int:
                  "states": [{k: (None if not np.isfinite(axi[k][i]) else round(float(axi[k][i]), 5)) for k in SCALARS}
                             for i in range(len(axi["phase"]))]}
         (out / "plane_strain.json").write_text(json.dumps(check, indent=1))
+        print(json.dumps(check["depths"], indent=1))
+    if args.shear3d:
+        from layerskin_exp.sim.fem_reference.shear3d import plane_strain_shear, run_shear3d
+
+        t0 = time.time()
+        out = args.out or DATA
+        res = run_shear3d(sim)
+        np.savez_compressed(out / "shear3d.npz", **res)
+        keys = [k for k in res if np.ndim(res[k]) == 1 and len(res[k]) == len(res["phase"])]
+        check = {"seconds": round(time.time() - t0, 1), "dof": int(res["dof"]), "factorisations": int(res["factorisations"]),
+                 "factor_cpu_seconds": round(float(res["factor_seconds"]), 1),
+                 "depths": plane_strain_shear(dict(np.load(out / f"{BOUND}.npz")), res),
+                 "states": [{k: (None if not np.isfinite(res[k][i]) else round(float(res[k][i]), 5)) for k in keys}
+                            for i in range(len(res["phase"]))]}
+        (out / "shear3d.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check["depths"], indent=1))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence

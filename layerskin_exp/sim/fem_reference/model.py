@@ -328,10 +328,11 @@ class CapContact:
     eps: float  # N/mm^3: penalty per length of surface per mm of penetration
     stuck: np.ndarray = field(default=None)
     anchor: np.ndarray = field(default=None)
+    dim: int = 2  # 3: a sphere's contact with a surface's nodes (weights: their areas, mm^2)
 
     def __post_init__(self):
         self.stuck = np.zeros(len(self.nodes), bool)
-        self.anchor = np.zeros((len(self.nodes), 2))
+        self.anchor = np.zeros((len(self.nodes), self.dim))
 
     def forces(self, x: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, list, np.ndarray]:
         """Forces on the nodes from the cap (n, 2), their 2x2 stiffness blocks (the derivative of
@@ -341,8 +342,8 @@ class CapContact:
         n = d / dist[:, None]
         gap = self.radius - dist  # penetration > 0
         f = np.zeros_like(x)
-        k = np.zeros((len(x), 2, 2))
-        eye = np.eye(2)
+        k = np.zeros((len(x), self.dim, self.dim))
+        eye = np.eye(self.dim)
         free = ~self.stuck & (gap > 0)
         kw = self.eps * self.weights
         nn = n[:, :, None] * n[:, None, :]
