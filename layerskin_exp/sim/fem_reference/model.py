@@ -329,6 +329,9 @@ class CapContact:
     stuck: np.ndarray = field(default=None)
     anchor: np.ndarray = field(default=None)
     dim: int = 2  # 3: a sphere's contact with a surface's nodes (weights: their areas, mm^2)
+    # None: a free node touches while it penetrates. An array: the free nodes in contact are
+    # these, held at their gap's sign either way (an active set, updated outside Newton)
+    active: np.ndarray | None = None
 
     def __post_init__(self):
         self.stuck = np.zeros(len(self.nodes), bool)
@@ -344,7 +347,7 @@ class CapContact:
         f = np.zeros_like(x)
         k = np.zeros((len(x), self.dim, self.dim))
         eye = np.eye(self.dim)
-        free = ~self.stuck & (gap > 0)
+        free = ~self.stuck & ((gap > 0) if self.active is None else self.active)
         kw = self.eps * self.weights
         nn = n[:, :, None] * n[:, None, :]
         f[free] = (kw[free] * gap[free])[:, None] * n[free]
