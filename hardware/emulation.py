@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import os
+import queue
 import select
 import socket
 import termios
@@ -381,13 +382,30 @@ class DeviceProcess:
         self.where = None
         self.error: str | None = None
         self.ready = threading.Event()
-        self._send_lock = threading.Lock()
         self._cv = threading.Condition()
         self._acks: dict = {}
+        # Messages to the child go through one sender thread: a bridge that blocked in send() on
+        # a full pipe while the child blocked sending its frames back (the bridge is also the
+        # one that reads them) deadlocked both, and the emulator's stop() with them.
+        self._outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._send_error: str | None = None
+        self._sender = threading.Thread(target=self._send_loop, name=f"{device}-pipe-out", daemon=True)
+        self._sender.start()
 
     def send(self, msg: tuple) -> None:
-        with self._send_lock:
-            self.conn.send(msg)
+        """Queue msg for the child (in order; never blocks). OSError once the pipe has broken."""
+        if self._send_error is not None:
+            raise OSError(self._send_error)
+        self._outbox.put(msg)
+
+    def _send_loop(self) -> None:
+        while (msg := self._outbox.get()) is not None:
+            try:
+                self.conn.send(msg)
+            except OSError as exc:
+                self._send_error = f"{self.device} emulator: its pipe broke ({exc})"
+                self.went_away(exc)
+                return
 
     def poll(self, timeout_s: float, handle) -> None:
         """Take what the child sent (waiting up to timeout_s for the first): read-outs ("info",
@@ -449,9 +467,11 @@ class DeviceProcess:
             self.send(("quit",))
         except OSError:
             pass
+        self._outbox.put(None)  # the sender ends after the quit
         try:
             self.proc.wait(timeout=3.0)
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()
+        self._sender.join(timeout=2.0)
         self.conn.close()

@@ -78,7 +78,9 @@ def test_lost_skin_frames_within_the_limit_keep_the_trial_complete_and_recorded(
     assert r.returncode == 0, r.stderr[-3000:]
     (f,) = data.glob("force_calibration/*/*.mcap*")
     s = load_session(f, warn=False)
-    assert s.complete and s.outcome == "complete" and f.suffix == ".mcap"
+    # complete, whatever ended the press (on a loaded host the platform's late ticks can carry the
+    # press past the force limit: "complete (safety stop: ...)"), and not made incomplete by the loss
+    assert s.complete and s.outcome.startswith("complete") and f.suffix == ".mcap"
     assert s.stream_health["skin"]["lost"] > 0 and _skin_frames_missing(s) > 0
 
 

@@ -2,6 +2,7 @@
 
     python -m layerskin_exp.sim.fem_reference               # the section (~5 min on a free core)
     python -m layerskin_exp.sim.fem_reference --refinement  # + the same on a coarser and a finer mesh
+    python -m layerskin_exp.sim.fem_reference --shear3d     # the 3D half-model's press and shear (shear3d.py)
 
 The cap pressed in to DEPTHS_MM (frictionless), then, from SHEAR_FROM_MM, sheared along +x
 with the contact sticking until the tangential force reaches SHEAR_RATIO of the normal force
@@ -223,6 +224,40 @@ def plane_strain_check(section: dict, axi: dict) -> dict:
     return rows
 
 
+def write_shear3d(res: dict, out: Path, seconds: float) -> dict:
+    """The 3D half-model's data (shear3d.npz) and its comparison (shear3d.json): beside the
+    section per quantity (shear3d.plane_strain_shear), and its press beside the solid of
+    revolution's at equal depth (axisymmetric.npz: resolved rings, so 3D / axisymmetric is the
+    homogenised lattice's and the coarse 3D mesh's error together)."""
+    from layerskin_exp.sim.fem_reference.shear3d import plane_strain_shear
+
+    np.savez_compressed(out / "shear3d.npz", **res)
+    axi = dict(np.load(out / "axisymmetric.npz"))
+    press = {}
+    for depth in PLANE_STRAIN_DEPTHS_MM:
+        i = np.flatnonzero((res["phase"] == 0) & np.isclose(res["depth_mm"], depth))
+        j = np.flatnonzero(np.isclose(axi["depth_mm"], depth))
+        if len(i) == 0 or len(j) == 0:
+            continue
+        i, j = int(i[0]), int(j[0])
+        pairs = {"load_n": (axi["fz_n_per_mm"][j], res["fz_n"][i]),
+                 "contact_radius_mm": (axi["contact_to_mm"][j], 0.5 * (res["contact_to_mm"][i] - res["contact_from_mm"][i])),
+                 "peak_superficial_kpa": (axi["superficial_kpa"][j].max(), res["superficial_kpa"][i].max()),
+                 "peak_deep_kpa": (axi["deep_kpa"][j].max(), res["deep_kpa"][i].max()),
+                 "max_lattice_strain": (axi["max_lattice_strain"][j], res["max_lattice_strain"][i])}
+        press[f"{depth:.2f} mm"] = {k: {"axisymmetric": round(float(a), 5), "3d": round(float(b), 5), "ratio": round(float(b / a), 4)}
+                                    for k, (a, b) in pairs.items()}
+    keys = [k for k in res if np.ndim(res[k]) == 1 and len(res[k]) == len(res["phase"])]
+    check = {"seconds": round(seconds, 1), "dof": int(res["dof"]), "factorisations": int(res["factorisations"]),
+             "factor_cpu_seconds": round(float(res["factor_seconds"]), 1),
+             "depths": plane_strain_shear(dict(np.load(out / f"{BOUND}.npz")), res),
+             "press_vs_axisymmetric": press,
+             "states": [{k: (None if not np.isfinite(res[k][i]) else round(float(res[k][i]), 5)) for k in keys}
+                        for i in range(len(res["phase"]))]}
+    (out / "shear3d.json").write_text(json.dumps(check, indent=1))
+    return check
+
+
 def main(argv=None) -> int:
     from layerskin_exp.sim.config import load_sim
 
@@ -233,12 +268,14 @@ def main(argv=None) -> int:
                     help="solve on every mesh and write reference/convergence.json")
     ap.add_argument("--axisymmetric", action="store_true",
                     help="the hemisphere's press as a solid of revolution (the 3D check), beside the section")
+    ap.add_argument("--shear3d", action="store_true",
+                    help="the hemisphere's press and shear as a 3D half-model (homogenised lattice), beside the section")
     ap.add_argument("--convergence-only", action="store_true",
                     help="recompute reference/convergence.json from the data already there")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: the package's reference/)")
     args = ap.parse_args(argv)
     sim = load_sim([])
-    if not args.convergence_only and not args.axisymmetric:
+    if not args.convergence_only and not args.axisymmetric and not args.shear3d:
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -253,6 +290,13 @@ def main(argv=None) -> int:
                             for i in range(len(axi["phase"]))]}
         (out / "plane_strain.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check["depths"], indent=1))
+    if args.shear3d:
+        from layerskin_exp.sim.fem_reference.shear3d import run_shear3d
+
+        t0 = time.time()
+        out = args.out or DATA
+        res = run_shear3d(sim, partial=lambda r: write_shear3d(r, out, time.time() - t0))
+        print(json.dumps(write_shear3d(res, out, time.time() - t0)["depths"], indent=1))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 

@@ -328,10 +328,14 @@ class CapContact:
     eps: float  # N/mm^3: penalty per length of surface per mm of penetration
     stuck: np.ndarray = field(default=None)
     anchor: np.ndarray = field(default=None)
+    dim: int = 2  # 3: a sphere's contact with a surface's nodes (weights: their areas, mm^2)
+    # None: a free node touches while it penetrates. An array: the free nodes in contact are
+    # these, held at their gap's sign either way (an active set, updated outside Newton)
+    active: np.ndarray | None = None
 
     def __post_init__(self):
         self.stuck = np.zeros(len(self.nodes), bool)
-        self.anchor = np.zeros((len(self.nodes), 2))
+        self.anchor = np.zeros((len(self.nodes), self.dim))
 
     def forces(self, x: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, list, np.ndarray]:
         """Forces on the nodes from the cap (n, 2), their 2x2 stiffness blocks (the derivative of
@@ -341,9 +345,9 @@ class CapContact:
         n = d / dist[:, None]
         gap = self.radius - dist  # penetration > 0
         f = np.zeros_like(x)
-        k = np.zeros((len(x), 2, 2))
-        eye = np.eye(2)
-        free = ~self.stuck & (gap > 0)
+        k = np.zeros((len(x), self.dim, self.dim))
+        eye = np.eye(self.dim)
+        free = ~self.stuck & ((gap > 0) if self.active is None else self.active)
         kw = self.eps * self.weights
         nn = n[:, :, None] * n[:, None, :]
         f[free] = (kw[free] * gap[free])[:, None] * n[free]
