@@ -352,6 +352,27 @@ def free_loopback_host(ports: dict[int, int], first: int = 2, last: int = 254) -
     raise OSError(f"no loopback address 127.0.0.N ({first}..{last}) with the ports {sorted(ports)} free")
 
 
+def serve_device(make, argv: list[str], parent_gone: tuple = (EOFError, BrokenPipeError, ConnectionResetError)) -> int:
+    """Entry of a device process (`python -m MODULE FD OPTIONS_JSON`, see DeviceProcess):
+    make(conn, **options).run(); the parent going away (parent_gone) powers the device off,
+    any other failure is sent to the parent, which raises it, and re-raised here."""
+    import json
+    from multiprocessing.connection import Connection
+
+    conn = Connection(int(argv[0]))
+    try:
+        make(conn, **json.loads(argv[1])).run()
+    except parent_gone:
+        return 0
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it
+        try:
+            conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        except OSError:
+            pass
+        raise
+    return 0
+
+
 class DeviceProcess:
     """The process an emulated device runs in (`python -m MODULE FD OPTIONS_JSON`), and the pipe
     to it (FD: a multiprocessing Connection over a socketpair), as a real device is another

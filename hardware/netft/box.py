@@ -16,7 +16,6 @@ as the RDT protocol says (see `hardware.netft.emulator`). Faults are applied her
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import socket
@@ -27,6 +26,7 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
+from hardware.emulation import serve_device
 from hardware.netft import wire
 
 BIAS_SAMPLES = 32  # the software bias takes the mean of the latest readings, as the twin's tare does
@@ -203,19 +203,7 @@ class Box:
 
 
 def main(argv: list[str]) -> int:
-    conn = Connection(int(argv[0]))
-    try:
-        box = Box(conn, **json.loads(argv[1]))
-        box.run()
-    except (EOFError, BrokenPipeError, ConnectionResetError):  # the parent went away: the box powers off
-        return 0
-    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it
-        try:
-            conn.send(("error", f"{type(exc).__name__}: {exc}"))
-        except OSError:
-            pass
-        raise
-    return 0
+    return serve_device(Box, argv)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ carried) every READOUT_S and its log lines go over the pipe into the run's log.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import sys
@@ -29,7 +28,7 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
-from hardware.emulation import Pty
+from hardware.emulation import Pty, serve_device
 from hardware.skin_board.wire import FRAME_LEN, encode_frame
 
 CORRUPTIONS = ("bit_flip", "drop_byte", "insert_garbage")
@@ -198,19 +197,7 @@ class Board:
 
 
 def main(argv: list[str]) -> int:
-    conn = Connection(int(argv[0]))
-    board = Board(conn, **json.loads(argv[1]))
-    try:
-        board.run()
-    except (EOFError, OSError, BrokenPipeError):  # the parent went away: the board powers off
-        return 0
-    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it
-        try:
-            conn.send(("error", f"{type(exc).__name__}: {exc}"))
-        except OSError:
-            pass
-        raise
-    return 0
+    return serve_device(Board, argv, (EOFError, OSError))  # (a pty error: the board powers off too)
 
 
 if __name__ == "__main__":
