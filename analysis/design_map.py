@@ -8,9 +8,14 @@ design_map.md and design_map.png to `out` (default `<sweep_dir>/design_map`).
 
 Per design and bracket (definitions; every number is measured on the campaign's sessions):
 - shift per newton (mm/N): slope of the inter-layer CoP shift along the applied shear,
-  d = -Δc·ŝ (Δc = c_s - c_d points against the shear, see characterization._height_fit), against
-  |F_xy| over slide frames with |F_xy| <= `sensitivity_max_shear_n`, within each normal-load bin;
-  the headline value is the bin holding the slides' preload (where they apply their shear).
+  d = -Δc·ŝ (Δc = c_s - c_d), against |F_xy| over slide frames with |F_xy| <=
+  `sensitivity_max_shear_n`, within each normal-load bin; the headline value is the bin holding
+  the slides' preload (where they apply their shear). Its sign says which layer's CoP leads along
+  the shear: positive, the deep layer's (the study's moment-balance picture, Δc against the
+  shear, see characterization._height_fit); negative, the superficial layer's (its pattern leans
+  ahead of the contact faster than the deep pattern follows). Either is a signal a reader
+  resolves, so designs rank by its magnitude and the shear range uses |slope|; the sign is a
+  result the map reports, not an assumption it makes.
 - shear range (N): low = the smallest shear distinguishable from zero-shear noise,
   `noise_sigmas` x the rms inter-layer shift of press frames (no shear, F_z >= 1 N) / the shift
   per newton; high = the smallest of (a) where the shift saturates (the local slope of the
@@ -67,10 +72,12 @@ from layerskin_exp.sim.config import load_brackets
 
 STUDY_DESIGN = "study"
 # The headline outcomes a designer ranks by: key in the outcome dict, label, larger is better.
-RANKED = (("shift_per_n_mm", "shift per newton at the slides' preload (mm/N)", True), ("shear_high_n", "shear range top (N)", True),
+# A signed outcome in MAGNITUDE ranks by its absolute value (the shift's sign names the leading layer).
+RANKED = (("shift_per_n_mm", "|shift per newton| at the slides' preload (mm/N)", True), ("shear_high_n", "shear range top (N)", True),
           ("dynamic_range", "shear dynamic range (high/low)", True), ("linear_r2_shear", "linear shear R²", True),
           ("ts5_r2_shear", "T-s5 shear R² (the sweep's training preset)", True),
           ("densification_n", "normal range before densification (N)", True))
+MAGNITUDE = frozenset({"shift_per_n_mm"})
 
 
 # ---------------------------------------------------------------------------- one campaign
@@ -192,9 +199,11 @@ def _slope(x: np.ndarray, y: np.ndarray, min_frames: int) -> float | None:
 
 
 def _saturation(shear: np.ndarray, d_par: np.ndarray, k0: float, cfg: DesignMapConfig) -> float | None:
-    """Shear (N) where the binned median shift's local slope falls below saturation_ratio x k0."""
-    if k0 is None or k0 <= 0:
+    """Shear (N) where the binned median shift's local slope falls below saturation_ratio x k0
+    (either sign: the shift is taken along its own small-shear slope)."""
+    if k0 is None or k0 == 0:
         return None
+    d_par, k0 = d_par * np.sign(k0), abs(k0)
     edges = np.arange(0.0, shear.max() + 0.2, 0.2)
     centres, med = [], []
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
@@ -271,7 +280,7 @@ def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -
     # -- shear range
     press_dc = np.concatenate([f["dc"][sl][cal[i].force_n[:, 2] >= 1.0] for i, sl in presses]) if presses else np.zeros((0, 2))
     sigma = float(np.sqrt(np.mean(np.sum((press_dc - press_dc.mean(0)) ** 2, axis=1) / 2))) if len(press_dc) else None
-    low = cfg.noise_sigmas * sigma / k_all if (sigma is not None and k_all and k_all > 0) else None
+    low = cfg.noise_sigmas * sigma / abs(k_all) if (sigma is not None and k_all) else None
     sat = _saturation(shear[op], d_par[op], k_all, cfg) if slides else None
     reached, reasons = [], Counter()
     for i, _ in slides:
@@ -380,7 +389,7 @@ def build_map(outcomes: list[dict]) -> dict:
         per_bracket = {}
         for b in brackets:
             vals = {d: e["brackets"].get(b, {}).get(key) for d, e in designs.items()}
-            vals = {d: v for d, v in vals.items() if v is not None}
+            vals = {d: (abs(v) if key in MAGNITUDE else v) for d, v in vals.items() if v is not None}
             per_bracket[b] = sorted(vals, key=lambda d, vals=vals: vals[d], reverse=larger)
         names = sorted(designs)
         holds = []  # (a, b): a beats b in every bracket that measured both
@@ -436,7 +445,7 @@ def write_markdown(path: Path, result: dict, brackets: dict, figures: list[str])
              f"Sweep: `{result['sweep_dir']}`; {len(m['designs'])} designs x brackets {', '.join(m['brackets'])}. "
              "Each cell: the nominal bracket's value [min–max over the brackets]. Definitions: "
              "analysis/design_map.py.", "",
-             "| design | E (kPa) | h / cell / wall (mm) | shift/N at the preload (mm/N) | shear range low–high (N), limited by | "
+             "| design | E (kPa) | h / cell / wall (mm) | shift/N at the preload (mm/N; + deep CoP leads, − superficial leads) | shear range low–high (N), limited by | "
              "normal range before densification (N) | linear shear R² | T-s5 shear R² | superficial shear R² | position CV |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for name, e in sorted(m["designs"].items(), key=lambda kv: kv[0] != STUDY_DESIGN):

@@ -4,8 +4,9 @@ design space (conf/hydra/sweeper/design_search.yaml) for sensitivity and range.
 The task is the calibration campaign itself (conf/force_calibration.yaml, the same app and the
 same design folders as `python -m protocols.force_calibration`); after it, the campaign's
 sessions are measured as the design map measures them (analysis.design_map.campaign_outcomes)
-and the job returns the two objectives the sweeper maximises: the inter-layer shift per newton
-(mm/N) and the top of the estimable shear range (N). A design whose outcome is undefined (no
+and the job returns the two objectives the sweeper maximises: the magnitude of the inter-layer
+shift per newton (mm/N; its sign only names the leading layer, see analysis.design_map) and the
+top of the estimable shear range (N). A design whose outcome is undefined (no
 slide reached a measurable shear) scores 0 on it. A trial already complete is not run again, so
 a resumed search re-measures its designs at no simulation cost.
 """
@@ -29,7 +30,7 @@ def objectives(folder: Path) -> list[float]:
     from analysis.design_map import DesignMapConfig, campaign_outcomes
 
     o = campaign_outcomes(folder, DesignMapConfig(min_frames=10, ts5=False))  # its objectives need no CNN
-    return [float(o.get(k) or 0.0) for k in OBJECTIVES]
+    return [abs(float(o.get(k) or 0.0)) for k in OBJECTIVES]
 
 
 @hydra_main("force_calibration")
