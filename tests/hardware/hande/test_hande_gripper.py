@@ -125,7 +125,7 @@ def test_device_fault_stall_and_link_loss(bench):
     assert "0x0E" in drv.fault(time.monotonic_ns()) and "overcurrent" in drv.fault(time.monotonic_ns())
     with pytest.raises(DeviceError, match="0x0E"):
         drv.move(30.0, 100.0, 0.0)
-    emu.regs["FLT"] = 0
+    emu.set_fault(0)
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 1.0)
     emu.stall()
     assert wait_for(lambda: "stalled" in (drv.fault(time.monotonic_ns()) or ""), 1.0)
