@@ -19,9 +19,8 @@ an unplugged camera's).
 It stays in the host's process, unlike the emulators that serve a link: the driver takes frames
 from a capture object in its own process (the lab camera's link is USB/V4L2 or librealsense, which
 no hermetic test can serve), and the frames are rendered by the world, which is in this process
-too; a process between them would only add two pipe hops per 0.9 MB frame (1280 x 720 grey, 30 fps)
-and keep both ends here. A late frame is judged by
-its device time (CAP_PROP_POS_MSEC), and the driver's stall bound is 200 ms (six frame periods).
+too; a process between them would add two pipe hops per 0.9 MB frame (1280 x 720 grey, 30 fps)
+and leave both ends here. (The driver's stall bound is 200 ms, six frame periods.)
 """
 
 from __future__ import annotations
