@@ -22,10 +22,15 @@ fault on a timer from start(): `stall_after_s`, `disconnect_after_s`.
 
 Serving helpers: `Pty` (a raw pseudo-terminal that knows whether a host has it open), and
 `free_loopback_host` (an address 127.0.0.N on which a device's usual ports are free).
+
+Device processes (an emulated device in a process of its own): `DeviceProcess` (the parent's side:
+the process and the pipe to it), `serve_device` (the child's entry) and `PipeLog` (the child's log
+records sent to the parent, which logs them into the run's log).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import queue
@@ -350,6 +355,21 @@ def free_loopback_host(ports: dict[int, int], first: int = 2, last: int = 254) -
             for s in socks:
                 s.close()
     raise OSError(f"no loopback address 127.0.0.N ({first}..{last}) with the ports {sorted(ports)} free")
+
+
+class PipeLog(logging.Handler):
+    """A device process's log records sent to the parent as ("log", level, text) (send: a callable
+    that sends one message over the pipe); the parent logs them (DeviceProcess.poll)."""
+
+    def __init__(self, send, level: int = logging.INFO) -> None:
+        super().__init__(level)
+        self._send = send
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self._send(("log", record.levelno, record.getMessage()))
+        except OSError:
+            pass
 
 
 def serve_device(make, argv: list[str], parent_gone: tuple = (EOFError, BrokenPipeError, ConnectionResetError)) -> int:

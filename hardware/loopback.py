@@ -1,10 +1,14 @@
 """`hardware=loopback`: the real drivers against emulators that speak each device's wire protocol.
 
-The emulators run in this process, on one simulated world advanced at wall-clock pace
+The emulators share one simulated world advanced at wall-clock pace in this process
 (`hardware.sim.realtime.RealtimeWorld`), so a loopback session carries the simulator's physics
 through the real drivers, the real serial framing, UDP and TCP protocols and the `ur_rtde`
-client. They listen on loopback addresses and pseudo-terminals only. The bench is powered on
-when the rig is built and off when it disconnects.
+client. The devices that serve a link (skin board, GRBL, Net F/T, UR5e controller, Hand-E URCap
+socket) run in processes of their own, as the real ones are other machines, and their log lines
+come into this process's log; each emulator object here starts its process and bridges it to the
+world. The camera's frames reach the driver through a capture object in this process (see
+`hardware.camera.emulator`). They listen on loopback addresses and pseudo-terminals only. The
+bench is powered on when the rig is built and off when it disconnects.
 """
 
 from __future__ import annotations

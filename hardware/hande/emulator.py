@@ -23,6 +23,10 @@ drop(n) (the next n replies are not sent), corrupt(n) (the next n replies arrive
 disconnect() (every client connection is closed, as when the URCap restarts; clients may connect
 again). set_fault(code): the gripper reports FLT `code` until reset (ACT 0 -> 1). reply_delay_s
 (slow replies), start_active (skip the need to activate). The URCap's usual port is USUAL_PORTS.
+
+The socket server and the gripper's registers (`HandEURCap`) run in a process of their own
+(`hardware.hande.urcap`, which says why and how the jaws' state reaches it); `HandEEmulator`
+starts it, keeps the simulated world, and moves and stops the world's jaws as the process asks.
 """
 
 from __future__ import annotations
@@ -31,8 +35,10 @@ import logging
 import socket
 import threading
 import time
+from collections import deque
+from types import MappingProxyType
 
-from hardware.emulation import Emulator
+from hardware.emulation import DeviceProcess, Emulator
 from hardware.hande import wire
 from hardware.interfaces import DeviceError
 
@@ -41,16 +47,19 @@ log = logging.getLogger(__name__)
 EMULATOR_SETUP = "gripper"
 
 
-POLL_S = 0.002  # how often the gripper twin's records are taken
+POLL_S = 0.002  # how often the bridge takes the gripper twin's records and looks at its jaws
+HEARTBEAT_S = 0.01  # the jaws' state goes to the URCap process when it changes, and at least this often
+START_TIMEOUT_S = 20.0
 LISTEN_BACKLOG = 16
 
 
-class HandEEmulator(Emulator):
-    """URCap socket on host:port (0 = any free port) backed by `rt.rig.gripper`."""
+class HandEURCap(Emulator):
+    """URCap socket on host:port (0 = any free port) backed by `rt.rig.gripper`, the jaws as the
+    URCap's process sees them (`hardware.hande.urcap.BridgedGripper`: opening_mm,
+    object_detected, is_moving(), move(), stop()). Runs in that process; `HandEEmulator` starts it."""
 
     DEVICE = "hande"
-    TWINS = ("gripper",)
-    USUAL_PORTS = {"port": wire.PORT}  # the URCap's gripper socket
+    TWINS = ()  # the jaws' state comes over the pipe; the parent drains the twin
 
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, activation_time_s: float = 0.05,
                  start_active: bool = False, reply_delay_s: float = 0.0, stall_after_s: float | None = None,
@@ -61,7 +70,7 @@ class HandEEmulator(Emulator):
         self.reply_delay_s = float(reply_delay_s)
         gcfg = rt.rig.gripper.cfg
         self.cal = wire.Calibration(gcfg.stroke_mm, 0, 255, gcfg.min_speed_mm_s, gcfg.max_speed_mm_s)
-        self._opening_mm = float(gcfg.initial_opening_mm)
+        self._opening_mm = float(rt.rig.gripper.opening_mm)
         self._object = False
         self._moving = False
         self.regs: dict[str, int] = {"ACT": 0, "GTO": 0, "ATR": 0, "ADR": 0, "POS": 0, "SPE": 0, "FOR": 0,
@@ -86,7 +95,6 @@ class HandEEmulator(Emulator):
         ls.settimeout(0.02)
         self.port = ls.getsockname()[1]
         self._spawn(self._accept, "accept")
-        self._spawn(self._track, "twin")
         return f"{self.host}:{self.port}"
 
     def _close(self) -> None:
@@ -108,7 +116,7 @@ class HandEEmulator(Emulator):
         self._disconnected.clear()  # the socket server stays: clients may connect again
 
     def set_fault(self, code: int) -> None:
-        """FLT reads `code` (e.g. 0x0E overcurrent) until the gripper is reset (ACT 0 -> 1)."""
+        """FLT reads `code` (e.g. 0x0E overcurrent) until the gripper is reset (ACT 0 -> 1); 0 clears it."""
         with self._regs_lock:
             self.regs["FLT"] = int(code)
             if code >= 0x08:
@@ -129,16 +137,6 @@ class HandEEmulator(Emulator):
             self._clients.add(conn)
             self._threads = [t for t in self._threads if t.is_alive()]  # forget finished clients
             self._spawn(self._serve_client, f"client{self.connections}", conn)
-
-    def _track(self) -> None:
-        """Keep the jaws' latest reported state (the twin's records, drained as they come)."""
-        while not self._stop.wait(POLL_S):
-            with self.rt.lock:
-                recs = self.rt.rig.gripper.read_available()
-            if recs:
-                with self._regs_lock:
-                    self._opening_mm = recs[-1].position_mm
-                    self._object = recs[-1].object_detected
 
     def _serve_client(self, conn: socket.socket) -> None:
         try:
@@ -204,12 +202,13 @@ class HandEEmulator(Emulator):
 
     # ---- the gripper ---------------------------------------------------------------------------
     def _tick(self) -> None:
-        """Advance the activation and refresh whether the jaws move (their position comes from _track)."""
+        """Advance the activation and take the jaws' latest state (opening, object, motion)."""
         r = self.regs
         if r["STA"] == wire.STA_ACTIVATING and time.monotonic() - self._act_t0 >= self.activation_time_s:
             r["STA"] = wire.STA_ACTIVE
         with self.rt.lock:
-            self._moving = self.rt.rig.gripper.is_moving()
+            jaws = self.rt.rig.gripper
+            self._opening_mm, self._object, self._moving = jaws.opening_mm, jaws.object_detected, jaws.is_moving()
 
     def _read(self, var: str) -> int:
         r = self.regs
@@ -259,15 +258,181 @@ class HandEEmulator(Emulator):
         r = self.regs
         r["PRE"] = r["POS"]
         cal = self.cal
-        try:
-            with self.rt.lock:
-                self.rt.rig.gripper.move(cal.count_to_mm(r["POS"]), cal.count_to_speed(r["SPE"]),
-                                         cal.count_to_force(r["FOR"]))
-                self._moving = self.rt.rig.gripper.is_moving()
-        except DeviceError as exc:
-            log.warning("Hand-E emulator: twin refused the move: %s", exc)
+        with self.rt.lock:
+            self.rt.rig.gripper.move(cal.count_to_mm(r["POS"]), cal.count_to_speed(r["SPE"]),
+                                     cal.count_to_force(r["FOR"]))
+            self._moving = self.rt.rig.gripper.is_moving()
 
     def _halt(self) -> None:
         with self.rt.lock:
-            if self.rt.rig.gripper.is_connected:
-                self.rt.rig.gripper.stop()
+            self.rt.rig.gripper.stop()
+
+
+class HandEEmulator(Emulator):
+    """URCap socket on host:port (0 = any free port) backed by `rt.rig.gripper`.
+
+    The socket server and the registers (HandEURCap) run in a process of their own
+    (hardware.hande.urcap, which says why); this object starts it and runs the bridge thread that
+    drains the gripper twin and sends the jaws' state (latest opening and object flag, motion)
+    when it changes, and applies the moves and stops the process sends back to the twin. The
+    gripper's read-out (`regs`, a read-only copy of its registers, `requests`, `bad_requests`,
+    `connections`) is asked of it when read.
+    """
+
+    DEVICE = "hande"
+    TWINS = ("gripper",)
+    USUAL_PORTS = {"port": wire.PORT}  # the URCap's gripper socket
+
+    def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, activation_time_s: float = 0.05,
+                 start_active: bool = False, reply_delay_s: float = 0.0, stall_after_s: float | None = None,
+                 disconnect_after_s: float | None = None) -> None:
+        super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
+        self.host, self.port = host, int(port)
+        self._options = {"host": host, "activation_time_s": float(activation_time_s),
+                         "start_active": bool(start_active), "reply_delay_s": float(reply_delay_s)}
+        self._urcap: DeviceProcess | None = None
+        self._info: dict = {}
+        self._jaws: tuple[float, bool] = (0.0, False)  # the twin's latest reported opening and object flag
+        self._applied_id = 0
+
+    # ---- the gripper's read-out -----------------------------------------------------------------
+    def __getattr__(self, name: str):
+        if name in ("regs", "requests", "bad_requests", "connections"):
+            urcap = self.__dict__.get("_urcap")
+            if urcap is not None and self.running:  # a fresh read-out: at least what the socket has answered
+                urcap.send(("readout",))
+                urcap.wait_ack("readout", lambda v: True)
+            value = self.__dict__.get("_info", {}).get(name, {} if name == "regs" else 0)
+            return MappingProxyType(value) if name == "regs" else value
+        raise AttributeError(name)
+
+    # ---- life cycle ----------------------------------------------------------------------------
+    def _open(self) -> str:
+        with self.rt.lock:
+            twin = self.rt.rig.gripper
+            twin.read_available()  # start with fresh records
+            cfg = twin.cfg
+            gripper = {"stroke_mm": float(cfg.stroke_mm), "min_speed_mm_s": float(cfg.min_speed_mm_s),
+                       "max_speed_mm_s": float(cfg.max_speed_mm_s)}
+            self._jaws = (float(cfg.initial_opening_mm), False)
+        opts = {**self._options, "port": self.port, "gripper": gripper, "opening_mm": self._jaws[0]}
+        self._urcap = DeviceProcess("hardware.hande.urcap", opts, self.DEVICE, log)
+        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
+        try:
+            self._urcap.wait_ready(START_TIMEOUT_S)
+        except DeviceError:
+            self._stop.set()
+            for t in self._threads:
+                t.join(timeout=2.0)
+            raise
+        where = self._urcap.where
+        self.port = int(where.rpartition(":")[2])
+        with self._fault_lock:  # drop/corrupt scheduled before start go to the gripper
+            planned, self._planned = list(self._planned), deque()
+        if planned:
+            self._plan(planned)
+        return where
+
+    def _close(self) -> None:
+        if self._urcap is not None:
+            self._urcap.close()
+            self._urcap = None
+
+    # ---- faults: carried out by the URCap process ------------------------------------------------
+    def _on_stall(self, stalled: bool) -> None:
+        if self._urcap is None:
+            return
+        if stalled:
+            left = self._stall_until - time.monotonic()
+            self._urcap.send(("stall", None if left == float("inf") else max(left, 0.0)))
+        else:
+            self._urcap.send(("resume",))
+        self._urcap.wait_ack("stall", lambda v: v == stalled)
+
+    def _on_disconnect(self) -> None:
+        self._disconnected.clear()  # the socket server stays: clients may connect again
+        if self._urcap is not None:
+            self._urcap.send(("disconnect",))
+            self._urcap.wait_ack("disconnect", lambda v: True)
+
+    def set_fault(self, code: int) -> None:
+        """FLT reads `code` (e.g. 0x0E overcurrent) until the gripper is reset (ACT 0 -> 1); 0
+        clears it. In force when this returns."""
+        code = int(code)
+        if not 0 <= code <= 0xFF:
+            raise ValueError(f"hande emulator: fault code {code!r} is not a register value; use 0..255 "
+                             "(0x05, 0x07 and 0x08-0x0F are the Hand-E's, see hardware.hande.wire)")
+        if self._urcap is None:
+            raise DeviceError("hande emulator: not started; start() it before setting a fault")
+        self._urcap.send(("set_fault", code))
+        self._urcap.wait_ack("set_fault", lambda v: v == code)
+
+    def schedule(self, *entries) -> None:
+        super().schedule(*entries)
+        if self._urcap is not None:
+            with self._fault_lock:
+                planned, self._planned = list(self._planned), deque()
+            self._plan(planned)
+
+    def _plan(self, planned: list) -> None:
+        self._urcap.send(("plan", planned))
+        self._urcap.wait_ack("plan", lambda v: True)
+
+    @property
+    def scheduled(self) -> int:
+        if self._urcap is None:
+            return super().scheduled
+        return int(self._info.get("scheduled", 0))
+
+    @property
+    def stalled(self) -> bool:
+        if self._urcap is None:
+            return super().stalled
+        return bool(self._info.get("stalled"))
+
+    # ---- bridge ----------------------------------------------------------------------------------
+    def _bridge(self) -> None:
+        urcap = self._urcap
+        last, last_t = None, 0.0
+        try:
+            while not self._stop.is_set():
+                urcap.poll(POLL_S, self._handle)
+                if urcap.ready.is_set() and urcap.error is None:
+                    with self.rt.lock:
+                        twin = self.rt.rig.gripper
+                        recs = twin.read_available()
+                        if recs:
+                            self._jaws = (float(recs[-1].position_mm), bool(recs[-1].object_detected))
+                        state = (*self._jaws, bool(twin.is_moving()), self._applied_id)
+                    now = time.monotonic()
+                    if state != last or now - last_t > HEARTBEAT_S:
+                        urcap.send(("state", *state))
+                        last, last_t = state, now
+        except (EOFError, OSError) as exc:
+            if not self._stop.is_set():
+                log.warning("Hand-E emulator: the URCap process went away (%s)", exc)
+                self.error = self.error or exc
+                urcap.went_away(exc)
+
+    def _handle(self, msg: tuple) -> None:
+        kind = msg[0]
+        if kind == "info":
+            info = msg[1]
+            for k in ("drop", "corrupt"):  # applied in the URCap process; stall and disconnect are counted here
+                if info["fault_counts"].get(k):
+                    self.fault_counts[k] = info["fault_counts"][k]
+            if info["error"] and self.error is None:
+                self.error = RuntimeError(info["error"])
+            self._info = info
+        elif kind == "move":
+            try:
+                with self.rt.lock:
+                    self.rt.rig.gripper.move(*msg[2:5])
+            except DeviceError as exc:
+                log.warning("Hand-E emulator: twin refused the move: %s", exc)
+            self._applied_id = max(self._applied_id, msg[1])
+        elif kind == "stop":
+            with self.rt.lock:
+                if self.rt.rig.gripper.is_connected:
+                    self.rt.rig.gripper.stop()
+            self._applied_id = max(self._applied_id, msg[1])

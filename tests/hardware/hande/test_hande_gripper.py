@@ -1,5 +1,7 @@
 """HandEGripper driver against the URCap socket emulator, backed by the simulated gripper and rod."""
 
+import logging
+import os
 import socket
 import threading
 import time
@@ -125,7 +127,7 @@ def test_device_fault_stall_and_link_loss(bench):
     assert "0x0E" in drv.fault(time.monotonic_ns()) and "overcurrent" in drv.fault(time.monotonic_ns())
     with pytest.raises(DeviceError, match="0x0E"):
         drv.move(30.0, 100.0, 0.0)
-    emu.regs["FLT"] = 0
+    emu.set_fault(0)
     assert wait_for(lambda: drv.fault(time.monotonic_ns()) is None, 1.0)
     emu.stall()
     assert wait_for(lambda: "stalled" in (drv.fault(time.monotonic_ns()) or ""), 1.0)
@@ -207,3 +209,31 @@ def test_a_poll_thread_not_run_or_a_reply_left_unread_is_no_stall(bench, monkeyp
     emu.stall()
     run_poll.set()
     assert wait_for(lambda: "gripper stalled" in (drv.fault(time.monotonic_ns()) or ""), 1.0)
+
+
+def test_the_gripper_answers_while_the_world_is_held_and_logs_into_the_run(bench, caplog):
+    """The URCap's socket runs in a process of its own: it answers from the jaws' latest state
+    while the world's process holds the world (as a busy host does), and its log lines come here."""
+    drv, emu, rt = bench(connect=False, start_active=True)
+    assert emu._urcap.proc.pid != os.getpid()
+    with socket.create_connection(("127.0.0.1", emu.port), timeout=1.0) as s:
+        assert exchange(s, b"GET POS\n") == b"POS 0\n"
+        with rt.lock:  # the world held: no pacer, no bridge
+            s.settimeout(1.0)
+            assert exchange(s, b"GET STA\n") == b"STA 3\n"
+            assert exchange(s, b"SET POS 100 GTO 1\n") == wire.ACK
+            assert exchange(s, b"GET OBJ\n") == b"OBJ 0\n"  # moving: the move not yet applied to the world
+        assert wait_for(lambda: exchange(s, b"GET POS\n") != b"POS 0\n")  # applied once the world runs on
+        with caplog.at_level(logging.WARNING, logger="hardware.hande.emulator"):
+            assert exchange(s, b"BOGUS\n") == b"?\n"
+            assert wait_for(lambda: any("hande (emulated): Hand-E emulator:" in r.getMessage() for r in caplog.records))
+
+
+def test_the_read_out_is_read_only_and_a_bad_fault_code_is_refused(bench):
+    drv, emu, rt = bench(connect=False)
+    with pytest.raises(TypeError):
+        emu.regs["FLT"] = 0  # a copy of the gripper's registers: set_fault() changes them
+    with pytest.raises(ValueError, match="fault code 256 .* use 0..255"):
+        emu.set_fault(256)
+    emu.set_fault(0x0E)
+    assert emu.regs["FLT"] == 0x0E
