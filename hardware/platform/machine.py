@@ -21,6 +21,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from hardware.emulation import PipeLog
 from hardware.interfaces import DeviceError
 
 
@@ -59,18 +60,6 @@ class BridgedStage:
         return self.pos.copy()
 
 
-class _PipeLog(logging.Handler):
-    def __init__(self, send) -> None:
-        super().__init__(logging.INFO)
-        self._send = send
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            self._send(("log", record.levelno, record.getMessage()))
-        except OSError:
-            pass
-
-
 def main(argv: list[str]) -> int:
     from multiprocessing.connection import Connection
 
@@ -86,7 +75,7 @@ def main(argv: list[str]) -> int:
 
     stage = BridgedStage(send, opts.pop("stage"), opts.pop("position"))
     world = SimpleNamespace(lock=threading.RLock(), rig=SimpleNamespace(platform=stage))
-    logging.getLogger("hardware.platform.emulator").addHandler(_PipeLog(send))
+    logging.getLogger("hardware.platform.emulator").addHandler(PipeLog(send))
     logging.getLogger("hardware.platform.emulator").propagate = False
     machine = GrblMachine(world, **opts)
 
