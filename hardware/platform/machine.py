@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import sys
 import threading
 from types import SimpleNamespace
 
 import numpy as np
 
-from hardware.emulation import PipeLog
+from hardware.emulation import PipeLog, run_as_a_device
 from hardware.interfaces import DeviceError
 
 
@@ -66,6 +67,7 @@ def main(argv: list[str]) -> int:
     from hardware.platform.emulator import GrblMachine
 
     conn = Connection(int(argv[0]))
+    conn.send(("log", logging.INFO, f"device process {os.getpid()}: {run_as_a_device()}"))
     opts = json.loads(argv[1])
     lock = threading.Lock()
 
