@@ -243,3 +243,36 @@ def test_the_hemispheres_press_carries_the_load():
     for depth, row in check["depths"].items():
         j = int(np.flatnonzero(np.isclose(axi["depth_mm"], float(depth.split()[0])))[0])
         assert row["peak_superficial_kpa"]["hemisphere"] == pytest.approx(axi["superficial_kpa"][j].max(), rel=1e-4)
+
+
+def test_the_homogenised_section_carries_the_load_and_its_comparison_is_of_the_data(committed):
+    """The section again with its lattice homogenised (reference/homogenised.npz): every layer
+    carries F_z within 2 %, and reference/homogenisation.json (cells beside homogenised on each
+    compared quantity) is computed from the two committed data sets."""
+    hom = fc.load_fem("homogenised")
+    for line, b in regen.balance(hom).items():
+        assert np.all(np.abs(b - 1.0) < 0.02), (line, b)
+    check = json.loads((fc.DATA / "homogenisation.json").read_text())["branches"]
+    assert check == json.loads(json.dumps(regen.homogenisation_check(committed, hom, SIM)))
+
+
+def test_the_sections_homogenised_lattice_meets_the_honeycombs_moduli():
+    """Plane strain, the through-thickness axis is the section's y (axis 1): E3 = rho E_s,
+    G13 = rho G_s / 2 (Gibson & Ashby 1997, sec. 4.4), and it fails on the fibre's axis."""
+    from layerskin_exp.sim.fem_reference.model import KPA, Section, homogenised_lattice
+
+    sec = Section.from_sim(SIM)
+    e_hc, g_hc = sec.honeycomb_moduli_kpa()
+
+    def moduli(axis: int) -> tuple[float, float]:
+        umat, strain = homogenised_lattice(sec, axis=axis), 0.01
+        F = np.eye(3)
+        F[1, 1] = 1.0 - strain
+        e3 = -umat.gradient([F.reshape(3, 3, 1, 1), None])[0][1, 1, 0, 0] / KPA / strain
+        F = np.eye(3)
+        F[0, 1] = strain
+        return float(e3), float(umat.gradient([F.reshape(3, 3, 1, 1), None])[0][0, 1, 0, 0] / KPA / strain)
+
+    e3, g13 = moduli(axis=1)
+    assert e3 == pytest.approx(e_hc, rel=0.05) and g13 == pytest.approx(g_hc, rel=0.15), (e3, g13, e_hc, g_hc)
+    assert moduli(axis=2)[0] != pytest.approx(e_hc, rel=0.05)  # the fibre along z: the section's y is soft

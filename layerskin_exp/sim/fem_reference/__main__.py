@@ -3,6 +3,8 @@
     python -m layerskin_exp.sim.fem_reference               # the section (~5 min on a free core)
     python -m layerskin_exp.sim.fem_reference --refinement  # + the same on a coarser and a finer mesh
     python -m layerskin_exp.sim.fem_reference --shear3d     # the 3D half-model's press and shear (shear3d.py)
+    python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
+        # homogenised (homogenised.npz, 34 s) beside the cells: homogenisation.json
 
 The cap pressed in to DEPTHS_MM (frictionless), then, from SHEAR_FROM_MM, sheared along +x
 with the contact sticking until the tangential force reaches SHEAR_RATIO of the normal force
@@ -20,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -48,9 +51,9 @@ BOUND = "bonded"
 BALANCE_TOL = 0.02
 
 
-def run_bound(sim, mesher: Mesher | None = None, log=print) -> dict:
+def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = False) -> dict:
     interface = BOUND
-    sec = Section.from_sim(sim)
+    sec = replace(Section.from_sim(sim), homogenised=homogenised)
     mesher = mesher or Mesher()
     fe = StackFE(sec, mesher)
     states = []
@@ -224,6 +227,31 @@ def plane_strain_check(section: dict, axi: dict) -> dict:
     return rows
 
 
+def homogenisation_check(cells: dict, hom: dict, sim) -> dict:
+    """The section with its lattice as cells (the committed bonded.npz) beside the same section
+    with the lattice homogenised (homogenised.npz), on each quantity the fast model is compared
+    on (compare.fem_side, through the simulator's FSR law): the error a homogenised lattice makes
+    in each, measured in the reference itself. Differences are homogenised - cells."""
+    from layerskin_exp.sim.fem_reference.compare import Reader, fem_side, line_model, line_sim
+
+    reader = Reader(line_model(line_sim(sim, BOUND)))
+    rows = {}
+    for name, res in (("cells", cells), ("homogenised", hom)):
+        branches = sorted(set(np.round(res["branch_depth_mm"][res["phase"] == 1], 6)))
+        rows[name] = {f"{b:.1f} mm": r for b, r in zip(branches, fem_side(res, reader, branches), strict=True)}
+    out = {}
+    for branch, c in rows["cells"].items():
+        h = rows["homogenised"].get(branch)
+        if h is None:
+            out[branch] = "not reached with the homogenised lattice"
+            continue
+        out[branch] = {k: {"cells": round(float(c[k]), 5), "homogenised": round(float(h[k]), 5),
+                           "difference": round(float(h[k] - c[k]), 5),
+                           "ratio": round(float(h[k] / c[k]), 4) if c[k] else None}
+                       for k in c}
+    return out
+
+
 def write_shear3d(res: dict, out: Path, seconds: float) -> dict:
     """The 3D half-model's data (shear3d.npz) and its comparison (shear3d.json): beside the
     section per quantity (shear3d.plane_strain_shear), and its press beside the solid of
@@ -270,12 +298,15 @@ def main(argv=None) -> int:
                     help="the hemisphere's press as a solid of revolution (the 3D check), beside the section")
     ap.add_argument("--shear3d", action="store_true",
                     help="the hemisphere's press and shear as a 3D half-model (homogenised lattice), beside the section")
+    ap.add_argument("--homogenised-lattice", action="store_true",
+                    help="the section again with its lattice homogenised (reference/homogenised.npz) and "
+                         "reference/homogenisation.json: what the cells do to each compared quantity")
     ap.add_argument("--convergence-only", action="store_true",
                     help="recompute reference/convergence.json from the data already there")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: the package's reference/)")
     args = ap.parse_args(argv)
     sim = load_sim([])
-    if not args.convergence_only and not args.axisymmetric and not args.shear3d:
+    if not (args.convergence_only or args.axisymmetric or args.shear3d or args.homogenised_lattice):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -290,6 +321,16 @@ def main(argv=None) -> int:
                             for i in range(len(axi["phase"]))]}
         (out / "plane_strain.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check["depths"], indent=1))
+    if args.homogenised_lattice:
+        t0 = time.time()
+        out = args.out or DATA
+        hom = run_bound(sim, MESHES["default"], homogenised=True)
+        require_balance(hom)
+        np.savez_compressed(out / "homogenised.npz", **hom)
+        check = {"seconds": round(time.time() - t0, 1),
+                 "branches": homogenisation_check(dict(np.load(out / f"{BOUND}.npz")), hom, sim)}
+        (out / "homogenisation.json").write_text(json.dumps(check, indent=1))
+        print(json.dumps(check, indent=1))
     if args.shear3d:
         from layerskin_exp.sim.fem_reference.shear3d import run_shear3d
 

@@ -88,6 +88,9 @@ class Section:
     core_e_mpa: float
     radius_mm: float
     deep_sheet: bool = True  # False: the lattice bonded to the rigid base (the closed-form checks)
+    # True: the lattice as one homogenised layer (`homogenised_lattice`) instead of walls and
+    # smeared medium: the section's own measure of what its cells do to each compared quantity
+    homogenised: bool = False
 
     @classmethod
     def from_sim(cls, sim: SimConfig) -> Section:
@@ -288,6 +291,45 @@ def fill_shear_modulus_mpa(sec: Section) -> float:
     return (1.0 - f) / (1.0 / g13 - f / g_s)
 
 
+def lattice_constants(sec: Section) -> dict:
+    """The homogenised lattice's matrix shear modulus and bulk modulus (nu = 0) and its fibre
+    stiffness (MPa): E3 = 2 mu + k = rho E_s, G13 = mu = rho G_s / 2."""
+    e3_kpa, g13_kpa = sec.honeycomb_moduli_kpa()
+    mu = g13_kpa * KPA
+    return {"mu": mu, "bulk": 2.0 * mu / 3.0, "k": e3_kpa * KPA - 2.0 * mu}
+
+
+def fibre(k: float, axis: int) -> fem.Material:
+    """W = k / 8 (C_aa - 1)^2, a = axis: stiffness along that axis only (P = dW/dF, A = dP/dF)."""
+
+    def stress(x, k):
+        F, statevars = x[0], x[-1]
+        c = np.einsum("a...,a...->...", F[:, axis], F[:, axis])
+        P = np.zeros_like(F)
+        P[:, axis] = 0.5 * k * (c - 1.0) * F[:, axis]
+        return [P, statevars]
+
+    def elasticity(x, k):
+        F = x[0]
+        c = np.einsum("a...,a...->...", F[:, axis], F[:, axis])
+        A = np.zeros((3, 3, 3, 3, *F.shape[2:]))
+        A[:, axis, :, axis] = k * np.einsum("i...,k...->ik...", F[:, axis], F[:, axis])
+        for i in range(3):
+            A[i, axis, i, axis] += 0.5 * k * (c - 1.0)
+        return [A]
+
+    return fem.Material(stress, elasticity, k=k)
+
+
+def homogenised_lattice(sec: Section, axis: int):
+    """The lattice as a transversely isotropic solid about `axis` (the through-thickness one): a
+    compressible neo-Hooke matrix (nu = 0) with the honeycomb's G13 = rho G_s / 2 plus a fibre
+    term along the axis, so that its through-thickness modulus is the honeycomb's E3 = rho E_s
+    (Gibson & Ashby 1997, sec. 4.4); in-plane moduli are the matrix's, 2 G13."""
+    c = lattice_constants(sec)
+    return fem.CompositeMaterial(fem.NeoHookeCompressible(mu=c["mu"], lmbda=0.0), fibre(c["k"], axis))
+
+
 def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
     """(cell mask, felupe material) per material region."""
     lay = mesh.layer
@@ -302,9 +344,13 @@ def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
     # Its -mu ln J term stiffens without bound as a cell is squeezed flat, which carries the
     # walls' contact when it closes (a third medium).
     mu_fill = fill_shear_modulus_mpa(sec)
+    if sec.homogenised:
+        lattice = [(is_("lattice"), homogenised_lattice(sec, axis=1))]
+    else:
+        lattice = [(is_("lattice") & mesh.wall, _neo_hooke(sec.silicone_e_mpa, sec.silicone_nu)),
+                   (is_("lattice") & ~mesh.wall, fem.NeoHookeCompressible(mu=mu_fill, lmbda=0.0))]
     out = [
-        (is_("lattice") & mesh.wall, _neo_hooke(sec.silicone_e_mpa, sec.silicone_nu)),
-        (is_("lattice") & ~mesh.wall, fem.NeoHookeCompressible(mu=mu_fill, lmbda=0.0)),
+        *lattice,
         (is_("film_across", "deep_film_across"), _neo_hooke(sec.film_across_e_mpa, 0.34)),
         (is_("film_along", "deep_film_along"), _neo_hooke(sec.film_along_e_mpa, 0.34)),
         (is_("core", "deep_core"), _neo_hooke(sec.core_e_mpa, 0.4)),

@@ -36,7 +36,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from layerskin_exp.sim.fem_reference.model import KPA, CapContact, Section, _neo_hooke, simpson_weights
+from layerskin_exp.sim.fem_reference.model import (
+    KPA,
+    CapContact,
+    Section,
+    _neo_hooke,
+    homogenised_lattice,
+    simpson_weights,
+)
 
 DATA = Path(__file__).resolve().parent / "reference"
 SHEAR_FROM_MM = (0.3, 0.6)
@@ -81,39 +88,8 @@ def merged_sheet_e_mpa(sec: Section) -> float:
     return 12 * bend / t ** 3
 
 
-def lattice_constants(sec: Section) -> dict:
-    """The homogenised lattice's matrix shear modulus and bulk modulus (nu = 0) and its fibre
-    stiffness (MPa): E3 = 2 mu + k = rho E_s, G13 = mu = rho G_s / 2."""
-    e3_kpa, g13_kpa = sec.honeycomb_moduli_kpa()
-    mu = g13_kpa * KPA
-    return {"mu": mu, "bulk": 2.0 * mu / 3.0, "k": e3_kpa * KPA - 2.0 * mu}
-
-
-def _fibre_z(k: float) -> fem.Material:
-    """W = k / 8 (C33 - 1)^2: stiffness along z only (P = dW/dF, A = dP/dF)."""
-
-    def stress(x, k):
-        F, statevars = x[0], x[-1]
-        c33 = np.einsum("a...,a...->...", F[:, 2], F[:, 2])
-        P = np.zeros_like(F)
-        P[:, 2] = 0.5 * k * (c33 - 1.0) * F[:, 2]
-        return [P, statevars]
-
-    def elasticity(x, k):
-        F = x[0]
-        c33 = np.einsum("a...,a...->...", F[:, 2], F[:, 2])
-        A = np.zeros((3, 3, 3, 3, *F.shape[2:]))
-        A[:, 2, :, 2] = k * np.einsum("i...,k...->ik...", F[:, 2], F[:, 2])
-        for i in range(3):
-            A[i, 2, i, 2] += 0.5 * k * (c33 - 1.0)
-        return [A]
-
-    return fem.Material(stress, elasticity, k=k)
-
-
 def lattice_material(sec: Section):
-    c = lattice_constants(sec)
-    return fem.CompositeMaterial(fem.NeoHookeCompressible(mu=c["mu"], lmbda=0.0), _fibre_z(c["k"]))
+    return homogenised_lattice(sec, axis=2)
 
 
 def stack(sec: Section) -> list[tuple[str, float, int]]:
