@@ -5,6 +5,9 @@
     python -m layerskin_exp.sim.fem_reference --shear3d     # the 3D half-model's press and shear (shear3d.py)
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
         # homogenised (homogenised.npz, 34 s) beside the cells: homogenisation.json
+    python -m layerskin_exp.sim.fem_reference --alignments  # the cap pressed in 0.5, 1, 1.5 mm from
+        # the centre wall (alignment/, 7 min); `python -m layerskin_exp.sim.fem_reference.alignment`
+        # prints each count-CoP shear signal over the alignments, FEM beside the fast model
 
 The cap pressed in to DEPTHS_MM (frictionless), then, from SHEAR_FROM_MM, sheared along +x
 with the contact sticking until the tangential force reaches SHEAR_RATIO of the normal force
@@ -51,7 +54,10 @@ BOUND = "bonded"
 BALANCE_TOL = 0.02
 
 
-def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = False) -> dict:
+def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = False,
+              cap_x0_mm: float = 0.0) -> dict:
+    """The section's press and shear branches. cap_x0_mm: where the cap presses in, from the
+    wall under the pad's centre (the walls stay where they are; `--alignments`)."""
     interface = BOUND
     sec = replace(Section.from_sim(sim), homogenised=homogenised)
     mesher = mesher or Mesher()
@@ -70,7 +76,7 @@ def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = 
     saved = {}
     for depth in DEPTHS_MM:
         try:
-            it = fe.move_to(np.array([0.0, top - depth]), sticking=False, step_mm=0.1)
+            it = fe.move_to(np.array([cap_x0_mm, top - depth]), sticking=False, step_mm=0.1)
         except (RuntimeError, FloatingPointError, np.linalg.LinAlgError) as err:
             log(f"  {interface}: no equilibrium beyond depth {states[-1]['depth_mm']:.2f} mm ({err})")
             break
@@ -95,7 +101,7 @@ def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = 
             failed = False
             for x_inc in np.linspace(x, x_next, n_inc + 1)[1:]:
                 try:
-                    it = fe.move_to(np.array([x_inc, c0[1]]), sticking=True, step_mm=SHEAR_INCREMENT_MM)
+                    it = fe.move_to(np.array([cap_x0_mm + x_inc, c0[1]]), sticking=True, step_mm=SHEAR_INCREMENT_MM)
                 except (RuntimeError, FloatingPointError, np.linalg.LinAlgError) as err:
                     log(f"  {interface}: shear from {depth} mm stopped at x {x_inc:.2f} ({err})")
                     failed = True
@@ -117,6 +123,7 @@ def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = 
         out[f"{line}_moment_error"] = np.array([s[f"{line}_moment_error"] for s in states])
     for k in ("contact_kpa", "contact_x_mm"):
         out[k] = np.stack([s[k] for s in states])
+    out["cap_start_mm"] = np.array(cap_x0_mm)
     out["section"] = json.dumps(sec.__dict__)
     out["mesher"] = json.dumps(mesher.__dict__)
     return require_balance(out, log)
@@ -298,6 +305,9 @@ def main(argv=None) -> int:
                     help="the hemisphere's press as a solid of revolution (the 3D check), beside the section")
     ap.add_argument("--shear3d", action="store_true",
                     help="the hemisphere's press and shear as a 3D half-model (homogenised lattice), beside the section")
+    ap.add_argument("--alignments", action="store_true",
+                    help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
+                         "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
     ap.add_argument("--homogenised-lattice", action="store_true",
                     help="the section again with its lattice homogenised (reference/homogenised.npz) and "
                          "reference/homogenisation.json: what the cells do to each compared quantity")
@@ -306,7 +316,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: the package's reference/)")
     args = ap.parse_args(argv)
     sim = load_sim([])
-    if not (args.convergence_only or args.axisymmetric or args.shear3d or args.homogenised_lattice):
+    if not (args.convergence_only or args.axisymmetric or args.shear3d or args.homogenised_lattice or args.alignments):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -321,6 +331,16 @@ def main(argv=None) -> int:
                             for i in range(len(axi["phase"]))]}
         (out / "plane_strain.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check["depths"], indent=1))
+    if args.alignments:
+        from layerskin_exp.sim.fem_reference.alignment import ALIGN_X0_MM
+
+        folder = (args.out or DATA) / "alignment"
+        folder.mkdir(parents=True, exist_ok=True)
+        for x0 in ALIGN_X0_MM[1:]:  # 0 is the committed section (bonded.npz)
+            t0 = time.time()
+            res = run_bound(sim, MESHES["default"], cap_x0_mm=x0)
+            np.savez_compressed(folder / f"x0_{x0:.2f}.npz", **res)
+            print(f"cap at {x0:.2f} mm: {len(res['phase'])} states in {time.time() - t0:.0f} s")
     if args.homogenised_lattice:
         t0 = time.time()
         out = args.out or DATA

@@ -64,8 +64,9 @@ def line_model(sim: SimConfig) -> SkinModel:
 class Reader:
     """Pressure (kPa) -> per-layer tared counts through one skin model's FSR law and readout."""
 
-    def __init__(self, model: SkinModel):
+    def __init__(self, model: SkinModel, shift_mm: float = 0.0):
         self.m = model
+        self.shift_mm = shift_mm  # the taxel grid's offset in the profiles' frame (alignment.py)
         self.floor = self.counts(np.zeros((2, SKIN.n_taxels, SKIN.n_taxels)), tare=False)
 
     def taxel_profile(self, x_mm: np.ndarray, p_kpa: np.ndarray, w_mm: np.ndarray) -> np.ndarray:
@@ -77,7 +78,7 @@ class Reader:
         x, p, w = (np.asarray(a, float)[order] for a in (x_mm, p_kpa, w_mm))
         bounds = np.concatenate([[x[0]], x[0] + np.cumsum(w)])
         force = np.concatenate([[0.0], np.cumsum(np.clip(p, 0.0, None) * w)])
-        c, half = SKIN.taxel_centres_mm(), 0.5 * SKIN.electrode_mm
+        c, half = SKIN.taxel_centres_mm() + self.shift_mm, 0.5 * SKIN.electrode_mm
         return (np.interp(c + half, bounds, force) - np.interp(c - half, bounds, force)) / SKIN.electrode_mm
 
     def maps(self, fem: dict, sup_kpa, deep_kpa) -> np.ndarray:

@@ -1,0 +1,158 @@
+"""The count-CoP shear signals averaged over where the contact sits on the walls and the taxels.
+
+The section's walls (2 mm pitch) carry the lattice's load about ten times the cells' level, and
+the taxels (1.5 mm pitch) sample it; at the one alignment of the committed section (the cap on the
+centre wall, between two taxels) the walls decide the sign of every count-CoP shear signal
+(reference/homogenisation.json: homogenised, the inter-layer shift is -0.11 / -0.18 mm where the
+cells give +0.24 / +0.53). A campaign presses at a hundred positions, every alignment. So each
+signal is also taken here over a grid of alignments:
+
+- the FEM: the cap pressed in at ALIGN_X0_MM from the centre wall (`python -m
+  layerskin_exp.sim.fem_reference --alignments`, reference/alignment/), each read with the
+  taxel grid placed so that the cap starts at ALIGN_TAXEL_MM from a taxel's centre;
+- the fast model (line contact, as in `compare`): the rod pressed in at ALIGN_TAXEL_MM from a
+  taxel's centre.
+
+Each signal is the sheared state's change from its own press (at an alignment other than the
+symmetric one the press alone has a count offset), at F_t / F_z = SHEAR_RATIO; the same loads
+and ratios as `compare`. `python -m layerskin_exp.sim.fem_reference.alignment` prints the table:
+each side's mean and range over its alignments, and the homogenised section's (taxel alignments
+only: it has no walls).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from layerskin_exp.sim.fem_reference.compare import (
+    DATA,
+    SHEAR_RATIO,
+    SKIN,
+    Reader,
+    _asymmetry,
+    _cop_x,
+    _fem_at_ratio,
+    line_model,
+    line_sim,
+    load_fem,
+)
+
+# where the cap presses in, from the wall under the pad's centre (cell pitch 2 mm): on a wall and a
+# quarter, half and three quarters of a cell away (the __main__'s --alignments runs)
+ALIGN_X0_MM = (0.0, 0.5, 1.0, 1.5)
+ALIGN_TAXEL_MM = (0.0, 0.375, 0.75, 1.125)  # the cap from a taxel's centre (the pitch is 1.5 mm)
+SIGNALS = ("interlayer_shift_counts_mm", "effective_height_counts", "deep_cop_counts_mm",
+           "superficial_offset_counts_mm", "superficial_asymmetry_counts")
+
+
+def signals(press: np.ndarray, sheared: np.ndarray, fz: float, fx: float, under_mm: float, start_mm: float) -> dict:
+    """Shear signals of one sheared state from its press, counts (2, 16, 16) in the taxel grid's
+    frame: under_mm, the superficial sheet's point under the cap, start_mm, where the cap pressed."""
+    dc = (_cop_x(sheared[0]) - _cop_x(sheared[1])) - (_cop_x(press[0]) - _cop_x(press[1]))
+    return {"interlayer_shift_counts_mm": dc,
+            "effective_height_counts": -fz * dc / fx,
+            "deep_cop_counts_mm": _cop_x(sheared[1]) - _cop_x(press[1]),
+            "superficial_offset_counts_mm": (_cop_x(sheared[0]) - under_mm) - (_cop_x(press[0]) - start_mm),
+            "superficial_asymmetry_counts": _asymmetry(sheared[0], under_mm) - _asymmetry(press[0], start_mm)}
+
+
+def _centre() -> float:
+    """The taxel centre nearest the array's middle (the grid's coordinates)."""
+    c = SKIN.taxel_centres_mm()
+    return float(c[np.argmin(np.abs(c))])
+
+
+def fem_signals(fem: dict, model, taxel_mm: float) -> dict:
+    """{branch depth: signals} of one FEM run, read with the cap starting taxel_mm from a taxel's
+    centre."""
+    x0 = float(fem.get("cap_start_mm", 0.0))
+    # a taxel's centre (the grid's, moved by the shift) at x0 - taxel_mm: the cap starts there + taxel_mm
+    reader = Reader(model, shift_mm=x0 - taxel_mm - _centre())
+    out = {}
+    for b in sorted(set(np.round(fem["branch_depth_mm"][fem["phase"] == 1], 6))):
+        s = _fem_at_ratio(fem, b)
+        st = s["start"]
+        press = reader.counts(reader.maps(fem, fem["superficial_kpa"][st], fem["deep_kpa"][st]))
+        sheared = reader.counts(reader.maps(fem, s["superficial_kpa"], s["deep_kpa"]))
+        out[float(b)] = {**signals(press, sheared, float(s["fz_n_per_mm"]), float(s["fx_n_per_mm"]),
+                                   float(s["sheet_x_under_cap_mm"]) - reader.shift_mm, x0 - reader.shift_mm),
+                         "fz_n_per_mm": float(fem["fz_n_per_mm"][st]), "shear_ratio": s["ratio"]}
+    return out
+
+
+def fast_signals(model, fresh, reader: Reader, load_n_per_mm: float, ratio: float, taxel_mm: float) -> dict:
+    """The fast model's rod pressed to a line load at taxel_mm from a taxel's centre, sheared
+    while sticking to F_t / F_z = ratio (as compare.fast_side); fresh: its unloaded state."""
+    tab = model.tab
+    length = model.sim.spacer.width_mm
+    delta = float(np.interp(load_n_per_mm, tab.load, tab.delta_mm))
+    start = _centre() + taxel_mm
+    model.restore_mech_state(fresh)
+    rec0 = model.step_many(np.array([0.0]), np.array([[start, 0.0, -delta]]), np.array([np.pi / 2]))[0]
+    xs = np.linspace(0.0, 3.0, 601)[1:]
+    recs = model.step_many(1e-3 * np.arange(1, len(xs) + 1),
+                           np.column_stack([start + xs, np.zeros_like(xs), -delta * np.ones_like(xs)]),
+                           np.full(len(xs), np.pi / 2))
+    k = int(np.argmax(recs[:, 1] / recs[:, 3] >= ratio))
+    rec = recs[k]
+    press = reader.counts(np.stack(model.pressure_maps([model.state_of(rec0)]))[:, 0])
+    sheared = reader.counts(np.stack(model.pressure_maps([model.state_of(rec)]))[:, 0])
+    return signals(press, sheared, float(rec[3]) / length, float(rec[1]) / length, float(rec[6]), start)
+
+
+def _summary(values: list[float]) -> dict:
+    v = np.asarray(values, float)
+    return {"mean": float(v.mean()), "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
+
+
+def alignment_table(sim, data: Path = DATA) -> dict:
+    """{branch: {signal: {"fem": summary, "homogenised": summary, "fast": summary}}} (see the
+    module docstring); summaries are mean, min, max over the alignments."""
+    model = line_model(line_sim(sim, "bonded"))
+    fresh = model.mech_state()  # unloaded, nothing stuck
+    runs = [load_fem("bonded", data)] + [load_fem(f"alignment/x0_{x0:.2f}", data) for x0 in ALIGN_X0_MM[1:]]
+    fem_by: dict = {}
+    for fem in runs:
+        for t in ALIGN_TAXEL_MM:
+            for b, sig in fem_signals(fem, model, t).items():
+                fem_by.setdefault(b, []).append(sig)
+    hom = load_fem("homogenised", data)
+    hom_by: dict = {}
+    for t in ALIGN_TAXEL_MM:
+        for b, sig in fem_signals(hom, model, t).items():
+            hom_by.setdefault(b, []).append(sig)
+    out = {}
+    for b, rows in sorted(fem_by.items()):
+        load = float(np.mean([r["fz_n_per_mm"] for r in rows]))
+        ratio = float(np.mean([r["shear_ratio"] for r in rows]))
+        fast = [fast_signals(model, fresh, Reader(model), load, ratio, t) for t in ALIGN_TAXEL_MM]
+        out[f"{b:.1f} mm"] = {"fz_n_per_mm": load, "shear_ratio": ratio, **{
+            name: {"fem": _summary([r[name] for r in rows]),
+                   "homogenised": _summary([r[name] for r in hom_by.get(b, [])]) if hom_by.get(b) else None,
+                   "fast": _summary([r[name] for r in fast])} for name in SIGNALS}}
+    return out
+
+
+def table_text(res: dict) -> str:
+    lines = [f"{'branch':8} {'signal':30} {'FEM cells mean [min, max]':>30} {'homogenised':>26} {'fast':>26}"]
+    for b, row in res.items():
+        for name in SIGNALS:
+            cells = [row[name][k] for k in ("fem", "homogenised", "fast")]
+            txt = ["-" if c is None else f"{c['mean']:+.3f} [{c['min']:+.2f}, {c['max']:+.2f}]" for c in cells]
+            lines.append(f"{b:8} {name:30} {txt[0]:>30} {txt[1]:>26} {txt[2]:>26}")
+    return "\n".join(lines)
+
+
+def main() -> int:
+    from layerskin_exp.sim.config import load_sim
+
+    print(f"F_t / F_z = {SHEAR_RATIO:.3f}; FEM: cap at {ALIGN_X0_MM} mm from a wall x {ALIGN_TAXEL_MM} mm "
+          f"from a taxel; fast: {ALIGN_TAXEL_MM}")
+    print(table_text(alignment_table(load_sim([]))))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
