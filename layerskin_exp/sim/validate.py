@@ -5,6 +5,10 @@ closed form, a bound, or the finite-element reference (`layerskin_exp.sim.fem_re
     python -m layerskin_exp.sim.validate            # prints the table
     python -m layerskin_exp.sim.validate sim.spacer.modulus_kpa=20   # the same for another design
 
+A Hydra app on conf/validate.yaml (the simulated world; started by layerskin_exp.cli.run_command,
+like the protocols): sim.* overrides are checked as the protocols check them; exit code 1 if a
+check fails.
+
 The checks run on the skin model itself (no protocol). A check never encodes a study outcome or
 a protocol outcome (stop-reason fractions, force maxima): those are printed below the table as
 results, with the inter-layer shift, effective heights and position spread read from counts
@@ -26,7 +30,7 @@ import scipy.sparse.linalg as sparse_linalg
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.features import centre_of_pressure
 from layerskin_exp.sim import mechanics as mk
-from layerskin_exp.sim.config import SimConfig, load_sim
+from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.contact import _solver
 from layerskin_exp.sim.laminate import PlateOnFoundation
 from layerskin_exp.sim.skin import SkinModel
@@ -380,8 +384,8 @@ def table(checks: list[Check]) -> str:
     return "\n".join(rows)
 
 
-def main(argv=None) -> int:
-    sim = load_sim(list(sys.argv[1:] if argv is None else argv))
+def report(sim: SimConfig) -> int:
+    """Print the table and the results for `sim`; 0 if every check passed, else 1."""
     checks, extra = run(sim)
     print(table(checks))
     for k, v in extra.items():
@@ -391,5 +395,20 @@ def main(argv=None) -> int:
     return 0 if all(c.passed for c in checks) else 1
 
 
+def cli() -> None:
+    """`python -m layerskin_exp.sim.validate`: --help, the whole command line refused or run."""
+    from layerskin_exp.cli import hydra_main, run_command
+
+    @hydra_main("validate")
+    def main(cfg) -> None:
+        from layerskin_exp.config import validate
+
+        code = report(validate(cfg).sim)
+        if code:
+            sys.exit(code)
+
+    run_command("validate", lambda: main)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    cli()
