@@ -2,11 +2,10 @@
 before anything runs.
 
 Every command that runs or measures (the protocols, the report, the design map, the sensitivity
-screen, the design search) is a Hydra app on conf/<name>.yaml, decorated by `hydra_main(name)`
+screen, the design search, the simulator's preview and validation) is a Hydra app on conf/<name>.yaml, decorated by `hydra_main(name)`
 (one config folder, one `version_base`) and started by `run_command(name, load_main, ...)`:
 `--help` from one composition, the command's own checks of its command line, then `preflight`,
-then Hydra. The simulator's preview and validation compose through `layerskin_exp.config.compose`;
-only the file tools (`python -m layerskin_exp.log`, `protocols.sessions`, `hardware.emulate`, the
+then Hydra. Only the file tools (`python -m layerskin_exp.log`, `protocols.sessions`, `hardware.emulate`, the
 export, the demo) parse options with argparse (tests/test_entry.py holds all of this).
 
 `preflight(config_name, argv)` composes and validates the config of every job a command line

@@ -40,6 +40,46 @@ def entry_problems(repo: Path) -> list[str]:
     return sorted(set(out))
 
 
+# Every command that takes config, and its config: a Hydra app (`hydra_main(name)`) started by
+# `run_command(name, ...)` on conf/<name>.yaml.
+HYDRA_APPS = {
+    "protocols/force_calibration.py": "force_calibration",
+    "protocols/grip_depth.py": "grip_depth",
+    "protocols/design_search.py": "force_calibration",
+    "protocols/sensitivity.py": "sensitivity",
+    "analysis/report.py": "report",
+    "analysis/design_map.py": "design_map",
+    "layerskin_exp/sim/preview.py": "preview",
+    "layerskin_exp/sim/validate.py": "validate",
+}
+
+
+def app_problems(repo: Path, apps: dict[str, str]) -> list[str]:
+    out = []
+    for rel, name in apps.items():
+        calls = {(n.func.id, n.args[0].value) for n in ast.walk(ast.parse((repo / rel).read_text(), rel))
+                 if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.args
+                 and isinstance(n.args[0], ast.Constant)}
+        out += [f"{rel}: no {f}({name!r})" for f in ("hydra_main", "run_command") if (f, name) not in calls]
+        if not (repo / "conf" / f"{name}.yaml").is_file():
+            out.append(f"{rel}: no conf/{name}.yaml")
+    return out
+
+
+def test_every_command_that_takes_config_is_a_hydra_app_started_by_run_command():
+    assert app_problems(REPO, HYDRA_APPS) == []
+
+
+def test_the_app_check_sees_a_command_outside_the_entry(tmp_path):
+    (tmp_path / "conf").mkdir()
+    (tmp_path / "conf" / "preview.yaml").write_text("")
+    (tmp_path / "a.py").write_text("def main(argv):\n    compose('preview', argv)\n")  # the preview before
+    (tmp_path / "b.py").write_text("@hydra_main('preview')\ndef main(cfg): ...\nrun_command('preview', lambda: main)\n")
+    (tmp_path / "c.py").write_text("@hydra_main('validate')\ndef main(cfg): ...\nrun_command('validate', lambda: main)\n")
+    assert app_problems(tmp_path, {"a.py": "preview", "b.py": "preview", "c.py": "validate"}) == [
+        "a.py: no hydra_main('preview')", "a.py: no run_command('preview')", "c.py: no conf/validate.yaml"]
+
+
 def test_every_command_enters_one_way():
     assert entry_problems(REPO) == []
 

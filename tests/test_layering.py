@@ -158,8 +158,9 @@ def test_the_checks_see_an_upward_import_and_a_circle(tmp_path):
 LOADS = {
     "layerskin_exp": (
         "from layerskin_exp.sim import preview, validate\n"
-        "preview.configs(['sim.seed=1'])\n"
-        "validate.load_sim(['sim.seed=1'])\n"
+        "from layerskin_exp.cli import preflight\n"
+        "preflight('preview', ['sim.seed=1', 'out=x.png'])\n"
+        "preflight('validate', ['sim.seed=1'])\n"
     ),
     "hardware": (
         "from hardware import emulate\n"
