@@ -7,7 +7,10 @@ Read from the source with `ast`, so a lazy import or a call inside a function co
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("layerskin_exp", "hardware", "protocols", "analysis")
@@ -100,3 +103,83 @@ def test_the_check_sees_each_other_way_in(tmp_path):
         "layerskin_exp/c.py: OmegaConf.load (compose the config: layerskin_exp.config.compose)",
         "protocols/d.py: argparse (a command that takes config is a Hydra app)",
     ]
+
+
+# ---------------------------------------------------------------- one composition per command line
+
+
+def _count_compositions(monkeypatch) -> list[str]:
+    """Every composition of a config (Hydra's apps and its compose API both load it here)."""
+    from hydra._internal.config_loader_impl import ConfigLoaderImpl
+
+    seen: list[str] = []
+    load = ConfigLoaderImpl.load_configuration
+
+    def counting(self, config_name, *args, **kwargs):
+        seen.append(config_name)
+        return load(self, config_name, *args, **kwargs)
+
+    monkeypatch.setattr(ConfigLoaderImpl, "load_configuration", counting)
+    return seen
+
+
+def _bare_app_compositions(monkeypatch, config_name: str, argv: list[str]) -> int:
+    """How many compositions Hydra's own app makes for this command line (Hydra 1.3 composes a
+    run twice: once to read hydra.mode, once to run), the app started without run_command."""
+    from layerskin_exp.cli import hydra_main
+
+    @hydra_main(config_name)
+    def bare(cfg):
+        return None
+
+    with monkeypatch.context() as m:
+        m.setattr(sys, "argv", [config_name, *argv])
+        seen = _count_compositions(m)
+        bare()
+    return len(seen)
+
+
+@pytest.mark.parametrize("argv", [["seed=4", "sim.spacer.modulus_kpa=20"], ["--cfg", "job"]])
+def test_a_command_line_composes_only_where_hydra_does(argv, tmp_path, monkeypatch, capsys):
+    """A run and `--cfg job` through run_command compose no more than Hydra's app itself: no
+    preflight or check composes the config again (the preview, its render replaced)."""
+    import layerskin_exp.sim.config  # noqa: F401 - the preview's schemas
+    from layerskin_exp.sim import preview
+
+    monkeypatch.chdir(tmp_path)
+    hydra_own = _bare_app_compositions(monkeypatch, "preview", argv)
+    monkeypatch.setattr(preview, "render", lambda out, sim, skin: out)
+    monkeypatch.setattr(sys, "argv", ["preview", *argv])
+    seen = _count_compositions(monkeypatch)
+    preview.cli()
+    assert len(seen) == hydra_own, seen
+
+
+def test_help_composes_once(tmp_path, monkeypatch, capsys):
+    from layerskin_exp.sim import preview
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["preview", "--help"])
+    seen = _count_compositions(monkeypatch)
+    with pytest.raises(SystemExit) as e:
+        preview.cli()
+    assert e.value.code == 0 and seen == ["preview"]
+
+
+def test_a_refused_run_is_refused_from_hydras_composition(tmp_path, monkeypatch, capsys):
+    """A bad value in a run: refused (exit 2, one line) by RefuseBadConfig from Hydra's composition,
+    with no composition of its own and before Hydra writes anything."""
+    from layerskin_exp.sim import validate
+
+    monkeypatch.chdir(tmp_path)
+    argv = ["sim.spacer.modulus_kpa=-1", f"hydra.run.dir={tmp_path}/out"]
+    hydra_own = _bare_app_compositions(monkeypatch, "validate", [f"hydra.run.dir={tmp_path}/bare"])
+    monkeypatch.setattr(validate, "report", lambda sim: pytest.fail("ran the checks despite a bad value"))
+    monkeypatch.setattr(sys, "argv", ["validate", *argv])
+    seen = _count_compositions(monkeypatch)
+    with pytest.raises(SystemExit) as e:
+        validate.cli()
+    assert e.value.code == 2 and len(seen) == hydra_own, seen
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "sim.spacer.modulus_kpa=-1" in err, err
+    assert not (tmp_path / "out").exists()  # refused before Hydra made the run's folder
