@@ -157,7 +157,7 @@ def test_the_checks_see_an_upward_import_and_a_circle(tmp_path):
 # every module of the layer (its `__main__` modules excepted: they run a command when imported).
 LOADS = {
     "layerskin_exp": (
-        "from layerskin_exp.sim import preview, validate\n"
+        "from layerskin_exp.sim import physics_checks, preview, validate\n"
         "from layerskin_exp.config import compose\n"
         "compose('preview', ['sim.seed=1', 'out=x.png'])\n"
         "compose('validate', ['sim.seed=1'])\n"
