@@ -1,5 +1,6 @@
 """How soon the protocols' command line answers: `python -m protocols.grip_depth --help`, a refused
-override (`grip_depth=abc`, exit 2) and `--cfg job`, each a fresh process timed by its wall clock,
+override (`grip_depth=abc`, exit 2) and `--cfg job` (and the same three of the simulator's preview
+and validation), each a fresh process timed by its wall clock,
 against a bare `python -c pass` in the same run (the interpreter's own start).
 
 Target (issue 32): each under 1.5 s on 2 cores. Before the heavy imports moved to where they are
@@ -28,6 +29,13 @@ COMMANDS = {
     "help": ["-m", "protocols.grip_depth", "--help"],
     "refused_override": ["-m", "protocols.grip_depth", "grip_depth=abc"],
     "cfg_job": ["-m", "protocols.grip_depth", "--cfg", "job"],
+    # the simulator's preview and validation, Hydra apps through the same entry (layerskin_exp.cli)
+    "preview_help": ["-m", "layerskin_exp.sim.preview", "--help"],
+    "preview_refused_override": ["-m", "layerskin_exp.sim.preview", "seed=abc"],
+    "preview_cfg_job": ["-m", "layerskin_exp.sim.preview", "--cfg", "job"],
+    "validate_help": ["-m", "layerskin_exp.sim.validate", "--help"],
+    "validate_refused_override": ["-m", "layerskin_exp.sim.validate", "sim.spacer.modulus_kpa=abc"],
+    "validate_cfg_job": ["-m", "layerskin_exp.sim.validate", "--cfg", "job"],
 }
 BASELINE = ["-c", "pass"]
 HEAVY = ("numba", "cv2", "scipy", "torch", "mcap", "foxglove", "matplotlib")
@@ -65,6 +73,10 @@ def run(repeats: int = 5, repo: Path = REPO) -> dict:
     modules = _imported(COMMANDS["help"], repo)
     out["help_modules"] = len(modules)
     out["help_heavy_modules"] = sorted({m.split(".")[0] for m in modules} & set(HEAVY))
+    for app in ("preview", "validate"):
+        modules = _imported(COMMANDS[f"{app}_help"], repo)
+        out[f"{app}_help_modules"] = len(modules)
+        out[f"{app}_help_heavy_modules"] = sorted({m.split(".")[0] for m in modules} & set(HEAVY))
     out["repeats"] = repeats
     return out
 

@@ -2,16 +2,19 @@
 before anything runs.
 
 Every command that runs or measures (the protocols, the report, the design map, the sensitivity
-screen, the design search) is a Hydra app on conf/<name>.yaml, decorated by `hydra_main(name)`
+screen, the design search, the simulator's preview and validation) is a Hydra app on conf/<name>.yaml, decorated by `hydra_main(name)`
 (one config folder, one `version_base`) and started by `run_command(name, load_main, ...)`:
 `--help` from one composition, the command's own checks of its command line, then `preflight`,
-then Hydra. The simulator's preview and validation compose through `layerskin_exp.config.compose`;
-only the file tools (`python -m layerskin_exp.log`, `protocols.sessions`, `hardware.emulate`, the
+then Hydra. Only the file tools (`python -m layerskin_exp.log`, `protocols.sessions`, `hardware.emulate`, the
 export, the demo) parse options with argparse (tests/test_entry.py holds all of this).
 
-`preflight(config_name, argv)` composes and validates the config of every job a command line
-asks for (a multirun's whole sweep) before Hydra starts, so a bad override ends the command
-with one readable line and exit code 2: nothing connected, nothing written.
+A command line's config is composed once. A run: Hydra composes it, and `RefuseBadConfig` (every
+app's `hydra.callbacks.refuse_bad_config`) validates that composition before Hydra writes its run
+folder; a composition Hydra refuses reaches `run_command` as its exception. A multirun:
+`preflight(config_name, argv)` composes and validates every job of the sweep before any of them
+runs (the sweep is refused as a whole), and the launcher composes each job when it starts it.
+Either way a bad override ends the command with one readable line and exit code 2: nothing
+connected, nothing written.
 
 Kept in the core because the protocols' and the report's command lines share it; it names no
 application (the caller has stored its schemas before calling it).
@@ -20,13 +23,15 @@ application (the caller has stored its schemas before calling it).
 from __future__ import annotations
 
 import itertools
+import os
 import sys
 from collections.abc import Callable, Iterable
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
+from hydra.experimental.callback import Callback
 
-from layerskin_exp import config
+from layerskin_exp import config as config_module
 from layerskin_exp.config import (
     CONF_DIR,
     VERSION_BASE,
@@ -36,11 +41,14 @@ from layerskin_exp.config import (
     one_line,
 )
 
-__all__ = ["CONF_DIR", "EXIT_CONFIG", "answer_help", "expand_sweep", "hydra_main", "one_line", "preflight", "refuse",
+__all__ = ["CONF_DIR", "EXIT_CONFIG", "RefuseBadConfig", "answer_help", "expand_sweep", "hydra_main", "one_line", "preflight", "refuse",
            "run_command"]
 
 
 EXIT_CONFIG = 2
+# Hydra's own modes and alternative configs: Hydra handles them (no run, or a config of the user's)
+HYDRA_MODES = ("--help", "-h", "--hydra-help", "--info", "-i", "--cfg", "-c", "--shell-completion", "-sc",
+               "--config-path", "-cp", "--config-name", "-cn", "--config-dir", "-cd")
 # Launchers that need an optional extra: Hydra's own error ("Could not load ...") names no fix.
 LAUNCHER_EXTRAS = {"slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
                    "submitit_slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
@@ -66,9 +74,11 @@ def run_command(config_name: str, load_main: Callable[[], Callable[[], object]],
 
     Answers `--help` (from one composition, before the command's heavy modules load), runs the
     command's own checks of its command line (`before` preflight, `after` it: each refuses with
-    exit 2), composes and validates every job (`preflight`), then runs the Hydra app
+    exit 2), `preflight` (a multirun's every job composed and validated), then runs the Hydra app
     `load_main()` returns (decorated by `hydra_main(config_name)`; loaded last, so a refused
-    command line never imports it). The caller has stored its schemas. Reads sys.argv, as Hydra does."""
+    command line never imports it). A run's config is composed once, by Hydra, and validated by
+    `RefuseBadConfig`; a composition Hydra refuses ends the command here with exit 2. The caller
+    has stored its schemas. Reads sys.argv, as Hydra does."""
     argv = sys.argv[1:]
     answer_help(config_name, argv)
     for check in before:
@@ -76,7 +86,48 @@ def run_command(config_name: str, load_main: Callable[[], Callable[[], object]],
     preflight(config_name, argv)
     for check in after:
         check(argv)
-    load_main()()
+    main = load_main()
+    if _is_multirun(argv) or any(a in HYDRA_MODES for a in argv):
+        main()
+        return
+    RefuseBadConfig.started = False
+    full_error = os.environ.get("HYDRA_FULL_ERROR")
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises a refused composition instead of printing it
+    try:
+        main()
+    except HydraException as e:
+        if RefuseBadConfig.started or full_error == "1":
+            raise
+        refuse(ConfigError(one_line(e)))
+    finally:
+        if full_error is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = full_error
+
+
+class RefuseBadConfig(Callback):
+    """Hydra callback of every app (`hydra.callbacks.refuse_bad_config`): a run's config, as Hydra
+    composed it, is validated (`layerskin_exp.config.validate`: types, ranges, unknown keys) before
+    Hydra makes the run's folder; a bad one ends the command with one line and exit 2."""
+
+    started = False  # the run got past its config (errors after this are the run's, not the config's)
+
+    def on_run_start(self, config, **kwargs) -> None:
+        from omegaconf import open_dict
+
+        cfg = config.copy()  # the app's config: Hydra's own node dropped, as run_job does
+        with open_dict(cfg):
+            del cfg["hydra"]
+        try:
+            config_module.validate(cfg)
+        except ConfigError as e:
+            refuse(e)
+        RefuseBadConfig.started = True
+
+
+def _is_multirun(argv: list[str]) -> bool:
+    return "-m" in argv or "--multirun" in argv
 
 
 def expand_sweep(overrides: list[str]) -> list[list[str]]:
@@ -124,18 +175,19 @@ def answer_help(config_name: str, argv: list[str]) -> None:
 
 
 def preflight(config_name: str, argv: list[str]) -> None:
-    """Compose and validate the config of every job the command line asks for, before Hydra runs.
+    """Refuse a bad command line before Hydra runs: the launcher, schema names given as options,
+    retired keys, the override syntax; and for a multirun, compose and validate every job.
 
-    Catches unknown group options (`hardware=foo`), type errors and range errors as one line and
-    exit code 2, so a sweep is refused as a whole rather than failing at job 37.
+    A multirun's unknown group options (`hardware=foo`), type errors and range errors end it as
+    one line and exit code 2, so a sweep is refused as a whole rather than failing at job 37. A
+    single run is composed once, by Hydra (`RefuseBadConfig` validates it).
     """
-    if any(a in ("--help", "-h", "--hydra-help", "--info", "-i", "--cfg", "-c", "--shell-completion", "-sc",
-                 "--config-path", "-cp", "--config-name", "-cn", "--config-dir", "-cd") for a in argv):
+    if any(a in HYDRA_MODES for a in argv):
         return  # Hydra's own modes and alternative configs: let Hydra handle them
     _check_launcher(argv)
     _refuse_schema_options(argv)
     overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
-    multirun = "-m" in argv or "--multirun" in argv
+    multirun = _is_multirun(argv)
     try:
         check_retired(overrides)
     except ConfigError as e:
@@ -144,9 +196,11 @@ def preflight(config_name: str, argv: list[str]) -> None:
         jobs = expand_sweep(overrides) if multirun else [overrides]
     except HydraException as e:
         refuse(ConfigError(f"override: {one_line(e)}"))
+    if not multirun:
+        return  # the run's one composition is Hydra's (RefuseBadConfig)
     for job in jobs:  # every job of a sweep, before any of them runs
         try:
-            config.compose(config_name, job)
+            config_module.compose(config_name, job)
         except ConfigError as e:
             refuse(e)
 

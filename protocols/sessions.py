@@ -2,7 +2,8 @@
 
 Sessions are laid out as `<data_root>/<protocol>/<design>/<trial>.mcap` (protocols/identity.py).
 This lists, per protocol, each design folder with its count of complete trials (final `.mcap`
-names) and interrupted ones (`.partial`), and the settings that tell the designs apart, read from
+names), the `.partial` ones a live run is writing (in progress: its writer holds the file's lock,
+layerskin_exp.log.container.lock) and the other `.partial` ones (interrupted), and the settings that tell the designs apart, read from
 each folder's `design.yaml`. Nothing is opened but those manifests.
 """
 
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import yaml
 
+from layerskin_exp.log.container.lock import held
 from protocols.identity import MANIFEST
 
 PARTIAL_GLOB = "*.mcap.partial"
@@ -25,7 +27,8 @@ class Design:
     folder: Path
     settings: dict = field(default_factory=dict)  # dotted key -> value, from design.yaml
     complete: int = 0
-    partial: int = 0
+    partial: int = 0  # .partial files no live writer holds: interrupted runs
+    in_progress: int = 0  # .partial files a live writer holds
 
 
 def _flatten(node, prefix: str = "") -> dict:
@@ -46,7 +49,9 @@ def scan_designs(protocol_root: Path) -> list[Design]:
             settings = _flatten(yaml.safe_load(manifest.read_text()) or {}) if manifest.is_file() else {}
         except (OSError, yaml.YAMLError):
             settings = {}
-        designs.append(Design(folder, settings, len(list(folder.glob("*.mcap"))), len(list(folder.glob(PARTIAL_GLOB)))))
+        writing = [held(p) for p in folder.glob(PARTIAL_GLOB)]
+        designs.append(Design(folder, settings, len(list(folder.glob("*.mcap"))), writing.count(False),
+                              writing.count(True)))
     return designs
 
 
@@ -60,14 +65,15 @@ def describe(data_root: Path) -> str:
     roots = [p for p in sorted(Path(data_root).iterdir()) if p.is_dir()] if Path(data_root).is_dir() else []
     lines = []
     for root in roots:
-        designs = [d for d in scan_designs(root) if d.settings or d.complete or d.partial]
+        designs = [d for d in scan_designs(root) if d.settings or d.complete or d.partial or d.in_progress]
         if not designs:
             continue
         keys = differing(designs)
         lines.append(f"{root}: {len(designs)} design(s)" + (f", differing in {', '.join(keys)}" if keys else ""))
         for d in designs:
             what = ", ".join(f"{k}={d.settings.get(k, '<absent>')}" for k in keys)
-            lines.append(f"  {d.folder.name}  {d.complete} complete, {d.partial} interrupted"
+            lines.append(f"  {d.folder.name}  {d.complete} complete, "
+                         + (f"{d.in_progress} in progress, " if d.in_progress else "") + f"{d.partial} interrupted"
                          + (f"  {what}" if what else "") + ("" if d.settings else f"  (no {MANIFEST})"))
     return "\n".join(lines) if lines else f"no session folders under {data_root}"
 

@@ -99,6 +99,7 @@ def test_an_old_key_in_a_user_written_design_file_is_refused_in_one_line(tmp_pat
     """A design of one's own (conf/design/<name>.yaml naming a lattice file of one's own) written
     with the old key is refused before anything runs, naming the new key and the file."""
     import shutil
+    import sys
 
     import layerskin_exp.sim.config  # noqa: F401 - the world's schemas
     from layerskin_exp import cli, config
@@ -112,10 +113,18 @@ def test_an_old_key_in_a_user_written_design_file_is_refused_in_one_line(tmp_pat
     monkeypatch.setattr(cli, "CONF_DIR", conf)
     with pytest.raises(ConfigError, match=r"^sim\.spacer\.wall: no longer a setting; renamed to sim\.spacer\.wall_mm"):
         compose("world", ["+design=mine"])
-    with pytest.raises(SystemExit) as e:
-        cli.preflight("world", ["+design=mine"])
-    assert e.value.code == cli.EXIT_CONFIG
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "sim.spacer.wall_mm" in err and "lattice/mine" in err, err
+    monkeypatch.chdir(tmp_path)
+
+    @cli.hydra_main("world")
+    def app(cfg):
+        pytest.fail("ran despite a retired key")
+
+    for argv in (["-m", "+design=mine"], ["+design=mine"]):  # a sweep (preflight), a run (Hydra's composition)
+        monkeypatch.setattr(sys, "argv", ["app", *argv])
+        with pytest.raises(SystemExit) as e:
+            cli.run_command("world", lambda: app)
+        assert e.value.code == cli.EXIT_CONFIG
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "sim.spacer.wall_mm" in err and "lattice/mine" in err, err
     (conf / "lattice" / "mine.yaml").write_text("# @package sim.spacer\nthickness_mm: 3.0\ncell_mm: 2.5\nwall_mm: 0.6\n")
     assert compose("world", ["+design=mine"]).sim.spacer.wall_mm == 0.6  # the same file with the new key runs

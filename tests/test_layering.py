@@ -157,9 +157,10 @@ def test_the_checks_see_an_upward_import_and_a_circle(tmp_path):
 # every module of the layer (its `__main__` modules excepted: they run a command when imported).
 LOADS = {
     "layerskin_exp": (
-        "from layerskin_exp.sim import preview, validate\n"
-        "preview.configs(['sim.seed=1'])\n"
-        "validate.load_sim(['sim.seed=1'])\n"
+        "from layerskin_exp.sim import physics_checks, preview, validate\n"
+        "from layerskin_exp.config import compose\n"
+        "compose('preview', ['sim.seed=1', 'out=x.png'])\n"
+        "compose('validate', ['sim.seed=1'])\n"
     ),
     "hardware": (
         "from hardware import emulate\n"
@@ -169,15 +170,16 @@ LOADS = {
     "protocols": (
         "from protocols import force_calibration, grip_depth\n"
         "from layerskin_exp.cli import preflight\n"
-        "preflight('force_calibration', ['positions.count=2'])\n"
+        "from layerskin_exp.config import compose\n"
+        "compose('force_calibration', ['positions.count=2'])\n"
         "preflight('grip_depth', ['-m', 'grip_depth=6,9'])\n"
-        "preflight('sensitivity', ['size=quick', 'params=[sim.cover.friction]'])\n"
+        "compose('sensitivity', ['size=quick', 'params=[sim.cover.friction]'])\n"
     ),
     "analysis": (
         "from analysis import cli, report\n"
-        "from layerskin_exp.cli import preflight\n"
-        "preflight('report', ['analysis=demo'])\n"
-        "preflight('design_map', ['sweep_dir=data', 'n_jobs=2'])\n"
+        "from layerskin_exp.config import compose\n"
+        "compose('report', ['analysis=demo'])\n"
+        "compose('design_map', ['sweep_dir=data', 'n_jobs=2'])\n"
     ),
 }
 

@@ -104,9 +104,10 @@ def test_commands_without_a_protocol_compose_from_the_wheel(installed):
     """The preview, the emulators and the model's validation compose conf/world.yaml from inside
     the installed package (the validation once read conf/ beside the sources: FileNotFoundError)."""
     _, venv, env, root = installed
-    code = ("from layerskin_exp.sim import preview, validate\n"
+    code = ("from layerskin_exp.sim import physics_checks, preview, validate\n"
+            "from layerskin_exp.config import compose\n"
             "from hardware import emulate\n"
-            "print(validate.load_sim(['sim.seed=7']).seed, preview.configs(['sim.seed=8'])[0].seed,\n"
+            "print(compose('validate', ['sim.seed=7']).sim.seed, compose('preview', ['seed=8']).seed,\n"
             "      emulate._compose('gripper', ['sim.seed=9'])[0].seed)\n")
     r = _run([str(venv / "bin" / "python"), "-c", code], cwd=root, env=env)
     assert r.returncode == 0, r.stderr[-2000:]

@@ -243,6 +243,18 @@ class WorldConfig:
     sim: Any = MISSING  # SimConfig
 
 
+@dataclass
+class PreviewConfig(WorldConfig):
+    """`conf/preview.yaml`: the world, where the preview PNG goes and (if set) the seed of its model."""
+
+    out: str = "skin_preview.png"
+    seed: int | None = None  # sim.seed for this preview; None: sim.seed as composed
+
+    def __post_init__(self) -> None:
+        if self.seed is not None:
+            require_seed("seed", self.seed)
+
+
 for _key, _fact in (("sim.contact.hemisphere_radius_mm", "the indenter's radius is layerskin_exp.rig.INDENTER_RADIUS_MM"),
                     ("sim.contact.rod_diameter_mm", "the rod's diameter is layerskin_exp.rig.ROD_DIAMETER_MM"),
                     ("sim.rig.gripper.rod_diameter_mm", "the rod's diameter is layerskin_exp.rig.ROD_DIAMETER_MM")):
@@ -263,6 +275,7 @@ def _store() -> None:
     cs = ConfigStore.instance()
     cs.store(group="sim", name="sim_schema", node=SimConfig)
     cs.store(name="world_schema", node=WorldConfig)
+    cs.store(name="preview_schema", node=PreviewConfig)
 
 
 _store()

@@ -3,22 +3,22 @@
     python -m layerskin_exp.sim.preview [out=PATH] [seed=N] [sim.KEY=VALUE ...] [skin.KEY=VALUE ...]
     python -m layerskin_exp.sim.preview out=soft.png sim.spacer.modulus_kpa=20
 
-sim.* and skin.* are the same overrides the protocols take (conf/sim/, conf/skin/, composed by
-conf/world.yaml), checked the same way; seed=N is sim.seed=N. Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of
+A Hydra app on conf/preview.yaml (started by layerskin_exp.cli.run_command, like the protocols):
+sim.* and skin.* are the same overrides the protocols take (conf/sim/, conf/skin/), checked the
+same way; seed=N seeds the model (sim.seed for this preview); --help and --cfg job answer. Writes a 2x2 PNG (rows: press, slide; columns: superficial, deep) with each layer's centre of
 pressure marked (baseline-subtracted counts as weights) and the applied force in the titles.
 """
 
 from __future__ import annotations
 
-import sys
-
-import numpy as np
+from layerskin_exp.cli import hydra_main, run_command
 
 
 def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) -> str:
     """Write the preview PNG to `out`; sim (SimConfig) / skin (SkinConfig) default to the defaults
     with sim.seed = seed."""
     import matplotlib
+    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -64,39 +64,23 @@ def render(out: str = "skin_preview.png", seed: int = 0, sim=None, skin=None) ->
     return out
 
 
-def configs(overrides: list[str]):
-    """(SimConfig, SkinConfig) from conf/world.yaml with sim.* / skin.* overrides, validated as the
-    protocols validate them (a bad key or value exits with code 2 and one line)."""
-    import layerskin_exp.sim.config  # noqa: F401 - stores the sim, skin and world schemas
-    from layerskin_exp.config import ConfigError, compose, format_config_error
+@hydra_main("preview")
+def main(cfg) -> None:
+    from dataclasses import replace
 
-    try:
-        typed = compose("world", overrides)
-    except ConfigError as e:
-        print(format_config_error(e), file=sys.stderr)
-        sys.exit(2)
-    return typed.sim, typed.skin
+    from layerskin_exp.config import validate
+
+    typed = validate(cfg)  # run_command has refused a bad command line: this only builds the objects
+    sim = typed.sim if typed.seed is None else replace(typed.sim, seed=typed.seed)
+    print(f"wrote {render(typed.out, sim=sim, skin=typed.skin)}")
 
 
-def main(argv: list[str]) -> None:
-    if any(a in ("-h", "--help") for a in argv):
-        print(__doc__.strip())
-        return
-    out, overrides = "skin_preview.png", []
-    for a in argv:
-        key, sep, value = a.partition("=")
-        if not sep or not (key in ("out", "seed") or key.lstrip("+~").startswith(("sim.", "skin."))):
-            print(f"error: {a!r}: expected out=PATH, seed=N, sim.KEY=VALUE or skin.KEY=VALUE (see --help)",
-                  file=sys.stderr)
-            sys.exit(2)
-        if key == "out":
-            out = value
-        else:
-            overrides.append(f"sim.seed={value}" if key == "seed" else a)
-    sim, skin = configs(overrides)
-    path = render(out, sim=sim, skin=skin)
-    print(f"wrote {path}")
+def cli() -> None:
+    """`python -m layerskin_exp.sim.preview`: --help, the whole command line refused or run."""
+    import layerskin_exp.sim.config  # noqa: F401 - stores the preview, sim and skin schemas
+
+    run_command("preview", lambda: main)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    cli()

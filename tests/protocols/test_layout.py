@@ -145,6 +145,22 @@ def test_sessions_listing_names_what_tells_designs_apart(tmp_path):
     assert all((root / d / MANIFEST).is_file() for d in [p.name for p in root.iterdir()])
 
 
+def test_sessions_listing_tells_a_trial_being_written_from_an_interrupted_one(tmp_path):
+    """A `.partial` whose writer still holds its lock is in progress; one nobody holds (its run
+    crashed or was killed: the kernel dropped the lock) is interrupted."""
+    from layerskin_exp.log import SessionWriter
+
+    folder = tmp_path / "grip_depth" / design_id({"hold_s": 0.5})
+    write_manifest(folder, {"hold_s": 0.5})
+    (folder / "g6_translation_t0.mcap.partial").write_bytes(b"")  # left by a killed run
+    writer = SessionWriter(folder / "g6_translation_t1.mcap.partial", metadata={"config": {}, "backend": "sim"})
+    try:
+        assert "0 complete, 1 in progress, 1 interrupted" in describe(tmp_path)
+    finally:
+        writer.close()
+    assert "0 complete, 2 interrupted" in describe(tmp_path)  # closed, not renamed: nobody writes it now
+
+
 def _first_chunk(data: bytes) -> int:
     off = 8  # after the magic: records are opcode (1 byte), length (u64), body
     while data[off] != 0x06:

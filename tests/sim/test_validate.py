@@ -1,4 +1,4 @@
-"""The physics validation suite (layerskin_exp.sim.validate): each check passes on the default
+"""The physics validation suite (layerskin_exp.sim.physics_checks): each check passes on the default
 design and fails when the physical error it names is injected into the simulated side (a
 perturbed parameter or a disabled mechanism), so none of them is a check that cannot fail."""
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from layerskin_exp.sim import laminate, skin
-from layerskin_exp.sim import validate as v
-from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim import physics_checks as v
+from layerskin_exp.sim.config import SimConfig, load_sim
 
 SIM = SimConfig()
 
@@ -83,7 +83,7 @@ def test_slides_use_the_protocols_thresholds_and_are_reported_not_checked():
 
 
 def test_overrides_reach_the_design():
-    sim = v.load_sim(["sim.spacer.modulus_kpa=20", "sheet.interface=bonded"])
+    sim = load_sim(["sim.spacer.modulus_kpa=20", "sheet.interface=bonded"])
     assert sim.spacer.modulus_kpa == 20 and sim.sheet.interface == "bonded"
     assert sim.sheet.rigidity_n_mm == pytest.approx(SIM.sheet.sandwich_rigidity_n_mm)
 

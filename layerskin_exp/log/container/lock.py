@@ -64,7 +64,7 @@ class WriterLock:
             try:
                 fd = os.open(path, flags, 0o644)
             except FileExistsError:
-                if _held(path):
+                if held(path):
                     raise _in_use(path) from None
                 raise FileExistsError(
                     f"session file {path} already exists; refusing to overwrite recorded data "
@@ -130,8 +130,9 @@ class WriterLock:
         self._remove_owner()
 
 
-def _held(path: Path) -> bool:
-    """Whether a live writer holds `path` (probed with a non-blocking shared lock)."""
+def held(path: Path) -> bool:
+    """Whether a live writer holds `path` (probed with a non-blocking shared lock): a file being
+    written, as against one a crashed or killed run left (the kernel dropped its lock)."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
     except OSError:

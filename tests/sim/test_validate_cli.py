@@ -1,0 +1,40 @@
+"""The validation command (a Hydra app through layerskin_exp.cli.run_command): sim.* overrides
+reach the checks, a failing check exits 1, a bad override is refused with exit 2 before any check."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+
+from layerskin_exp.sim import validate
+
+
+def _run(monkeypatch, *argv: str) -> None:
+    monkeypatch.setattr(sys, "argv", ["validate", *argv])
+    validate.cli()
+
+
+@pytest.mark.parametrize("code", [0, 1])
+def test_overrides_reach_the_checks_and_a_failure_exits_1(code, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    seen = []
+    monkeypatch.setattr(validate, "report", lambda sim: seen.append(sim) or code)
+    if code:
+        with pytest.raises(SystemExit) as e:
+            _run(monkeypatch, "sim.spacer.modulus_kpa=20")
+        assert e.value.code == 1
+    else:
+        _run(monkeypatch, "sim.spacer.modulus_kpa=20")
+    assert [s.spacer.modulus_kpa for s in seen] == [20]
+    assert list(tmp_path.iterdir()) == []  # no Hydra folders or logs
+
+
+@pytest.mark.parametrize("arg", ["sim.spacer.modulus_kpa=-1", "sim.spacer.modulus_kpa=abc", "spacer.modulus_kpa=20"])
+def test_bad_overrides_are_refused_before_any_check(arg, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(validate, "report", lambda sim: pytest.fail("ran the checks despite a bad override"))
+    with pytest.raises(SystemExit) as e:
+        _run(monkeypatch, arg)
+    assert e.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
