@@ -182,8 +182,24 @@ class Emulator:
         self._stall_until = 0.0
         self._on_stall(False)
 
+    # ---- a device in its own process -----------------------------------------------------------
+    # An emulator whose device runs in a DeviceProcess returns it from _device(); the fault
+    # schedule then goes to that process, and the process's read-out (self._info, kept by the
+    # emulator's bridge) answers `scheduled` (under SCHEDULED_KEY) and `stalled`.
+    SCHEDULED_KEY = "scheduled"
+
+    def _device(self) -> DeviceProcess | None:
+        return None
+
+    def _plan(self, planned: list) -> None:
+        device = self._device()
+        device.send(("plan", planned))
+        device.wait_ack("plan", lambda v: True)
+
     @property
     def stalled(self) -> bool:
+        if self._device() is not None:
+            return bool(self._info.get("stalled"))
         return time.monotonic() < self._stall_until
 
     def drop(self, n: int = 1) -> None:
@@ -213,10 +229,16 @@ class Emulator:
             plan.append((kind, how))
         with self._fault_lock:
             self._planned.extend(plan)
+        if self._device() is not None:  # the device applies its own schedule
+            with self._fault_lock:
+                planned, self._planned = list(self._planned), deque()
+            self._plan(planned)
 
     @property
     def scheduled(self) -> int:
         """Entries of the drop/corrupt schedule not yet applied."""
+        if self._device() is not None:
+            return int(self._info.get(self.SCHEDULED_KEY, 0))
         with self._fault_lock:
             return len(self._planned)
 

@@ -367,28 +367,8 @@ class HandEEmulator(Emulator):
         self._urcap.send(("set_fault", code))
         self._urcap.wait_ack("set_fault", lambda v: v == code)
 
-    def schedule(self, *entries) -> None:
-        super().schedule(*entries)
-        if self._urcap is not None:
-            with self._fault_lock:
-                planned, self._planned = list(self._planned), deque()
-            self._plan(planned)
-
-    def _plan(self, planned: list) -> None:
-        self._urcap.send(("plan", planned))
-        self._urcap.wait_ack("plan", lambda v: True)
-
-    @property
-    def scheduled(self) -> int:
-        if self._urcap is None:
-            return super().scheduled
-        return int(self._info.get("scheduled", 0))
-
-    @property
-    def stalled(self) -> bool:
-        if self._urcap is None:
-            return super().stalled
-        return bool(self._info.get("stalled"))
+    def _device(self) -> DeviceProcess | None:
+        return self._urcap
 
     # ---- bridge ----------------------------------------------------------------------------------
     def _bridge(self) -> None:

@@ -183,28 +183,10 @@ class NetFTEmulator(Emulator):
         if self._box is not None:
             self._box.send(("disconnect",))
 
-    def schedule(self, *entries) -> None:
-        super().schedule(*entries)
-        if self._box is not None:
-            with self._fault_lock:
-                planned, self._planned = list(self._planned), deque()
-            self._plan(planned)
+    SCHEDULED_KEY = "planned"
 
-    def _plan(self, planned: list) -> None:
-        self._box.send(("plan", planned))
-        self._box.wait_ack("plan", lambda v: True)
-
-    @property
-    def scheduled(self) -> int:
-        if self._box is None:
-            return super().scheduled
-        return int(self._info.get("planned", 0))
-
-    @property
-    def stalled(self) -> bool:
-        if self._box is None:
-            return super().stalled
-        return bool(self._info.get("stalled"))
+    def _device(self) -> DeviceProcess | None:
+        return self._box
 
     # ---- bridge ----------------------------------------------------------------------------------
     def _settings(self) -> list:

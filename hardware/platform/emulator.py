@@ -753,28 +753,8 @@ class GrblEmulator(Emulator):
         if self._machine is not None:
             self._machine.send(("disconnect",))
 
-    def schedule(self, *entries) -> None:
-        super().schedule(*entries)
-        if self._machine is not None:
-            with self._fault_lock:
-                planned, self._planned = list(self._planned), deque()
-            self._plan(planned)
-
-    def _plan(self, planned: list) -> None:
-        self._machine.send(("plan", planned))
-        self._machine.wait_ack("plan", lambda v: True)
-
-    @property
-    def scheduled(self) -> int:
-        if self._machine is None:
-            return super().scheduled
-        return int(self._info.get("scheduled", 0))
-
-    @property
-    def stalled(self) -> bool:
-        if self._machine is None:
-            return super().stalled
-        return bool(self._info.get("stalled"))
+    def _device(self) -> DeviceProcess | None:
+        return self._machine
 
     # ---- bridge ----------------------------------------------------------------------------------
     def _bridge(self) -> None:
