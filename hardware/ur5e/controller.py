@@ -16,6 +16,7 @@ the world's time when the emulator started). Socket readers run one thread per c
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -223,6 +224,8 @@ class URController:
 
     def _close_listeners(self) -> None:
         for s in self._listeners:
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)  # wakes the thread in accept() now (close alone does not)
             s.close()
         self._listeners.clear()
 
