@@ -16,6 +16,7 @@ the world's time when the emulator started). Socket readers run one thread per c
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -157,6 +158,7 @@ class URController:
         self.safety_mode = SAFETY_MODE_NORMAL
         self.robot_mode = ROBOT_MODE_RUNNING  # powered on, brakes released
         self.loaded_program: str | None = None  # dashboard "load" (a .urp path)
+        self.urp_playing = False  # the loaded program was started by dashboard "play" (it moves nothing)
         self.tool = ToolSettings()  # the installation's TCP and payload (a program may set its own)
         # Standard I/O set over RTDE (RTDEIOInterface): digital outputs (bits 0-7 standard, 8-15
         # configurable, 16-17 tool, as actual_digital_output_bits), analog outputs, speed slider.
@@ -223,6 +225,8 @@ class URController:
 
     def _close_listeners(self) -> None:
         for s in self._listeners:
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)  # wakes the thread in accept() now (close alone does not)
             s.close()
         self._listeners.clear()
 
@@ -327,7 +331,7 @@ class URController:
                 log.warning("ur5e emulator: control script runtime error, program stopped: %s", self.arm.error)
                 self.script.running = False
                 self.arm.error = None
-            if self.script is not None and self.runtime_state == RUNTIME_PLAYING:
+            if self.script is not None and self.runtime_state == RUNTIME_PLAYING and not self.urp_playing:
                 try:
                     self.script.tick()
                 except Exception as exc:  # noqa: BLE001 - a runtime error ends the program, like URControl
@@ -508,6 +512,7 @@ class URController:
                 self.script.halt()
             self.script = ControlScript(self.arm, self.regs, protective_stop=self.protective_stop)
             self.runtime_state = RUNTIME_PLAYING
+            self.urp_playing = False  # an uploaded script replaces the program that was running
         log.info("ur5e emulator: control script started (%d bytes)", len(program))
 
     # ---- dashboard (29999) ----------------------------------------------------------------------
@@ -532,6 +537,7 @@ class URController:
         if self.script is not None:
             self.script.halt()
             self.script.running = False
+        self.urp_playing = False
         self.runtime_state = RUNTIME_STOPPED
         self.arm.stop()
 
@@ -539,7 +545,7 @@ class URController:
         """The Dashboard server's answer (Universal Robots, "Dashboard server e-Series", PolyScope 5)."""
         command, _, argument = line.partition(" ")
         with self._lock:
-            if self.script is not None and self.script.running:
+            if self.script is not None and self.script.running and not self.urp_playing:
                 program = "rtde_control"
             else:
                 program = self.loaded_program.rsplit("/", 1)[-1] if self.loaded_program else "<unnamed>"
@@ -593,6 +599,13 @@ class URController:
             if line == "play":
                 if self.runtime_state == RUNTIME_PAUSED and self.safety_mode == SAFETY_MODE_NORMAL \
                         and self.robot_mode == ROBOT_MODE_RUNNING and self.script is not None and self.script.running:
+                    self.runtime_state = RUNTIME_PLAYING
+                    return "Starting program"
+                # the loaded .urp (dashboard "load"): started from stopped, resumed from paused
+                script_runs = self.script is not None and self.script.running and not self.urp_playing
+                if self.loaded_program is not None and not script_runs and self.safety_mode == SAFETY_MODE_NORMAL \
+                        and self.robot_mode == ROBOT_MODE_RUNNING:
+                    self.urp_playing = True
                     self.runtime_state = RUNTIME_PLAYING
                     return "Starting program"
                 return "Failed to execute: Play"

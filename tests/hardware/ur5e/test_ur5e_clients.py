@@ -328,6 +328,16 @@ def test_dashboard_answers_as_the_dashboard_server(controller):
     assert d.robotmode() == "Robotmode: RUNNING"
     with pytest.raises(RuntimeError, match="File not found"):
         d.loadURP("missing")
+    # issue 30: play after load starts the loaded program (ur_rtde's play() raises unless the
+    # answer is "Starting program"); programState and running follow it; stop stops it
+    d.play()
+    assert d.programState() == "PLAYING pick.urp" and d.running()
+    d.pause()
+    assert d.programState() == "PAUSED pick.urp" and not d.running()
+    d.play()
+    assert d.running()
+    d.stop()
+    assert d.programState() == "STOPPED pick.urp" and not d.running()
     d.disconnect()
 
 
