@@ -328,9 +328,12 @@ def test_a_third_party_client_reads_the_configuration_setcfgsel_selects(emulator
     assert (cal.counts_per_force_unit, cal.counts_per_torque_unit) == (4_000_000.0, 8_000_000.0)
     assert health.fault_code == pynetft.FaultCode.NONE
     # the records are in the selected calibration's counts: the same unloaded force (the twin's
-    # untared bias, > 0.05 N here) in N either way; a wrong scale would read it 4x off
+    # untared bias, > 0.05 N here) in N either way; a wrong scale would read it 4x off. Judged as
+    # the ratio of the two readings: the bias drifts and is noisy between the two windows (one run
+    # read 0.126 then 0.136 N in z), which an absolute 0.01 N could not tell from a scale error.
     after = np.mean([s.force for s in samples], axis=0)
-    assert np.linalg.norm(before) > 0.05 and np.allclose(after, before, atol=0.01), (before, after)
+    ratio = np.linalg.norm(after) / np.linalg.norm(before)
+    assert np.linalg.norm(before) > 0.05 and 0.8 < ratio < 1.25, (before, after)
 
 
 class HandBox:
