@@ -17,6 +17,7 @@ import dataclasses
 import importlib
 import logging
 import socket
+import threading
 from dataclasses import dataclass, field
 
 from hardware.emulation import free_loopback_host
@@ -102,11 +103,20 @@ class LoopbackBench:
         return dict(self.addresses)
 
     def stop(self) -> None:
-        for device, emu in reversed(list(self.emulators.items())):
+        """Power every emulator off at once (each waits on its own process or threads, none on
+        another's: one after another they took 0.25 s of the second SIGTERM allows), then the world."""
+        def stop(device: str, emu) -> None:
             try:
                 emu.stop()
             except Exception as exc:  # noqa: BLE001 - stop the others
                 log.warning("loopback: stopping the %s emulator failed: %s", device, exc)
+
+        stopping = [threading.Thread(target=stop, args=item, name=f"stop-{item[0]}", daemon=True)
+                    for item in self.emulators.items()]
+        for t in stopping:
+            t.start()
+        for t in stopping:
+            t.join()
         self.emulators.clear()
         self.rt.stop()
 

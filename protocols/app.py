@@ -10,8 +10,10 @@ the command then exits 1.
 
 Ctrl-C and SIGTERM take one path: the first asks the control loop to stop at its next tick (a
 safe point); a second one, or for SIGTERM `STOP_GRACE_S` without a tick (a wait on a device, a
-connection being set up), stops the run at once where it is. Either way the trial in progress is
-closed "aborted".
+long computation), stops the run at once where it is. Either way the trial in progress is closed
+"aborted". While the devices are still connecting no tick will come and no file is open: the first
+signal stops the run at once. A run a signal stopped ends without the interpreter's teardown once
+its files are closed (`layerskin_exp.cli.exit_now`), so SIGTERM ends it within a second.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from collections.abc import Callable
 
 from omegaconf import DictConfig, OmegaConf
 
-from layerskin_exp.cli import EXIT_CONFIG, expand_sweep, one_line, refuse
+from layerskin_exp.cli import EXIT_CONFIG, EXIT_INTERRUPTED, EXIT_TERMINATED, expand_sweep, one_line, refuse
 from layerskin_exp.config import ConfigError, validate
 
 __all__ = ["EXIT_CONFIG", "expand_sweep", "refuse_renamed", "refuse_shared_files",
@@ -35,8 +37,6 @@ __all__ = ["EXIT_CONFIG", "expand_sweep", "refuse_renamed", "refuse_shared_files
 log = logging.getLogger(__name__)
 
 EXIT_FAILED = 1
-EXIT_INTERRUPTED = 130
-EXIT_TERMINATED = 143
 # SIGTERM has no second press: a request no control tick has acted on by then (three ticks at the
 # slowest control_period_s) is acted on at once. A process manager follows SIGTERM with SIGKILL
 # after a few seconds, which leaves no closed file.
@@ -120,13 +120,16 @@ def sweep_job(task: Callable[[], dict]) -> dict:
 
 _grace: list[threading.Timer] = []
 _holding: list[bool] = []  # the run has ended; the live view is held open (live_hold)
+_connecting: list[bool] = []  # the devices are connecting: no control tick will come, no file is open
 
 
 def _on_sigterm(signum, frame) -> None:
-    """First SIGTERM: stop at the next tick; a second one, or STOP_GRACE_S without a tick: at once."""
+    """First SIGTERM: stop at the next tick; a second one, or STOP_GRACE_S without a tick: at once.
+    While the devices connect: at once."""
     from protocols.runner import request_termination, terminate_now, termination_pending  # loaded by run_app
 
-    if termination_pending():
+    if termination_pending() or _connecting:
+        request_termination("terminated (SIGTERM)")
         terminate_now()
         return
     request_termination("terminated (SIGTERM)")
@@ -147,7 +150,8 @@ def _on_sigint(signum, frame) -> None:
               flush=True)
         request_termination("interrupted (Ctrl-C)")
         return
-    if termination_pending():
+    if termination_pending() or _connecting:
+        request_termination("interrupted (Ctrl-C)")
         terminate_now()
         return
     request_termination("interrupted (Ctrl-C)")
@@ -225,7 +229,11 @@ def _run_connected(cfg: DictConfig, setup: str, rig, typed, body):
     )
 
     try:
-        rig.connect()
+        _connecting.append(True)
+        try:
+            rig.connect()
+        finally:
+            _connecting.clear()
     except (Terminated, KeyboardInterrupt) as e:  # while a device was still connecting: nothing written
         rig.disconnect()
         why = str(e) or "interrupted (Ctrl-C)"

@@ -422,3 +422,25 @@ def test_a_stop_says_what_it_left_of_the_trial_in_progress(tmp_path, monkeypatch
         assert err.strip() == ("interrupted: motion stopped, the trial in progress is kept as "
                                "pos000_press0.mcap.partial (aborted); rerun the same command to resume")
         assert (tmp_path / "d" / "pos000_press0.mcap.partial").is_file()
+
+
+@pytest.mark.parametrize("handler", ["_on_sigterm", "_on_sigint"])
+def test_a_signal_while_the_devices_connect_stops_the_run_at_once(monkeypatch, handler):
+    # No control tick comes while the devices connect and no file is open: the first signal raises
+    # at once instead of waiting STOP_GRACE_S (or, for Ctrl-C, a second press). Once connected, the
+    # first signal only asks the loop to stop at its next tick.
+    from protocols import app, runner
+
+    monkeypatch.setattr(runner, "_termination", [])
+    monkeypatch.setattr(runner, "_raised", [])
+    monkeypatch.setattr(app, "_grace", [])
+    monkeypatch.setattr(app, "_connecting", [True])
+    with pytest.raises(runner.Terminated):
+        getattr(app, handler)(None, None)
+    runner._termination.clear()
+    runner._raised.clear()
+    app._connecting.clear()
+    getattr(app, handler)(None, None)  # connected: only a request
+    assert runner.termination_pending()
+    for timer in app._grace:
+        timer.cancel()
