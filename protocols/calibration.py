@@ -302,7 +302,7 @@ def run_campaign(cfg: ForceCalibrationConfig, rig: Rig, metadata: dict, live=Non
     # trial_is_complete refuses a conflicting file: before the first trial, not half-way through
     todo = []
     for t in trials:
-        if trial_is_complete(root / f"{t.name}.mcap", identity[t.name]):
+        if trial_is_complete(root / f"{t.name}.mcap", identity[t.name], cfg.max_lost_skin_frames):
             RUN_FILES.record(root / f"{t.name}.mcap", "already_complete")
         else:
             todo.append(t)

@@ -16,7 +16,9 @@ over the trial (received, lost, duplicate, out of order, corrupt, reconnects; `t
 A complete file is never replaced: a rerun skips it when its identity matches and refuses
 (`TrialConflictError`) when the same path holds a trial of another identity, read from the parts
 that survive when the file is damaged. A damaged file whose identity matches or cannot
-be read is moved aside (`<name>.mcap.damaged`, reported) before the trial is recorded again.
+be read is moved aside (`<name>.mcap.damaged`, reported) before the trial is recorded again. So
+is a complete file whose stored skin losses exceed this run's `max_lost_skin_frames` (written
+under a looser limit: `<name>.mcap.over-limit`): it is not complete by this run's measure.
 """
 
 from __future__ import annotations
@@ -84,11 +86,21 @@ def outcome_after(safety_trip: str | None, health: dict | None = None, max_lost_
     """The outcome of a trial that ran to its end: plain complete, or complete with the trip;
     incomplete when the skin lost more frames than max_lost_skin_frames (None: no limit) by the
     trial's stream health (trial_health): sequence gaps plus frames a full driver buffer let go."""
-    skin = (health or {}).get("skin", {})
-    lost = skin.get("lost", 0) + skin.get("dropped", 0)
-    if max_lost_skin_frames is not None and lost > max_lost_skin_frames:
+    lost = lost_skin_frames(health)
+    if over_the_limit(lost, max_lost_skin_frames):
         return f"incomplete: {lost} skin frames lost (limit max_lost_skin_frames={max_lost_skin_frames})"
     return COMPLETE if safety_trip is None else f"{COMPLETE} (safety stop: {safety_trip})"
+
+
+def lost_skin_frames(health: dict | None) -> int:
+    """Skin frames a trial lost by its stream health: sequence gaps plus frames a full driver buffer
+    let go (0 where the file stores no health: written before it was stored)."""
+    skin = (health or {}).get("skin", {})
+    return int(skin.get("lost", 0)) + int(skin.get("dropped", 0))
+
+
+def over_the_limit(lost: int, max_lost_skin_frames: int | None) -> bool:
+    return max_lost_skin_frames is not None and lost > max_lost_skin_frames
 
 
 def device_health(rig: Rig) -> dict[str, dict[str, int]]:
@@ -160,7 +172,7 @@ class RunFiles:
     interrupted: list[Path] = field(default_factory=list)  # closed aborted, kept as <name>.mcap.partial
     incomplete: list[str] = field(default_factory=list)  # "<name>: <outcome>" of trials closed incomplete
     already_complete: int = 0
-    set_aside: list[Path] = field(default_factory=list)  # damaged files moved to <name>.mcap.damaged
+    set_aside: list[Path] = field(default_factory=list)  # moved to <name>.mcap.damaged / .over-limit
 
     def reset(self) -> None:
         self.folder, self.written, self.interrupted, self.already_complete = None, 0, [], 0
@@ -168,7 +180,8 @@ class RunFiles:
 
     def record(self, path: Path, how: str, outcome: str = "") -> None:
         """how: "written", "interrupted" (path: the .partial), "incomplete" (path: the .partial;
-        outcome: why), "already_complete" or "set_aside" (path: where the damaged file now is)."""
+        outcome: why), "already_complete" or "set_aside" (path: where the file now is: damaged, or
+        complete over this run's lost-frame limit)."""
         self.folder = path.parent
         if how == "incomplete":
             self.incomplete.append(f"{path.name.removesuffix('.mcap' + PARTIAL_SUFFIX)}: {outcome}")
@@ -199,7 +212,8 @@ class RunFiles:
         if self.already_complete:
             s += f"; {self.already_complete} already complete there"
         if self.set_aside:
-            s += (f"; {len(self.set_aside)} damaged file(s) moved aside, not replaced: "
+            # each name says why: .damaged, or .over-limit (complete over this run's lost-frame limit)
+            s += (f"; {len(self.set_aside)} file(s) moved aside, not replaced: "
                   + ", ".join(p.name for p in self.set_aside))
         return s
 
@@ -229,13 +243,13 @@ def surviving_identity(path: Path) -> str | None:
     return identity if isinstance(identity, str) else None
 
 
-def trial_is_complete(path: Path, identity: str | None = None) -> bool:
-    """True when `path` is a readable, undamaged, complete session recorded with `identity`;
-    raises TrialConflictError when it holds a trial of another identity (given one), complete or
-    damaged."""
+def trial_is_complete(path: Path, identity: str | None = None, max_lost_skin_frames: int | None = None) -> bool:
+    """True when `path` is a readable, undamaged, complete session recorded with `identity` whose
+    skin lost no more frames than `max_lost_skin_frames` (None: any number); raises
+    TrialConflictError when it holds a trial of another identity (given one), complete or damaged."""
     session = complete_session(path)
     check_no_conflict(path, identity, session)
-    return session is not None
+    return session is not None and not over_the_limit(lost_skin_frames(session.stream_health), max_lost_skin_frames)
 
 
 def check_no_conflict(path: Path, identity: str | None, session=None) -> None:
@@ -255,13 +269,14 @@ def check_no_conflict(path: Path, identity: str | None, session=None) -> None:
         "Record this one under another data_root, or move that file away first")
 
 
-def set_aside(path: Path) -> Path:
-    """Move the damaged file at `path` to a sibling `<name>.mcap.damaged[-k]` (never replacing
-    one; out of the `*.mcap` a folder's sessions are listed by) so that the trial can be recorded
-    again; returns the new path."""
+def set_aside(path: Path, why: str = "damaged") -> Path:
+    """Move the file at `path` to a sibling `<name>.mcap.<why>[-k]` (never replacing one; out of
+    the `*.mcap` a folder's sessions are listed by) so that the trial can be recorded again;
+    returns the new path. why: "damaged", or "over-limit" (complete, but its skin lost more frames
+    than this run allows)."""
     k = 0
     while True:
-        aside = path.with_name(f"{path.name}.damaged{'' if k == 0 else f'-{k}'}")
+        aside = path.with_name(f"{path.name}.{why}{'' if k == 0 else f'-{k}'}")
         if not aside.exists():
             break
         k += 1
@@ -457,7 +472,15 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     check_termination()
     existing = complete_session(path)
     check_no_conflict(path, identity, existing)
-    if existing is not None:
+    lost = lost_skin_frames(existing.stream_health) if existing is not None else 0
+    if existing is not None and over_the_limit(lost, max_lost_skin_frames):
+        aside = set_aside(path, "over-limit")
+        RUN_FILES.record(aside, "set_aside")
+        log.warning("trial %s: the complete file there lost %d skin frames, more than this run's "
+                    "max_lost_skin_frames=%d; moved to %s, recording the trial again", name, lost,
+                    max_lost_skin_frames, aside.name)
+        existing = None
+    elif existing is not None:
         note = _missing_views(existing.metadata.get("config") or {}, metadata.get("config") or {})
         if note:
             log.warning("trial %s is already complete (%s); it is not run again", name, note)

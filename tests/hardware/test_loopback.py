@@ -82,6 +82,13 @@ def test_lost_skin_frames_within_the_limit_keep_the_trial_complete_and_recorded(
     # press past the force limit: "complete (safety stop: ...)"), and not made incomplete by the loss
     assert s.complete and s.outcome.startswith("complete") and f.suffix == ".mcap"
     assert s.stream_health["skin"]["lost"] > 0 and _skin_frames_missing(s) > 0
+    # rerun under the default limit (0): that file is not complete by this run's measure; it is
+    # moved aside, not replaced, and the trial recorded again (lossy again: incomplete)
+    recorded = f.read_bytes()
+    r = run_cli("protocols.force_calibration", [*LOSSY_CAL, f"data_root={data}", *hydra_dirs], tmp_path)
+    assert r.returncode == 1, r.stderr[-3000:]
+    (aside,) = data.glob("force_calibration/*/*.mcap.over-limit")
+    assert aside.read_bytes() == recorded and f"moved aside, not replaced: {aside.name}" in r.stdout
 
 
 STALL_CASES = [  # (protocol, device, stream in the file, seconds after power-on)

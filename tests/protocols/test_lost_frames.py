@@ -60,3 +60,28 @@ def test_more_lost_skin_frames_than_the_limit_make_the_trial_incomplete(tmp_path
     assert "1 incomplete" in RUN_FILES.line() and why in RUN_FILES.line()
     again = run_trial(rig, path, {"trial": 0}, META, _lossy_trial(0), max_lost_skin_frames=limit)
     assert again.outcome == "complete" and path.is_file() and not again.skipped
+
+
+def test_a_complete_trial_is_judged_again_by_a_stricter_limit(tmp_path, caplog):
+    # Written complete under max_lost_skin_frames=10 with 7 frames lost: a rerun under the same
+    # limit skips it; one under 5 finds it not complete by its measure, moves it aside (never
+    # replaced, reported) and records the trial again.
+    from protocols.runner import trial_is_complete
+
+    RUN_FILES.reset()
+    rig = platform_rig()
+    rig.connect()
+    path = tmp_path / "t.mcap"
+    run_trial(rig, path, {"trial": 0}, META, _lossy_trial(7), max_lost_skin_frames=10)
+    first = path.read_bytes()
+    assert trial_is_complete(path, None, 10) and trial_is_complete(path, None, 7) and trial_is_complete(path)
+    assert not trial_is_complete(path, None, 6)
+    again = run_trial(rig, path, {"trial": 0}, META, _lossy_trial(0), max_lost_skin_frames=10)
+    assert again.skipped and path.read_bytes() == first
+    RUN_FILES.reset()
+    stricter = run_trial(rig, path, {"trial": 0}, META, _lossy_trial(0), max_lost_skin_frames=5)
+    assert not stricter.skipped and stricter.outcome == "complete"
+    assert (tmp_path / "t.mcap.over-limit").read_bytes() == first
+    assert load_session(path, warn=False).stream_health["skin"]["lost"] == 0
+    assert "moved aside" in RUN_FILES.line() and "t.mcap.over-limit" in RUN_FILES.line()
+    assert any("lost 7 skin frames" in r.getMessage() and r.levelname == "WARNING" for r in caplog.records)
