@@ -111,6 +111,7 @@ class LoopbackBench:
             except Exception as exc:  # noqa: BLE001 - stop the others
                 log.warning("loopback: stopping the %s emulator failed: %s", device, exc)
 
+        self.rt.halt()  # no further advance: an emulator's release of the world waits on none
         stopping = [threading.Thread(target=stop, args=item, name=f"stop-{item[0]}", daemon=True)
                     for item in self.emulators.items()]
         for t in stopping:

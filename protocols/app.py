@@ -199,9 +199,10 @@ def run_app(cfg: DictConfig, setup: str, body: Callable[[object, object, dict], 
 
     from hardware import build_rig  # the backends import heavy optional drivers
     from hardware.interfaces import DeviceError
-    from protocols.runner import RUN_FILES
+    from protocols.runner import RUN_FILES, winding_down
 
     RUN_FILES.reset()  # the jobs of a multirun may share this process
+    winding_down(False)
     try:
         typed = validate(cfg)
         tqdm.get_lock()  # tqdm makes its lock, importing multiprocessing, at its first bar
@@ -226,6 +227,8 @@ def _run_connected(cfg: DictConfig, setup: str, rig, typed, body):
         TrialConflictError,
         check_termination,
         termination_pending,
+        termination_reason,
+        winding_down,
     )
 
     try:
@@ -234,14 +237,15 @@ def _run_connected(cfg: DictConfig, setup: str, rig, typed, body):
             rig.connect()
         finally:
             _connecting.clear()
-    except (Terminated, KeyboardInterrupt) as e:  # while a device was still connecting: nothing written
+    except (Terminated, KeyboardInterrupt, Exception) as e:  # noqa: BLE001 - any failure to connect ends the run
         rig.disconnect()
-        why = str(e) or "interrupted (Ctrl-C)"
+        if isinstance(e, Exception) and not termination_pending():
+            _fail(f"could not connect the {rig.backend} rig: {one_line(e)}")
+        # stopped while a device was still connecting (a signal raised inside a library's call may
+        # come out as that library's error: an extension module's import gives ImportError)
+        why = str(e) if isinstance(e, Terminated) else (termination_reason() or "interrupted (Ctrl-C)")
         print(f"{why} while connecting: nothing was recorded; rerun the same command to start", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED if "Ctrl-C" in why else EXIT_TERMINATED)
-    except Exception as e:  # noqa: BLE001 - any failure to connect ends the run before motion
-        rig.disconnect()
-        _fail(f"could not connect the {rig.backend} rig: {one_line(e)}")
     sys.audit("layerskin_exp.rig_connected", rig.backend)  # from here on the devices stream
     if not rig.clock.is_virtual:
         # Everything built so far (modules, configs, drivers) leaves the garbage collector's reach:
@@ -264,8 +268,12 @@ def _run_connected(cfg: DictConfig, setup: str, rig, typed, body):
         print(f"live view: open {live.url} in Foxglove (Open connection > Foxglove WebSocket)", flush=True)
     finished = False
     try:
-        check_termination()  # SIGTERM while connecting
-        result = body(typed, rig, metadata, **({"live": live} if live is not None else {}))
+        try:
+            check_termination()  # SIGTERM while connecting
+            result = body(typed, rig, metadata, **({"live": live} if live is not None else {}))
+        finally:
+            # ended, failed or stopped: a signal from here on does not cut the closing short
+            winding_down()
         finished = True
         if RUN_FILES.incomplete:
             n = len(RUN_FILES.incomplete)

@@ -133,6 +133,7 @@ class Terminated(BaseException):
 
 _termination: list[str] = []
 _raised: list[bool] = []  # Terminated was raised once: the run is closing its trial and exiting
+_closing: list[bool] = []  # the run is winding down (ended, failed or stopped): its devices are closing
 
 
 def request_termination(reason: str = "terminated (SIGTERM)") -> None:
@@ -149,6 +150,11 @@ def termination_pending() -> bool:
     return bool(_termination)
 
 
+def termination_reason() -> str | None:
+    """Why the run was asked to stop ("terminated (SIGTERM)", "interrupted (Ctrl-C)"), if it was."""
+    return _termination[0] if _termination else None
+
+
 def check_termination() -> None:
     if _termination:
         _raised.append(True)
@@ -158,9 +164,18 @@ def check_termination() -> None:
 def terminate_now() -> None:
     """Raise Terminated here, wherever the run is (a signal handler's last resort when no tick
     acted on the request: a wait on a device, a long computation), unless it was raised already
-    and the run is closing its trial: that cleanup is not cut short."""
-    if _termination and not _raised:
+    and the run is closing its trial, or the run is winding down anyway (`winding_down`): that
+    cleanup is not cut short."""
+    if _termination and not _raised and not _closing:
         check_termination()
+
+
+def winding_down(yes: bool = True) -> None:
+    """The run has ended, failed or been stopped and is closing its trial and devices: a signal
+    from now on no longer raises into that (protocols.app; cleared when a run starts)."""
+    _closing.clear()
+    if yes:
+        _closing.append(True)
 
 
 @dataclass

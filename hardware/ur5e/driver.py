@@ -77,6 +77,7 @@ def async_status(word: int) -> tuple[bool, int]:
 
 # ur_rtde clients left behind when their controller hung (see UR5eArm._close_clients)
 _ABANDONED: list = []
+_CLOSED: list = []  # disconnected clients, destroyed at exit (see _close_clients)
 
 
 def _require_streaming(recv) -> None:
@@ -202,9 +203,17 @@ class UR5eArm(Arm):
             with self._io:
                 if ctrl is not None:
                     _quiet(ctrl.stopScript)
-                    _quiet(ctrl.disconnect)
-                if recv is not None:
-                    _quiet(recv.disconnect)
+                # ur_rtde's disconnect ends with a fixed 0.5 s sleep in each client, with the GIL
+                # released: both at once. Its destructor disconnects (and sleeps) again, holding the
+                # GIL: the clients are kept (_CLOSED) so that happens at the process's exit, not
+                # while the run closes its other devices (SIGTERM allows a second in all).
+                closing = [threading.Thread(target=_quiet, args=(c.disconnect,), name="ur5e-close", daemon=True)
+                           for c in (ctrl, recv) if c is not None]
+                for t in closing:
+                    t.start()
+                for t in closing:
+                    t.join(timeout=5.0)
+                _CLOSED.extend(c for c in (ctrl, recv) if c is not None)
             return
         # A hung controller: ur_rtde's clients loop reconnecting, and disconnecting or destroying
         # a client whose threads still run calls std::terminate (the process would abort after
