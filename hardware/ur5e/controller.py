@@ -365,7 +365,10 @@ class URController:
             "safety_status_bits": wire.safety_status_bits(self.safety_mode), "runtime_state": self.runtime_state,
             "robot_status_bits": (ROBOT_STATUS_POWER_ON if powered else 0)
             | (ROBOT_STATUS_PROGRAM_RUNNING if playing else 0),
-            "speed_scaling": self.speed_fraction, "target_speed_fraction": self.speed_fraction,
+            # speed_scaling: the trajectory limiter's (the script's); the slider is target_speed_fraction
+            # (clients multiply the two, as Universal Robots' ROS driver does)
+            "speed_scaling": self.script.speed_scaling if playing and self.script is not None else 1.0,
+            "target_speed_fraction": self.speed_fraction,
             "joint_mode": (255,) * 6,
             "payload": tool.payload_kg, "payload_cog": tuple(tool.payload_cog_m),
             "actual_digital_output_bits": self.digital_outputs,

@@ -130,7 +130,8 @@ def test_io_interface_outputs_and_speed_slider_take_effect(controller):
     assert wait_for(lambda: recv.getActualDigitalOutputBits() == want)
     assert recv.getDigitalOutState(3) and not recv.getDigitalOutState(4)
     assert recv.getStandardAnalogOutput0() == pytest.approx(0.4)
-    assert recv.getSpeedScaling() == pytest.approx(0.5) and recv.getTargetSpeedFraction() == pytest.approx(0.5)
+    # the slider is target_speed_fraction; speed_scaling is the trajectory limiter's, apart from it
+    assert recv.getTargetSpeedFraction() == pytest.approx(0.5) and recv.getSpeedScaling() == 1.0
     assert io.setStandardDigitalOut(3, False)
     assert wait_for(lambda: recv.getActualDigitalOutputBits() == want & ~(1 << 3))
     # The slider scales the speed of the moves commanded after it.
@@ -242,6 +243,51 @@ def test_movej_moves_the_tool_to_where_the_joints_put_it(controller):
     assert wait_for(lambda: ctrl.getAsyncOperationProgress() < 0, 10.0)
     np.testing.assert_allclose(_ur5e_flange(q_here)[:3, 3], twin_pose(rt)[:3], atol=1e-5)
     assert emu.info["unsupported"] == []
+
+
+def test_movel_above_the_safety_speed_limit_runs_at_the_limit_and_the_program_goes_on(controller):
+    """ur_rtde accepts moveL speeds up to 3 m/s (a UR5e runs about 1 m/s at the tool); the rig's
+    envelope (sim.rig.arm.max_speed_m_s) stands for the safety configuration's tool speed limit.
+    A real controller keeps a program's motion within its safety limits by slowing it (speed
+    scaling of the trajectory limiter), not by stopping the program: the move runs at the limit,
+    RTDE speed_scaling says by how much it was scaled, and the program goes on."""
+    rt, emu = controller("127.0.0.54")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.54", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.54")
+    controller.clients += [ctrl, recv]
+    with rt.lock:
+        v_max, a_max = rt.rig.arm.cfg.max_speed_m_s, rt.rig.arm.cfg.max_accel_m_s2
+    start = twin_pose(rt)
+    target = start + [-0.1, 0, 0, 0, 0, 0]
+    # 1 m/s asynchronously: sample what the controller reports while it runs.
+    assert ctrl.moveL(target.tolist(), 1.0, 1.2, True)
+    scalings, speeds = [], []
+    while ctrl.getAsyncOperationProgress() >= 0 or not scalings:
+        scalings.append(recv.getSpeedScaling())
+        speeds.append(np.linalg.norm(recv.getActualTCPSpeed()[:3]))
+        assert len(scalings) < 20000, "the move never finished"
+        time.sleep(0.002)
+    np.testing.assert_allclose(twin_pose(rt), target, atol=1e-5)
+    assert max(speeds) == pytest.approx(v_max, abs=1e-6)  # at the limit, never above it
+    assert min(scalings) == pytest.approx(v_max / 1.0)
+    assert ctrl.isProgramRunning() and recv.getSafetyMode() == wire.SAFETY_MODE_NORMAL
+    assert recv.getRuntimeState() == wire.RUNTIME_PLAYING
+    assert wait_for(lambda: recv.getSpeedScaling() == 1.0)  # the limited move is over
+    # Synchronous, speed and acceleration above the envelope: done (True) at the target.
+    assert ctrl.moveL(start.tolist(), 2.0, 10 * a_max)
+    np.testing.assert_allclose(twin_pose(rt), start, atol=1e-5)
+    # A twist above the limit runs at it, in its direction; speedStop ends it.
+    assert ctrl.speedL([-2 * v_max, 0.0, 0.0, 0.0, 0.0, 0.0], 10 * a_max, 0.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed()[0] < -v_max + 1e-6, 5.0)
+    assert recv.getSpeedScaling() == pytest.approx(0.5) and ctrl.isProgramRunning()
+    ctrl.speedStop(2.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed() == [0.0] * 6, 5.0)
+    # A move within the envelope afterwards works as before.
+    here = twin_pose(rt)
+    assert ctrl.moveL((here + [0, 0, 0.01, 0, 0, 0]).tolist(), 0.05, 0.5)
+    np.testing.assert_allclose(twin_pose(rt), here + [0, 0, 0.01, 0, 0, 0], atol=1e-5)
+    assert ctrl.isProgramRunning() and emu.info["unsupported"] == []
+    assert emu.info["runtime_state"] == wire.RUNTIME_PLAYING and emu.info["scripts_received"] == 1
 
 
 def test_pose_within_safety_limits_is_judged_against_the_workspace(controller):
