@@ -5,6 +5,7 @@ Each test serves on its own loopback address (the clients' ports are fixed). Wai
 polls; no assertion is about how fast anything ran.
 """
 
+import select
 import socket
 import struct
 import threading
@@ -460,7 +461,7 @@ def test_a_16_mb_upload_without_def_is_dropped_in_bounded_memory(controller):
     watcher.start()
     try:
         assert wait_for(lambda: len(stamps) > 20)
-        peak_before_kb = _peak_rss_kb(emu._proc.pid)
+        peak_before_kb = _peak_rss_kb(emu._controller.proc.pid)
         s = socket.create_connection(("127.0.0.46", wire.PORT_REALTIME), timeout=60.0)
         t0 = time.monotonic()
         s.sendall(b"x" * (16 << 20))  # one 16 MB "line": no def, no newline
@@ -475,10 +476,77 @@ def test_a_16_mb_upload_without_def_is_dropped_in_bounded_memory(controller):
     # Dropped as it came (the process grew by far less than the upload; the old reader kept and
     # re-decoded all of it: +28 MB), and the 500 Hz stream went on meanwhile (controller time
     # between the samples seen; it stalled for seconds before).
-    assert _peak_rss_kb(emu._proc.pid) - peak_before_kb < 8 * 1024
+    assert _peak_rss_kb(emu._controller.proc.pid) - peak_before_kb < 8 * 1024
     during = [ts for t, ts in stamps if t0 - 0.05 <= t <= t1 + 0.05]
     assert len(during) >= 2 and max(np.diff(during)) < 1.0
     # A real control script still starts afterwards on the same port.
     ctrl = rtde_control.RTDEControlInterface("127.0.0.46")
     controller.clients.append(ctrl)
     assert ctrl.isProgramRunning()
+
+
+def test_a_client_that_stops_reading_stalls_neither_the_controller_nor_other_clients(controller):
+    """One RTDE client stops reading its 500 Hz output and floods requests whose answers it does
+    not read: its own socket fills, and on a controller whose cycle sent to every client itself
+    the cycle blocked there, for every client and the control script. Judged by the device:
+    the other client's controller timestamps go on, a move completes, and once the slow client
+    reads again it finds every request answered, in order, and a gap in its data packages."""
+    rt, emu = controller("127.0.0.55")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.55", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.55")
+    controller.clients += [ctrl, recv]
+    slow = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # small buffers: full sooner
+    slow.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+    slow.settimeout(5.0)
+    slow.connect(("127.0.0.55", wire.PORT_RTDE))
+    assert _rtde_exchange(slow, wire.encode_protocol_version_request(2)) == (ord("V"), b"\x01")
+    names = ["timestamp", "actual_TCP_pose", "target_TCP_pose", "actual_TCP_speed"]
+    kind, payload = _rtde_exchange(slow, wire.encode_setup_outputs_request(500.0, names))
+    assert kind == ord("O") and payload[0] == 1
+    assert _rtde_exchange(slow, wire.pack(wire.RTDE_CONTROL_PACKAGE_START)) == (ord("S"), b"\x01")
+    # It stops reading and sends version requests until the controller stops taking them for
+    # good: its socket stays unwritable while the other client sees 0.5 s of controller time go
+    # by (a controller that is only slow to read takes more, and the flood goes on).
+    slow.setblocking(False)
+    request = wire.pack(wire.RTDE_GET_URCONTROL_VERSION)
+    chunk, sent = request * 4096, 0
+    deadline = time.monotonic() + 60.0
+    while True:
+        try:
+            sent += slow.send(chunk[sent % len(chunk):])
+            assert sent < 1 << 26, "the controller read 64 MB of requests without answering"
+            continue
+        except BlockingIOError:
+            pass
+        t = recv.getTimestamp()
+        while not select.select([], [slow], [], 0)[1] and recv.getTimestamp() < t + 0.5:
+            assert time.monotonic() < deadline, "the other client's data stopped"
+            time.sleep(0.005)
+        if recv.getTimestamp() >= t + 0.5:
+            break
+    requests = sent // len(request)  # (a request the last send cut is never answered)
+    # The controller goes on for the other client and the control script.
+    t = recv.getTimestamp()
+    assert wait_for(lambda: recv.getTimestamp() > t + 1.0, 30.0), "the other client's data stopped"
+    here = twin_pose(rt)
+    assert ctrl.moveL((here + [0, 0, 0.01, 0, 0, 0]).tolist(), 0.05, 0.5)
+    np.testing.assert_allclose(twin_pose(rt), here + [0, 0, 0.01, 0, 0, 0], atol=1e-5)
+    # The slow client reads again: every request answered, in order, and data packages with a gap.
+    slow.setblocking(True)
+    reader, answers, stamps = wire.PacketReader(), 0, []
+    deadline = time.monotonic() + 30.0
+    while answers < requests and time.monotonic() < deadline:
+        for kind, payload in reader.feed(slow.recv(65536)):
+            if kind == wire.RTDE_GET_URCONTROL_VERSION:
+                assert wire.decode_controller_version(payload)[0] == 5
+                answers += 1
+            elif kind == wire.RTDE_DATA_PACKAGE:
+                stamps.append(struct.unpack_from(">d", payload, 1)[0])
+            else:
+                raise AssertionError(f"unexpected package {chr(kind)!r}")
+    assert answers == requests
+    steps = np.diff(stamps)
+    assert np.all(steps > 0) and steps.max() > 0.4  # the packages it could not take were dropped
+    slow.close()
+    assert recv.isConnected() and ctrl.isProgramRunning()
