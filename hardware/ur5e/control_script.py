@@ -14,7 +14,8 @@ client sends (captured in the tests):
     elif not executing: process it (blocking commands finish first); executing = True
                         and signal_done_with_cmd() unless cmd == 255 (stop script)
 
-Commands acted on: moveL (3, synchronous or asynchronous), moveJ (1, likewise: see _joint_move), stopL (33) / stopJ (34), speedL (10),
+Commands acted on: moveL (3, synchronous or asynchronous; above the safety limits it runs at them,
+speed-scaled, see _limited), moveJ (1, likewise: see _joint_move), stopL (33) / stopJ (34), speedL (10),
 servoL (24: the TCP follows the stream of poses, see _command_servo), speedStop (15), servoStop (16), isSteady (47), isPoseWithinSafetyLimits (36: the pose against the
 safety planes, here the twin's workspace box; orientation is not limited), triggerProtectiveStop
 (31: the controller's protective stop, which pauses the program before the command is done),
@@ -140,6 +141,9 @@ class ControlScript:
         self.tool = ToolSettings()
         self.actual_q = [0.0] * 6  # what RTDE reports as actual_q (no joint space here: zeros)
         self.speed_fraction = 1.0  # the speed slider, set by the controller (applies to moves commanded after)
+        # RTDE speed_scaling: how far the trajectory limiter slows the motion under way to keep it
+        # within the safety limits (the twin's envelope), 1.0 when it does not; the slider is apart.
+        self.speed_scaling = 1.0
         self._reset_async_progress()
         self._signal(SIGNAL_READY)
 
@@ -179,6 +183,8 @@ class ControlScript:
         if self._move_active and not self.arm.is_moving():
             self._move_active = False  # move_thread / stop_thread finished
             self._write_async_progress(-1)
+        if self.speed_scaling != 1.0 and not self._speeding and not self.arm.is_moving():
+            self.speed_scaling = 1.0  # the limited motion is over
         if self._speeding and self._last_twist is not None:
             self._speed_renew_in -= 1
             if self._speed_renew_in <= 0:
@@ -212,6 +218,7 @@ class ControlScript:
         self._last_twist = None
         self._servo_target = None
         self._pending = None
+        self.speed_scaling = 1.0
 
     # ---- commands -----------------------------------------------------------------------------
     def _process(self, cmd: int) -> bool:
@@ -225,7 +232,7 @@ class ControlScript:
             self._servo_target = None
             f = self._slider()
             if cmd == CMD_MOVEL:
-                self.arm.move_linear(pose, v * f, a * f * f, None)
+                self.arm.move_linear(pose, *self._limited(v * f, a * f * f), None)
             else:  # the registers hold joint angles q, joint speed and acceleration
                 self.arm.move_linear(*self._joint_move(pose, v * f, a * f * f))
             if is_async == 1:
@@ -328,6 +335,20 @@ class ControlScript:
         w = None if turn < 1e-9 else min(max(speed_rad_s * scale_rad, 1e-4), lim.get("max_angular_speed_rad_s", np.inf))
         return target, v, a, w
 
+    def _limited(self, speed_m_s: float, accel_m_s2: float) -> tuple[float, float]:
+        """A move's speed and acceleration within the safety limits (the twin's envelope, ARM_LIMITS),
+        as the controller's trajectory limiter runs a move asked above them: held at the limit
+        and reported as speed scaling, the program going on (UR user manual: "the speed of the
+        robot arm is automatically adjusted in order to not exceed" the limits; e-Series: "the
+        robot controller prevents violations by making a robot stop or by reducing the speed").
+        A stop (category 0) comes only where the arm itself exceeds a limit, which a planned move
+        here never does."""
+        lim = self.arm.limits or {}
+        v = min(speed_m_s, lim.get("max_speed_m_s", np.inf))
+        a = min(accel_m_s2, lim.get("max_accel_m_s2", np.inf))
+        self.speed_scaling = v / speed_m_s if speed_m_s > 0 else 1.0
+        return v, a
+
     def _slider(self) -> float:
         # Time scaling by the speed slider: speeds scale by f, accelerations by f^2; kept above
         # what the twin accepts (a slider at 0 holds the arm on the real controller).
@@ -346,6 +367,14 @@ class ControlScript:
         v, w = twist[:3] * f, twist[3:] * f
         accel = accel * f * f
         speed, ang = float(np.linalg.norm(v)), float(np.linalg.norm(w))
+        # The trajectory limiter: a twist above the safety limits runs at them, in its direction.
+        lim = self.arm.limits or {}
+        v_max, w_max = lim.get("max_speed_m_s", np.inf), lim.get("max_angular_speed_rad_s", np.inf)
+        s = min(1.0, v_max / speed if speed > 0 else 1.0, w_max / ang if ang > 0 else 1.0)
+        if s < 1.0:
+            v, w, speed, ang = v * s, w * s, min(speed * s, v_max), min(ang * s, w_max)
+        accel = min(accel, lim.get("max_accel_m_s2", np.inf))
+        self.speed_scaling = s
         if speed == 0.0 and ang == 0.0:
             self._decelerate(here, accel)
             return

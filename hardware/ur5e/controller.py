@@ -1,7 +1,7 @@
 """The emulated UR controller process: dashboard, RTDE and script ports, the control script.
 
-Runs in its own process (`python -m hardware.ur5e.controller FD HOST T0`), started by
-`UR5eEmulator`, for the reason a real controller is another machine: the ur_rtde client's Python
+Runs in its own process (`python -m hardware.ur5e.controller FD OPTIONS_JSON`: host, t0_s,
+limits), started by `UR5eEmulator` through `hardware.emulation.DeviceProcess`, for the reason a real controller is another machine: the ur_rtde client's Python
 constructors hold the GIL while they wait for the controller's answers, so a controller served
 by threads of the client's own process could never answer them. The simulated arm stays in the
 parent (with the world); this process sees it as a `BridgedArm`: the parent pushes the TCP pose
@@ -9,15 +9,17 @@ every 2 ms cycle over a pipe (FD, a multiprocessing Connection) and applies the 
 this process sends back. Fault injection and test read-outs go over the same pipe.
 
 One controller thread runs the 500 Hz cycle: it advances the control script (the register
-protocol of the uploaded `rtde_control` script) and sends every started RTDE connection its
+protocol of the uploaded `rtde_control` script) and queues for every started RTDE connection its
 output recipe at the frequency it asked for. Cycle k is stamped T0 + k * 2 ms (controller time:
-the world's time when the emulator started). Socket readers run one thread per connection.
+the world's time when the emulator started). Socket readers run one thread per connection; each
+RTDE connection also has a writer thread, so neither the cycle nor another client ever waits on a
+client that stopped reading (see _RtdeSession). The dashboard answers from its reader thread,
+which holds no lock while it sends.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import socket
@@ -58,6 +60,10 @@ PERIOD_S = 0.002  # the controller cycle (500 Hz)
 MAX_PROGRAM_BYTES = 1 << 20
 ROBOT_MODEL = "UR5"  # what the dashboard's "get robot model" answers for a UR5e
 PROGRAMS_DIR = "/programs"  # where PolyScope keeps .urp programs ("load" paths are relative to it)
+# What one RTDE client's outbox holds (data packages and replies) before the controller cycle
+# drops that client's packages: 0.1 s of 500 Hz output, on top of what the sockets buffer.
+OUTBOX_PACKAGES = 50
+FLUSH_S = 1.0  # how long a closing RTDE connection's last messages (an "M" before a close) may take
 
 
 class BridgedArm:
@@ -79,9 +85,15 @@ class BridgedArm:
         self.error: str | None = None
 
     def _send(self, msg: tuple) -> None:
+        """msg to the parent, numbered (the parent reports the highest number it applied)."""
         with self._send_lock:
             self.sent_id += 1
             self.conn.send((msg[0], self.sent_id, *msg[1:]))
+
+    def post(self, msg: tuple) -> None:
+        """msg to the parent as it is (ready, error, log: kept by the parent's DeviceProcess)."""
+        with self._send_lock:
+            self.conn.send(msg)
 
     def move_linear(self, pose6, speed_m_s, accel_m_s2, angular_speed_rad_s, stop_at_workspace=False):
         """stop_at_workspace: end the move where it would leave the twin's workspace (speedl)
@@ -118,18 +130,72 @@ class BridgedArm:
 
 
 class _RtdeSession:
-    """One RTDE client connection: its recipes and whether it has started."""
+    """One RTDE client connection: its recipes, whether it has started, and its outbox.
+
+    Nothing that serves other clients waits on this client's socket: what goes to it is queued
+    (at most OUTBOX_PACKAGES) and one writer thread per connection sends it. The controller
+    cycle offers its data packages and never waits: where this client's outbox is full (a
+    client that stopped reading) the package is dropped and counted, the client sees a gap in
+    the timestamps, and every other client and the control script go on. The connection's
+    reader queues its replies, waiting only for room in this outbox (the client's own flow
+    control: a client that sends requests and never reads the answers stops being read).
+    """
 
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
         self.outputs: list[tuple[wire.Recipe, int]] = []  # (recipe, send every n cycles)
         self.inputs: dict[int, wire.Recipe] = {}
         self.started = False
-        self.send_lock = threading.Lock()
+        self.dropped = 0  # data packages this client's full outbox could not take
+        self._out: deque[bytes] = deque()
+        self._cv = threading.Condition()
+        self._closing = False  # no more queueing; the writer sends what is queued and ends
+
+    def offer(self, data: bytes) -> None:
+        """A data package from the controller cycle: queued, or dropped if the outbox is full."""
+        with self._cv:
+            if self._closing:
+                return
+            if len(self._out) >= OUTBOX_PACKAGES:
+                self.dropped += 1
+                return
+            self._out.append(data)
+            self._cv.notify_all()
 
     def send(self, data: bytes) -> None:
-        with self.send_lock:
-            self.sock.sendall(data)
+        """A reply from this connection's reader: queued in order, waiting for room if need be.
+        OSError once the connection is closing (the writer failed or the link was dropped)."""
+        with self._cv:
+            while len(self._out) >= OUTBOX_PACKAGES and not self._closing:
+                self._cv.wait()
+            if self._closing:
+                raise OSError("RTDE connection closing")
+            self._out.append(data)
+            self._cv.notify_all()
+
+    def write_loop(self) -> None:
+        """The writer thread: send the outbox in order until the session closes and is flushed."""
+        while True:
+            with self._cv:
+                while not self._out and not self._closing:
+                    self._cv.wait()
+                if not self._out:
+                    return
+                data = self._out.popleft()
+                self._cv.notify_all()
+            try:
+                self.sock.sendall(data)
+            except OSError:
+                self.close()
+                with self._cv:
+                    self._out.clear()
+                return
+
+    def close(self) -> None:
+        """Queue nothing more; the writer sends what is already queued, then ends."""
+        with self._cv:
+            self._closing = True
+            self._cv.notify_all()
 
 
 class URController:
@@ -348,10 +414,7 @@ class URController:
             targets = [(s, r) for s in self._sessions if s.started
                        for r, every in s.outputs if self._cycle % every == 0]
         for session, recipe in targets:
-            try:
-                session.send(wire.encode_data(recipe, values))
-            except OSError:
-                pass  # the reader thread of that connection cleans up
+            session.offer(wire.encode_data(recipe, values))  # never waits on a client's socket
 
     def _output_values(self, t_s: float, pose: np.ndarray, speed: np.ndarray) -> dict:
         playing = self.runtime_state == RUNTIME_PLAYING
@@ -365,7 +428,10 @@ class URController:
             "safety_status_bits": wire.safety_status_bits(self.safety_mode), "runtime_state": self.runtime_state,
             "robot_status_bits": (ROBOT_STATUS_POWER_ON if powered else 0)
             | (ROBOT_STATUS_PROGRAM_RUNNING if playing else 0),
-            "speed_scaling": self.speed_fraction, "target_speed_fraction": self.speed_fraction,
+            # speed_scaling: the trajectory limiter's (the script's); the slider is target_speed_fraction
+            # (clients multiply the two, as Universal Robots' ROS driver does)
+            "speed_scaling": self.script.speed_scaling if playing and self.script is not None else 1.0,
+            "target_speed_fraction": self.speed_fraction,
             "joint_mode": (255,) * 6,
             "payload": tool.payload_kg, "payload_cog": tuple(tool.payload_cog_m),
             "actual_digital_output_bits": self.digital_outputs,
@@ -382,6 +448,8 @@ class URController:
     # ---- RTDE (30004) ---------------------------------------------------------------------------
     def _serve_rtde(self, conn: socket.socket) -> None:
         session = _RtdeSession(conn)
+        writer = threading.Thread(target=session.write_loop, name="ur5e-emu-rtde-out", daemon=True)
+        writer.start()
         with self._lock:
             self._sessions.append(session)
         reader = wire.PacketReader()
@@ -410,8 +478,17 @@ class URController:
                     if reply:
                         session.send(reply)
         finally:
+            session.close()  # the writer sends what is queued (an "M" before a close), then ends
+            writer.join(FLUSH_S)
+            if writer.is_alive():  # a client that does not read: wake the writer from its send
+                with contextlib.suppress(OSError):
+                    conn.shutdown(socket.SHUT_RDWR)
+                writer.join(FLUSH_S)
             if bad > 1:
                 log.info("ur5e emulator: %d malformed RTDE packages on one connection", bad)
+            if session.dropped:
+                log.warning("ur5e emulator: %d RTDE data packages dropped for a client that did not read them",
+                            session.dropped)
 
     def _rtde_request(self, session: _RtdeSession, kind: int, payload: bytes) -> bytes | None:
         if kind == wire.RTDE_REQUEST_PROTOCOL_VERSION:
@@ -698,7 +775,7 @@ class ScriptReader:
         return []
 
 
-# ---- process entry: python -m hardware.ur5e.controller FD HOST T0 ------------------------------
+# ---- process entry: python -m hardware.ur5e.controller FD OPTIONS_JSON ------------------------
 def _info(ctl: URController) -> dict:
     script = ctl.script
     return {"scripts_received": len(ctl.scripts_received), "dashboard_requests": list(ctl.dashboard_requests),
@@ -711,41 +788,55 @@ def _info(ctl: URController) -> dict:
             "connections": len(ctl._conns), "output_paused": ctl.output_paused}
 
 
-def main(argv: list[str]) -> int:
-    from multiprocessing.connection import Connection
+class ControllerProcess:
+    """The controller process's side of the pipe (`hardware.emulation.serve_device` runs it):
+    the parent's twin state in, fault injection and settings applied, read-outs out. The parent
+    sends through a DeviceProcess (its own sender thread), so it always comes back to reading
+    what this side sends; this side's sends (read-outs here, moves from the controller thread)
+    share BridgedArm's lock."""
 
-    logging.basicConfig(level=logging.WARNING, format="ur5e-controller %(levelname)s %(message)s")
-    conn = Connection(int(argv[0]))
-    arm = BridgedArm(conn, json.loads(argv[3]) if len(argv) > 3 else None)
-    ctl = URController(arm, host=argv[1], t0_s=float(argv[2]))
-    try:
-        where = ctl.start()
-    except OSError as exc:
-        conn.send(("error", 0, str(exc)))
-        return 1
-    arm._send(("ready", where))
-    last_info = None
-    try:
-        while True:
-            msg = conn.recv()
-            kind = msg[0]
-            if kind == "state":
-                arm.on_state(*msg[1:])
-            elif kind == "fault":
-                getattr(ctl, msg[1])(*msg[2:])
-            elif kind == "set":
-                setattr(ctl, msg[1], msg[2])
-            elif kind == "quit":
-                break
-            info = _info(ctl)
-            if info != last_info:
-                arm._send(("info", info))
-                last_info = info
-    except (EOFError, OSError):
-        pass  # the parent went away
-    finally:
-        ctl.stop()
-    return 0
+    def __init__(self, conn, *, host: str, t0_s: float, limits: dict | None = None) -> None:
+        self.conn = conn
+        self.arm = BridgedArm(conn, limits)
+        self.ctl = URController(self.arm, host=host, t0_s=t0_s)
+
+    def run(self) -> None:
+        logging.basicConfig(level=logging.WARNING, format="ur5e-controller %(levelname)s %(message)s")
+        while (msg := self.conn.recv())[0] != "state":  # the twin's pose before any client sees one
+            if msg[0] == "quit":
+                return
+        self.arm.on_state(*msg[1:])
+        try:
+            where = self.ctl.start()
+        except OSError as exc:  # its address is taken: the parent raises this
+            self.arm.post(("error", str(exc)))
+            return
+        self.arm.post(("ready", where))
+        last_info = None
+        try:
+            while True:
+                msg = self.conn.recv()
+                kind = msg[0]
+                if kind == "state":
+                    self.arm.on_state(*msg[1:])
+                elif kind == "fault":
+                    getattr(self.ctl, msg[1])(*msg[2:])
+                elif kind == "set":
+                    setattr(self.ctl, msg[1], msg[2])
+                elif kind == "quit":
+                    break
+                info = _info(self.ctl)
+                if info != last_info:
+                    self.arm._send(("info", info, None))  # (no acknowledgement: see wait_info)
+                    last_info = info
+        finally:
+            self.ctl.stop()
+
+
+def main(argv: list[str]) -> int:
+    from hardware.emulation import serve_device
+
+    return serve_device(ControllerProcess, argv, (EOFError, OSError))  # OSError: the parent went away
 
 
 if __name__ == "__main__":

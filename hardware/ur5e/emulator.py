@@ -9,26 +9,20 @@ instances are told apart by host: give each its own loopback address (127.0.0.2,
 all of 127/8 is loopback on Linux). The controller itself runs in a child process
 (`hardware.ur5e.controller`, which says why); this object starts it and runs the bridge thread
 that, every 2 ms, hands it the twin's TCP pose (taken under `rt.lock`) and applies the moves and
-stops the control script commands to `rt.rig.arm`.
+stops the control script commands to `rt.rig.arm`. The pipe to that process is a
+`hardware.emulation.DeviceProcess`: what this side sends is queued for its own sender thread, so
+the bridge, which also reads what the controller sends back, never blocks in a send.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import os
-import socket
-import subprocess
-import sys
-import threading
 import time
-from multiprocessing.connection import Connection
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hardware.emulation import Emulator
+from hardware.emulation import DeviceProcess, Emulator
 from hardware.interfaces import DeviceError
 from hardware.ur5e import wire
 from hardware.ur5e.control_script import ARM_LIMITS
@@ -39,7 +33,6 @@ EMULATOR_SETUP = "gripper"
 
 PERIOD_S = 0.002
 START_TIMEOUT_S = 20.0
-_ROOT = Path(__file__).resolve().parents[2]
 
 
 class UR5eEmulator(Emulator):
@@ -66,52 +59,31 @@ class UR5eEmulator(Emulator):
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
         self.host = host
         self.info: dict = {}  # the controller's latest read-out (commands seen, runtime state, ...)
-        self._proc: subprocess.Popen | None = None
-        self._conn: Connection | None = None
-        self._send_lock = threading.Lock()
+        self._controller: DeviceProcess | None = None
         self._applied_id = 0
         self._error: str | None = None
-        self._ready = threading.Event()
-        self._where: str | None = None
-        self._start_error: str | None = None
 
     # ---- life cycle ----------------------------------------------------------------------------
     def _open(self) -> str:
         """Start the controller process and the bridge; returns "host:30004" once it listens."""
-        parent, child = socket.socketpair()
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(_ROOT), os.environ.get("PYTHONPATH", "")]))
         cfg = self.rt.rig.arm.cfg  # its workspace box stands for the controller's safety planes
-        limits = json.dumps({k: getattr(cfg, k) for k in ARM_LIMITS})
-        self._proc = subprocess.Popen(
-            [sys.executable, "-m", "hardware.ur5e.controller", str(child.fileno()), self.host,
-             repr(float(self.rt.world_time_s())), limits], pass_fds=[child.fileno()], cwd=str(_ROOT), env=env)
-        child.close()
-        self._conn = Connection(parent.detach())
+        limits = {k: getattr(cfg, k) for k in ARM_LIMITS}
+        opts = {"host": self.host, "t0_s": float(self.rt.world_time_s()), "limits": limits}
+        self._controller = DeviceProcess("hardware.ur5e.controller", opts, self.DEVICE, log)
         self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
-        if not self._ready.wait(START_TIMEOUT_S) or self._start_error is not None:
-            why = self._start_error or f"no answer within {START_TIMEOUT_S} s"
+        try:
+            self._controller.wait_ready(START_TIMEOUT_S)
+        except DeviceError as exc:
             self._stop.set()
             for t in self._threads:
                 t.join(timeout=2.0)
-            raise DeviceError(f"ur5e emulator: the controller process did not start on {self.host} ({why})")
-        return self._where
+            raise DeviceError(f"{exc} on {self.host}") from exc
+        return self._controller.where
 
     def _close(self) -> None:
-        if self._conn is not None:
-            try:
-                self._send(("quit",))
-            except OSError:
-                pass
-        if self._proc is not None:
-            try:
-                self._proc.wait(timeout=3.0)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-                self._proc.wait()
-            self._proc = None
-        if self._conn is not None:
-            self._conn.close()
-            self._conn = None
+        if self._controller is not None:
+            self._controller.close()
+            self._controller = None
 
     # ---- fault injection -------------------------------------------------------------------------
     def protective_stop(self) -> None:
@@ -160,25 +132,26 @@ class UR5eEmulator(Emulator):
 
     # ---- bridge ----------------------------------------------------------------------------------
     def _send(self, msg: tuple) -> None:
-        if self._conn is None:
+        """Queue msg for the controller process (never waits on the pipe)."""
+        if self._controller is None:
             raise DeviceError("ur5e emulator: not started")
-        with self._send_lock:
-            self._conn.send(msg)
+        self._controller.send(msg)
 
     def _bridge(self) -> None:
+        controller = self._controller
         k, origin = 0, time.monotonic()
         try:
             while not self._stop.is_set():
-                while self._conn.poll():
-                    self._handle(self._conn.recv())
-                with self.rt.lock:
-                    arm = self.rt.rig.arm
-                    pose = np.asarray(arm.tcp_pose6(), float).tolist()
-                    speed = np.asarray(arm.tcp_speed6(), float).tolist()
-                    moving = bool(arm.is_moving())
-                    t_s = float(self.rt.world.t_s)
-                error, self._error = self._error, None
-                self._send(("state", t_s, pose, moving, self._applied_id, error, speed))
+                controller.poll(0.0, self._handle)
+                if controller.error is None:  # (the controller listens once it has the first state)
+                    with self.rt.lock:
+                        arm = self.rt.rig.arm
+                        pose = np.asarray(arm.tcp_pose6(), float).tolist()
+                        speed = np.asarray(arm.tcp_speed6(), float).tolist()
+                        moving = bool(arm.is_moving())
+                        t_s = float(self.rt.world.t_s)
+                    error, self._error = self._error, None
+                    controller.send(("state", t_s, pose, moving, self._applied_id, error, speed))
                 k += 1
                 delay = origin + k * PERIOD_S - time.monotonic()
                 if delay > 0:
@@ -188,10 +161,11 @@ class UR5eEmulator(Emulator):
         except (EOFError, OSError) as exc:
             if not self._stop.is_set():
                 log.warning("ur5e emulator: controller process went away (%s)", exc)
-                self._start_error = self._start_error or str(exc)
-                self._ready.set()
+                controller.went_away(exc)
 
     def _handle(self, msg: tuple) -> None:
+        """A message from the controller process (DeviceProcess.poll keeps "ready", "error" and
+        "log" itself): a move or stop to apply, or its read-out."""
         kind, msg_id = msg[0], msg[1]
         if kind == "move":
             pose, v, a, w, stop_at_workspace = msg[2:]
@@ -210,12 +184,6 @@ class UR5eEmulator(Emulator):
                 self.rt.rig.arm.stop()
         elif kind == "info":
             self.info = msg[2]
-        elif kind == "ready":
-            self._where = msg[2]
-            self._ready.set()
-        elif kind == "error":
-            self._start_error = msg[2]
-            self._ready.set()
         self._applied_id = max(self._applied_id, msg_id)
 
 

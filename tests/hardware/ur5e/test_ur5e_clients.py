@@ -5,6 +5,7 @@ Each test serves on its own loopback address (the clients' ports are fixed). Wai
 polls; no assertion is about how fast anything ran.
 """
 
+import select
 import socket
 import struct
 import threading
@@ -130,7 +131,8 @@ def test_io_interface_outputs_and_speed_slider_take_effect(controller):
     assert wait_for(lambda: recv.getActualDigitalOutputBits() == want)
     assert recv.getDigitalOutState(3) and not recv.getDigitalOutState(4)
     assert recv.getStandardAnalogOutput0() == pytest.approx(0.4)
-    assert recv.getSpeedScaling() == pytest.approx(0.5) and recv.getTargetSpeedFraction() == pytest.approx(0.5)
+    # the slider is target_speed_fraction; speed_scaling is the trajectory limiter's, apart from it
+    assert recv.getTargetSpeedFraction() == pytest.approx(0.5) and recv.getSpeedScaling() == 1.0
     assert io.setStandardDigitalOut(3, False)
     assert wait_for(lambda: recv.getActualDigitalOutputBits() == want & ~(1 << 3))
     # The slider scales the speed of the moves commanded after it.
@@ -242,6 +244,51 @@ def test_movej_moves_the_tool_to_where_the_joints_put_it(controller):
     assert wait_for(lambda: ctrl.getAsyncOperationProgress() < 0, 10.0)
     np.testing.assert_allclose(_ur5e_flange(q_here)[:3, 3], twin_pose(rt)[:3], atol=1e-5)
     assert emu.info["unsupported"] == []
+
+
+def test_movel_above_the_safety_speed_limit_runs_at_the_limit_and_the_program_goes_on(controller):
+    """ur_rtde accepts moveL speeds up to 3 m/s (a UR5e runs about 1 m/s at the tool); the rig's
+    envelope (sim.rig.arm.max_speed_m_s) stands for the safety configuration's tool speed limit.
+    A real controller keeps a program's motion within its safety limits by slowing it (speed
+    scaling of the trajectory limiter), not by stopping the program: the move runs at the limit,
+    RTDE speed_scaling says by how much it was scaled, and the program goes on."""
+    rt, emu = controller("127.0.0.54")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.54", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.54")
+    controller.clients += [ctrl, recv]
+    with rt.lock:
+        v_max, a_max = rt.rig.arm.cfg.max_speed_m_s, rt.rig.arm.cfg.max_accel_m_s2
+    start = twin_pose(rt)
+    target = start + [-0.1, 0, 0, 0, 0, 0]
+    # 1 m/s asynchronously: sample what the controller reports while it runs.
+    assert ctrl.moveL(target.tolist(), 1.0, 1.2, True)
+    scalings, speeds = [], []
+    while ctrl.getAsyncOperationProgress() >= 0 or not scalings:
+        scalings.append(recv.getSpeedScaling())
+        speeds.append(np.linalg.norm(recv.getActualTCPSpeed()[:3]))
+        assert len(scalings) < 20000, "the move never finished"
+        time.sleep(0.002)
+    np.testing.assert_allclose(twin_pose(rt), target, atol=1e-5)
+    assert max(speeds) == pytest.approx(v_max, abs=1e-6)  # at the limit, never above it
+    assert min(scalings) == pytest.approx(v_max / 1.0)
+    assert ctrl.isProgramRunning() and recv.getSafetyMode() == wire.SAFETY_MODE_NORMAL
+    assert recv.getRuntimeState() == wire.RUNTIME_PLAYING
+    assert wait_for(lambda: recv.getSpeedScaling() == 1.0)  # the limited move is over
+    # Synchronous, speed and acceleration above the envelope: done (True) at the target.
+    assert ctrl.moveL(start.tolist(), 2.0, 10 * a_max)
+    np.testing.assert_allclose(twin_pose(rt), start, atol=1e-5)
+    # A twist above the limit runs at it, in its direction; speedStop ends it.
+    assert ctrl.speedL([-2 * v_max, 0.0, 0.0, 0.0, 0.0, 0.0], 10 * a_max, 0.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed()[0] < -v_max + 1e-6, 5.0)
+    assert recv.getSpeedScaling() == pytest.approx(0.5) and ctrl.isProgramRunning()
+    ctrl.speedStop(2.0)
+    assert wait_for(lambda: recv.getActualTCPSpeed() == [0.0] * 6, 5.0)
+    # A move within the envelope afterwards works as before.
+    here = twin_pose(rt)
+    assert ctrl.moveL((here + [0, 0, 0.01, 0, 0, 0]).tolist(), 0.05, 0.5)
+    np.testing.assert_allclose(twin_pose(rt), here + [0, 0, 0.01, 0, 0, 0], atol=1e-5)
+    assert ctrl.isProgramRunning() and emu.info["unsupported"] == []
+    assert emu.info["runtime_state"] == wire.RUNTIME_PLAYING and emu.info["scripts_received"] == 1
 
 
 def test_pose_within_safety_limits_is_judged_against_the_workspace(controller):
@@ -414,7 +461,7 @@ def test_a_16_mb_upload_without_def_is_dropped_in_bounded_memory(controller):
     watcher.start()
     try:
         assert wait_for(lambda: len(stamps) > 20)
-        peak_before_kb = _peak_rss_kb(emu._proc.pid)
+        peak_before_kb = _peak_rss_kb(emu._controller.proc.pid)
         s = socket.create_connection(("127.0.0.46", wire.PORT_REALTIME), timeout=60.0)
         t0 = time.monotonic()
         s.sendall(b"x" * (16 << 20))  # one 16 MB "line": no def, no newline
@@ -429,10 +476,77 @@ def test_a_16_mb_upload_without_def_is_dropped_in_bounded_memory(controller):
     # Dropped as it came (the process grew by far less than the upload; the old reader kept and
     # re-decoded all of it: +28 MB), and the 500 Hz stream went on meanwhile (controller time
     # between the samples seen; it stalled for seconds before).
-    assert _peak_rss_kb(emu._proc.pid) - peak_before_kb < 8 * 1024
+    assert _peak_rss_kb(emu._controller.proc.pid) - peak_before_kb < 8 * 1024
     during = [ts for t, ts in stamps if t0 - 0.05 <= t <= t1 + 0.05]
     assert len(during) >= 2 and max(np.diff(during)) < 1.0
     # A real control script still starts afterwards on the same port.
     ctrl = rtde_control.RTDEControlInterface("127.0.0.46")
     controller.clients.append(ctrl)
     assert ctrl.isProgramRunning()
+
+
+def test_a_client_that_stops_reading_stalls_neither_the_controller_nor_other_clients(controller):
+    """One RTDE client stops reading its 500 Hz output and floods requests whose answers it does
+    not read: its own socket fills, and on a controller whose cycle sent to every client itself
+    the cycle blocked there, for every client and the control script. Judged by the device:
+    the other client's controller timestamps go on, a move completes, and once the slow client
+    reads again it finds every request answered, in order, and a gap in its data packages."""
+    rt, emu = controller("127.0.0.55")
+    recv = rtde_receive.RTDEReceiveInterface("127.0.0.55", 500)
+    ctrl = rtde_control.RTDEControlInterface("127.0.0.55")
+    controller.clients += [ctrl, recv]
+    slow = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # small buffers: full sooner
+    slow.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+    slow.settimeout(5.0)
+    slow.connect(("127.0.0.55", wire.PORT_RTDE))
+    assert _rtde_exchange(slow, wire.encode_protocol_version_request(2)) == (ord("V"), b"\x01")
+    names = ["timestamp", "actual_TCP_pose", "target_TCP_pose", "actual_TCP_speed"]
+    kind, payload = _rtde_exchange(slow, wire.encode_setup_outputs_request(500.0, names))
+    assert kind == ord("O") and payload[0] == 1
+    assert _rtde_exchange(slow, wire.pack(wire.RTDE_CONTROL_PACKAGE_START)) == (ord("S"), b"\x01")
+    # It stops reading and sends version requests until the controller stops taking them for
+    # good: its socket stays unwritable while the other client sees 0.5 s of controller time go
+    # by (a controller that is only slow to read takes more, and the flood goes on).
+    slow.setblocking(False)
+    request = wire.pack(wire.RTDE_GET_URCONTROL_VERSION)
+    chunk, sent = request * 4096, 0
+    deadline = time.monotonic() + 60.0
+    while True:
+        try:
+            sent += slow.send(chunk[sent % len(chunk):])
+            assert sent < 1 << 26, "the controller read 64 MB of requests without answering"
+            continue
+        except BlockingIOError:
+            pass
+        t = recv.getTimestamp()
+        while not select.select([], [slow], [], 0)[1] and recv.getTimestamp() < t + 0.5:
+            assert time.monotonic() < deadline, "the other client's data stopped"
+            time.sleep(0.005)
+        if recv.getTimestamp() >= t + 0.5:
+            break
+    requests = sent // len(request)  # (a request the last send cut is never answered)
+    # The controller goes on for the other client and the control script.
+    t = recv.getTimestamp()
+    assert wait_for(lambda: recv.getTimestamp() > t + 1.0, 30.0), "the other client's data stopped"
+    here = twin_pose(rt)
+    assert ctrl.moveL((here + [0, 0, 0.01, 0, 0, 0]).tolist(), 0.05, 0.5)
+    np.testing.assert_allclose(twin_pose(rt), here + [0, 0, 0.01, 0, 0, 0], atol=1e-5)
+    # The slow client reads again: every request answered, in order, and data packages with a gap.
+    slow.setblocking(True)
+    reader, answers, stamps = wire.PacketReader(), 0, []
+    deadline = time.monotonic() + 30.0
+    while answers < requests and time.monotonic() < deadline:
+        for kind, payload in reader.feed(slow.recv(65536)):
+            if kind == wire.RTDE_GET_URCONTROL_VERSION:
+                assert wire.decode_controller_version(payload)[0] == 5
+                answers += 1
+            elif kind == wire.RTDE_DATA_PACKAGE:
+                stamps.append(struct.unpack_from(">d", payload, 1)[0])
+            else:
+                raise AssertionError(f"unexpected package {chr(kind)!r}")
+    assert answers == requests
+    steps = np.diff(stamps)
+    assert np.all(steps > 0) and steps.max() > 0.4  # the packages it could not take were dropped
+    slow.close()
+    assert recv.isConnected() and ctrl.isProgramRunning()

@@ -111,6 +111,24 @@ def test_connect_streams_poses_and_moves_the_world(bench):
     assert emu.info["unsupported"] == []
 
 
+def test_the_driver_refuses_a_speed_above_its_envelope_before_sending(bench):
+    """A controller runs a moveL above its safety limit at the limit (speed scaling); this
+    driver's own envelope (hardware.ur5e.max_speed_m_s) refuses such a move before anything is
+    sent, naming the setting."""
+    rt, emu, arm = bench("127.0.0.56")
+    before = emu.wait_info(lambda i: CMD_GET_TCP_OFFSET in i["commands"])["commands"]
+    start = arm.tcp_pose6()
+    too_fast = arm.cfg.max_speed_m_s * 2
+    with pytest.raises(DeviceError, match=rf"speed {too_fast!r} m/s is outside .*hardware\.ur5e\.max_speed_m_s"):
+        arm.move_linear(start + [0.0, 0.0, 0.003, 0.0, 0.0, 0.0], too_fast, 0.1)
+    # Nothing reached the controller; a move within the envelope then does.
+    arm.move_linear(start + [0.0, 0.0, 0.003, 0.0, 0.0, 0.0], 0.01, 0.1)
+    assert wait_for(lambda: not arm.is_moving())
+    commands = emu.wait_info(lambda i: len(i["commands"]) > len(before))["commands"]
+    assert commands[len(before)] == CMD_MOVEL and commands.count(CMD_MOVEL) == 1
+    np.testing.assert_allclose(twin_pose(rt)[:3], start[:3] + [0.0, 0.0, 0.003], atol=1e-6)
+
+
 def test_stop_mid_move_and_from_another_thread(bench):
     import threading
 
