@@ -424,17 +424,28 @@ def test_a_stop_says_what_it_left_of_the_trial_in_progress(tmp_path, monkeypatch
         assert (tmp_path / "d" / "pos000_press0.mcap.partial").is_file()
 
 
-@pytest.mark.parametrize("handler", ["_on_sigterm", "_on_sigint"])
-def test_a_signal_while_the_devices_connect_stops_the_run_at_once(monkeypatch, handler):
-    # No control tick comes while the devices connect and no file is open: the first signal raises
-    # at once instead of waiting STOP_GRACE_S (or, for Ctrl-C, a second press). Once connected, the
-    # first signal only asks the loop to stop at its next tick.
+@pytest.fixture
+def signal_state(monkeypatch):
+    """The run's stop requests and signal handling state, fresh for this test (module globals that
+    the signal handlers share with the runner); grace timers a test started are cancelled."""
     from protocols import app, runner
 
     monkeypatch.setattr(runner, "_termination", [])
     monkeypatch.setattr(runner, "_raised", [])
     monkeypatch.setattr(runner, "_closing", [])
     monkeypatch.setattr(app, "_grace", [])
+    yield
+    for timer in app._grace:
+        timer.cancel()
+
+
+@pytest.mark.parametrize("handler", ["_on_sigterm", "_on_sigint"])
+def test_a_signal_while_the_devices_connect_stops_the_run_at_once(monkeypatch, signal_state, handler):
+    # No control tick comes while the devices connect and no file is open: the first signal raises
+    # at once instead of waiting STOP_GRACE_S (or, for Ctrl-C, a second press). Once connected, the
+    # first signal only asks the loop to stop at its next tick.
+    from protocols import app, runner
+
     monkeypatch.setattr(app, "_connecting", [True])
     with pytest.raises(runner.Terminated):
         getattr(app, handler)(None, None)
@@ -443,22 +454,17 @@ def test_a_signal_while_the_devices_connect_stops_the_run_at_once(monkeypatch, h
     app._connecting.clear()
     getattr(app, handler)(None, None)  # connected: only a request
     assert runner.termination_pending()
-    for timer in app._grace:
-        timer.cancel()
 
 
-def test_sigterm_while_a_failed_run_closes_its_devices_does_not_cut_that_short(tmp_path, monkeypatch, capsys):
+def test_sigterm_while_a_failed_run_closes_its_devices_does_not_cut_that_short(tmp_path, monkeypatch, capsys,
+                                                                             signal_state):
     # A device fault ended the run; SIGTERM (twice: the second is "at once") lands while the rig
     # disconnects. The closing goes on and the run ends as the failure it was, exit 1, not with a
     # Terminated traceback out of the cleanup.
-    from protocols import app, runner
+    from protocols import app
     from protocols.app import run_app
     from tests.protocols.fake_rig import platform_rig
 
-    monkeypatch.setattr(runner, "_termination", [])
-    monkeypatch.setattr(runner, "_raised", [])
-    monkeypatch.setattr(runner, "_closing", [])
-    monkeypatch.setattr(app, "_grace", [])
     rig = platform_rig()
     disconnect = rig.disconnect
     closed = []
@@ -478,13 +484,12 @@ def test_sigterm_while_a_failed_run_closes_its_devices_does_not_cut_that_short(t
 
     with pytest.raises(SystemExit) as stop:
         run_app(cfg, "platform", body)
-    for timer in app._grace:
-        timer.cancel()
     assert stop.value.code == 1 and closed == [True]
     assert "the platform faulted" in capsys.readouterr().err
 
 
-def test_sigterm_inside_a_library_call_while_connecting_ends_the_run_as_terminated(tmp_path, monkeypatch, capsys):
+def test_sigterm_inside_a_library_call_while_connecting_ends_the_run_as_terminated(tmp_path, monkeypatch, capsys,
+                                                                                   signal_state):
     # The signal's exception raised inside an extension module's import comes out as ImportError
     # (measured: 4 of 6 runs signalled at once after the skin board connected exited 1 with "the
     # ur_rtde package is not installed"). Pending a termination, any failure to connect is it.
@@ -492,10 +497,6 @@ def test_sigterm_inside_a_library_call_while_connecting_ends_the_run_as_terminat
     from protocols.app import run_app
     from tests.protocols.fake_rig import platform_rig
 
-    monkeypatch.setattr(runner, "_termination", [])
-    monkeypatch.setattr(runner, "_raised", [])
-    monkeypatch.setattr(runner, "_closing", [])
-    monkeypatch.setattr(app, "_grace", [])
     rig = platform_rig()
 
     def connect():
