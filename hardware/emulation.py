@@ -191,6 +191,25 @@ class Emulator:
     def _device(self) -> DeviceProcess | None:
         return None
 
+    def _serve_device(self, device: DeviceProcess, timeout_s: float = 20.0) -> str:
+        """Once `_open` has started the device's process (kept where `_device()` and the bridge
+        find it): start the bridge (`self._bridge`, which carries the process's "ready"), wait
+        until the process serves, and hand it the drop/corrupt faults scheduled before start.
+        Returns where it serves. If it does not start, the bridge is stopped and DeviceError raised."""
+        self._spawn(self._bridge, "bridge").start()
+        try:
+            device.wait_ready(timeout_s)
+        except BaseException:  # DeviceError, or a stop while waiting: the bridge goes too
+            self._stop.set()
+            for t in self._threads:
+                t.join(timeout=2.0)
+            raise
+        with self._fault_lock:
+            planned, self._planned = list(self._planned), deque()
+        if planned:
+            self._plan(planned)
+        return device.where
+
     def _plan(self, planned: list) -> None:
         device = self._device()
         device.send(("plan", planned))

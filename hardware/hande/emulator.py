@@ -35,7 +35,6 @@ import logging
 import socket
 import threading
 import time
-from collections import deque
 from types import MappingProxyType
 
 from hardware.emulation import DeviceProcess, Emulator
@@ -317,20 +316,8 @@ class HandEEmulator(Emulator):
             self._jaws = (float(cfg.initial_opening_mm), False)
         opts = {**self._options, "port": self.port, "gripper": gripper, "opening_mm": self._jaws[0]}
         self._urcap = DeviceProcess("hardware.hande.urcap", opts, self.DEVICE, log)
-        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
-        try:
-            self._urcap.wait_ready(START_TIMEOUT_S)
-        except DeviceError:
-            self._stop.set()
-            for t in self._threads:
-                t.join(timeout=2.0)
-            raise
-        where = self._urcap.where
+        where = self._serve_device(self._urcap, START_TIMEOUT_S)
         self.port = int(where.rpartition(":")[2])
-        with self._fault_lock:  # drop/corrupt scheduled before start go to the gripper
-            planned, self._planned = list(self._planned), deque()
-        if planned:
-            self._plan(planned)
         return where
 
     def _close(self) -> None:

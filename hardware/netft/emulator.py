@@ -32,12 +32,10 @@ from __future__ import annotations
 import http.server
 import logging
 import time
-from collections import deque
 
 import numpy as np
 
 from hardware.emulation import DeviceProcess, Emulator
-from hardware.interfaces import DeviceError
 from hardware.netft import web, wire
 
 log = logging.getLogger(__name__)
@@ -105,19 +103,7 @@ class NetFTEmulator(Emulator):
         opts = {"host": self.host, "port": self.port, "twin_rate_hz": twin_rate_hz,
                 "ft_sample_rate_hz": self.ft_sample_rate_hz, "t0_s": t0_s, "settings": self._settings()}
         self._box = DeviceProcess("hardware.netft.box", opts, self.DEVICE, log)
-        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
-        try:
-            self._box.wait_ready(START_TIMEOUT_S)
-        except DeviceError:
-            self._stop.set()
-            for t in self._threads:
-                t.join(timeout=2.0)
-            raise
-        self.port = self._box.where
-        with self._fault_lock:  # drop/corrupt scheduled before start go to the box
-            planned, self._planned = list(self._planned), deque()
-        if planned:
-            self._plan(planned)
+        self.port = self._serve_device(self._box, START_TIMEOUT_S)
         return f"{self.host}:{self.port}"
 
     def _wake(self) -> None:

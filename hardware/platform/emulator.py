@@ -718,19 +718,7 @@ class GrblEmulator(Emulator):
                  for k in ("workspace_min_mm", "workspace_max_mm", "max_speed_mm_s", "max_accel_mm_s2")}
         opts = {**self._options, "stage": stage, "position": self._twin_pos().tolist()}
         self._machine = DeviceProcess("hardware.platform.machine", opts, self.DEVICE, log)
-        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
-        try:
-            self._machine.wait_ready(20.0)
-        except DeviceError:
-            self._stop.set()
-            for t in self._threads:
-                t.join(timeout=2.0)
-            raise
-        self.path = self._machine.where
-        with self._fault_lock:  # drop/corrupt scheduled before start go to the controller
-            planned, self._planned = list(self._planned), deque()
-        if planned:
-            self._plan(planned)
+        self.path = self._serve_device(self._machine)
         return self.path
 
     def _close(self) -> None:

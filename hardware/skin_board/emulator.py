@@ -101,19 +101,7 @@ class SkinBoardEmulator(Emulator):
                 "p_drop_frame": self.p_drop_frame, "garbage_max": self.garbage_max,
                 "stalls": self.stalls, "t0_us": t0_us}
         self._board = DeviceProcess("hardware.skin_board.board", opts, self.DEVICE, log)
-        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
-        try:
-            self._board.wait_ready(START_TIMEOUT_S)
-        except DeviceError:
-            self._stop.set()
-            for t in self._threads:
-                t.join(timeout=2.0)
-            raise
-        self.path = self._board.where
-        with self._fault_lock:  # drop/corrupt scheduled before start go to the board
-            planned, self._planned = list(self._planned), deque()
-        if planned:
-            self._plan(planned)
+        self.path = self._serve_device(self._board, START_TIMEOUT_S)
         return self.path
 
     def _close(self) -> None:

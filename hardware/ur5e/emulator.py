@@ -70,15 +70,10 @@ class UR5eEmulator(Emulator):
         limits = {k: getattr(cfg, k) for k in ARM_LIMITS}
         opts = {"host": self.host, "t0_s": float(self.rt.world_time_s()), "limits": limits}
         self._controller = DeviceProcess("hardware.ur5e.controller", opts, self.DEVICE, log)
-        self._spawn(self._bridge, "bridge").start()  # started now: it carries the "ready" message
         try:
-            self._controller.wait_ready(START_TIMEOUT_S)
+            return self._serve_device(self._controller, START_TIMEOUT_S)
         except DeviceError as exc:
-            self._stop.set()
-            for t in self._threads:
-                t.join(timeout=2.0)
             raise DeviceError(f"{exc} on {self.host}") from exc
-        return self._controller.where
 
     def _close(self) -> None:
         if self._controller is not None:
