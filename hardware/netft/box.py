@@ -74,6 +74,9 @@ class Box:
         if kind == "samples":
             self.waiting.extend(msg[1])
             self.decimation, self.records_per_packet, self.status, self.drop_every = msg[2]
+        elif kind == "settings":
+            self.decimation, self.records_per_packet, self.status, self.drop_every = msg[1]
+            self.readout(ack=("settings", True))
         elif kind == "stall":
             self.stall_until = max(self.stall_until, math.inf if msg[1] is None else time.monotonic() + msg[1])
             self.readout(ack=("stall", True))

@@ -132,7 +132,7 @@ class NetFTEmulator(Emulator):
         return self.web.buffer_records
 
     def _handler(self):
-        box = self.web
+        box, emulator = self.web, self
 
         class Handler(http.server.BaseHTTPRequestHandler):
             def do_GET(self) -> None:  # noqa: N802 - http.server's name
@@ -140,6 +140,8 @@ class NetFTEmulator(Emulator):
                 if code != 200:
                     self.send_error(code)
                     return
+                if ".cgi" in self.path:  # a setting: in force in the box before the page answers
+                    emulator._push_settings()
                 body = text.encode()
                 self.send_response(200)
                 self.send_header("Content-Type", content_type)
@@ -175,6 +177,14 @@ class NetFTEmulator(Emulator):
         return self._box
 
     # ---- bridge ----------------------------------------------------------------------------------
+    def _push_settings(self) -> None:
+        """Hand the box the web page's settings now and wait until it has them (a setting page
+        answers once the setting is in force, as the real box's does; before, the box took it with
+        the next samples, and the first RDT records after comrdtrate still came at the old rate)."""
+        if self._box is not None and self._box.ready.is_set():
+            self._box.send(("settings", self._settings()))
+            self._box.wait_ack("settings", lambda v: True)
+
     def _settings(self) -> list:
         with self.web.lock:
             decimation, per_packet = self.web.decimation, self.web.buffer_records
