@@ -1,5 +1,6 @@
 """The 3D check of the section's shear (issue 28, item 6): the hemispherical cap on the stack as a
-solid, pressed to SHEAR_FROM_MM and sheared with the contact sticking to F_x / F_z = 1/3.
+solid, pressed to SHEAR_FROM_MM and to the study's normal loads LOADS_N, and from each sheared
+with the contact sticking to F_x / F_z = 1/3.
 
 What is modelled (lengths mm, stresses MPa, forces N):
 - a half-model, y >= 0, with u_y = 0 on the symmetry plane y = 0 (a press at x = 0 and a shear
@@ -18,11 +19,14 @@ What is modelled (lengths mm, stresses MPa, forces N):
 - the cover as in the section; the cap a rigid sphere (model.CapContact with dim = 3, each
   surface node's weight its area, penalty 50 N/mm^3: ~300 times the cover's own foundation
   stiffness E / t), frictionless while pressing (Newton on a fixed active set, the set updated
-  between solves), sticking while shearing.
+  between solves), sticking while shearing: a node that touches sticks where it touches, and a
+  stuck node whose tie pulls (tension) is released only on the stuck patch's edge.
 
 Each layer's load is read as in the section: the internal forces of the elements above a node
 plane, at its nodes, over the nodes' tensor-Simpson areas. Every layer's sum must carry F_z
-within BALANCE_TOL, or the run fails.
+within BALANCE_TOL, or the run fails. The shear signals are read from those maps as the
+section's are: through the taxel grid and the simulator's FSR law (compare.Reader.taxel_map,
+alignment.fem3d_signals), averaged over the grid's alignments (count_signals_vs_section).
 """
 
 from __future__ import annotations
@@ -472,8 +476,13 @@ def run_shear3d(sim, log=print, x_edges=X_EDGES_MM, y_edges=Y_EDGES_MM, depths=S
             try:
                 it = fe.move_to(np.array([x_next, 0.0, c_press[2]]), sticking=True, step_mm=0.25)
             except failures as err:
-                stopped[name] = (f"shear stopped at cap travel {x:.3f} mm, F_x / F_z {0 if st is None else st['fx_n'] / st['fz_n']:.3f}: "
-                                 f"{err}")
+                # move_to keeps the furthest equilibrium it reached on the way: recorded, so the
+                # branch's data end where its equilibrium ends, not at the last planned advance
+                if fe.centre[0] > x + 1e-9:
+                    x = float(fe.centre[0])
+                    st = record(1.0, np.nan, depth)  # its Newton count went with the failure
+                stopped[name] = (f"shear stopped at cap travel {x:.3f} mm, F_x / F_z {0 if st is None else st['fx_n'] / st['fz_n']:.3f}"
+                                 f" (on the way to {x_next:.3f} mm, the cap's step halved to its floor): {err}")
                 log(f"  3D {stopped[name]}")
                 break
             x = x_next
