@@ -276,9 +276,11 @@ class Stack3D:
             new = ~c.stuck & (gap > 0)
             # a stuck patch peels from its edge: a node whose surface neighbours are all stuck
             # cannot open a gap, and the small tension a tri-quadratic face's mid-side node can
-            # carry under a sticking cap (the 9-node face's nodal-force pattern) is not one;
-            # freed, that node has no support in the cover's one element row and Newton
-            # diverges at any step of the cap (the 0.6 mm branch stopped so, at 0.15 mm of travel)
+            # carry under a sticking cap (the 9-node face's nodal-force pattern) is not one.
+            # Freed (by hand, the 0.6 mm branch on the way from 0.4 to 0.65 mm of travel: the
+            # node at x 0.25, y 0.5, -0.04 MPa), the next Newton step moved its neighbour 0.59 mm
+            # and inverted elements. This rule alone does not carry that branch to 1/3: it still
+            # loses equilibrium near there (shear3d.json's 'stopped')
             release = c.stuck & (normal < 0) & self._on_patch_edge(c.stuck)
             if not new.any() and not release.any():
                 return total
