@@ -2,7 +2,9 @@
 
     python -m layerskin_exp.sim.fem_reference               # the section (~5 min on a free core)
     python -m layerskin_exp.sim.fem_reference --refinement  # + the same on a coarser and a finer mesh
-    python -m layerskin_exp.sim.fem_reference --shear3d     # the 3D half-model's press and shear (shear3d.py)
+    python -m layerskin_exp.sim.fem_reference --shear3d     # the 3D half-model's press and shear (shear3d.py):
+        # to 0.3 and 0.6 mm and to 3 N (--shear3d-load), each sheared to F_x / F_z = 1/3, read
+        # through the taxel grid beside the section (shear3d.json's count_signals)
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
         # homogenised (homogenised.npz, 34 s) beside the cells: homogenisation.json
     python -m layerskin_exp.sim.fem_reference --alignments  # the cap pressed in 0.5, 1, 1.5 mm from
@@ -259,12 +261,12 @@ def homogenisation_check(cells: dict, hom: dict, sim) -> dict:
     return out
 
 
-def write_shear3d(res: dict, out: Path, seconds: float) -> dict:
+def write_shear3d(res: dict, out: Path, seconds: float, sim=None) -> dict:
     """The 3D half-model's data (shear3d.npz) and its comparison (shear3d.json): beside the
     section per quantity (shear3d.plane_strain_shear), and its press beside the solid of
     revolution's at equal depth (axisymmetric.npz: resolved rings, so 3D / axisymmetric is the
     homogenised lattice's and the coarse 3D mesh's error together)."""
-    from layerskin_exp.sim.fem_reference.shear3d import plane_strain_shear
+    from layerskin_exp.sim.fem_reference.shear3d import count_signals_vs_section, plane_strain_shear
 
     np.savez_compressed(out / "shear3d.npz", **res)
     axi = dict(np.load(out / "axisymmetric.npz"))
@@ -287,6 +289,8 @@ def write_shear3d(res: dict, out: Path, seconds: float) -> dict:
              "factor_cpu_seconds": round(float(res["factor_seconds"]), 1),
              "depths": plane_strain_shear(dict(np.load(out / f"{BOUND}.npz")), res),
              "press_vs_axisymmetric": press,
+             "count_signals": None if sim is None else count_signals_vs_section(res, sim, out),
+             "stopped": json.loads(str(res.get("stopped", "{}"))),
              "states": [{k: (None if not np.isfinite(res[k][i]) else round(float(res[k][i]), 5)) for k in keys}
                         for i in range(len(res["phase"]))]}
     (out / "shear3d.json").write_text(json.dumps(check, indent=1))
@@ -305,6 +309,9 @@ def main(argv=None) -> int:
                     help="the hemisphere's press as a solid of revolution (the 3D check), beside the section")
     ap.add_argument("--shear3d", action="store_true",
                     help="the hemisphere's press and shear as a 3D half-model (homogenised lattice), beside the section")
+    ap.add_argument("--shear3d-load", type=float, nargs="*", default=None, metavar="N",
+                    help="with --shear3d: the whole skin's normal loads (N) the 3D model is also pressed to and "
+                         "sheared from (default: shear3d.LOADS_N; none given: the depths only)")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
@@ -352,12 +359,14 @@ def main(argv=None) -> int:
         (out / "homogenisation.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check, indent=1))
     if args.shear3d:
-        from layerskin_exp.sim.fem_reference.shear3d import run_shear3d
+        from layerskin_exp.sim.fem_reference.shear3d import LOADS_N, run_shear3d
 
         t0 = time.time()
         out = args.out or DATA
-        res = run_shear3d(sim, partial=lambda r: write_shear3d(r, out, time.time() - t0))
-        print(json.dumps(write_shear3d(res, out, time.time() - t0)["depths"], indent=1))
+        loads = LOADS_N if args.shear3d_load is None else tuple(args.shear3d_load)
+        res = run_shear3d(sim, loads_n=loads, partial=lambda r: write_shear3d(r, out, time.time() - t0, sim))
+        check = write_shear3d(res, out, time.time() - t0, sim)
+        print(json.dumps({k: check[k] for k in ("depths", "count_signals", "stopped")}, indent=1))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 

@@ -54,6 +54,8 @@ def signals(press: np.ndarray, sheared: np.ndarray, fz: float, fx: float, under_
     return {"interlayer_shift_counts_mm": dc,
             "effective_height_counts": -fz * dc / fx,
             "deep_cop_counts_mm": _cop_x(sheared[1]) - _cop_x(press[1]),
+            # the superficial layer's own count-CoP travel (not in SIGNALS: the 3D check's row)
+            "superficial_cop_counts_mm": _cop_x(sheared[0]) - _cop_x(press[0]),
             "superficial_offset_counts_mm": (_cop_x(sheared[0]) - under_mm) - (_cop_x(press[0]) - start_mm),
             "superficial_asymmetry_counts": _asymmetry(sheared[0], under_mm) - _asymmetry(press[0], start_mm)}
 
@@ -82,6 +84,28 @@ def fem_signals(fem: dict, model, taxel_mm: float) -> dict:
     return out
 
 
+def fem3d_signals(res: dict, model, taxel_mm: float, taxel_y_mm: float) -> dict:
+    """{branch depth: signals} of the 3D half-model (shear3d.npz, the cap pressed at x = y = 0),
+    read with the cap starting taxel_mm from a taxel's centre along x and taxel_y_mm across;
+    branches that did not reach F_t / F_z = SHEAR_RATIO are left out."""
+    from layerskin_exp.sim.fem_reference.shear3d import _at_ratio
+
+    reader = Reader(model, shift_mm=-taxel_mm - _centre(), shift_y_mm=-taxel_y_mm - _centre())
+    keys = ("cap_x_mm", "fx_n", "fz_n", "sheet_x_under_cap_mm", "superficial_kpa", "deep_kpa")
+    out = {}
+    for b in sorted(set(np.round(res["branch_depth_mm"][res["phase"] == 1], 6))):
+        s = _at_ratio(res, "fz_n", "fx_n", b, keys)
+        if s is None:
+            continue
+        st = s["start"]
+        press = reader.counts(reader.maps(res, res["superficial_kpa"][st], res["deep_kpa"][st]))
+        sheared = reader.counts(reader.maps(res, s["superficial_kpa"], s["deep_kpa"]))
+        out[float(b)] = {**signals(press, sheared, float(s["fz_n"]), float(s["fx_n"]),
+                                   float(s["sheet_x_under_cap_mm"]) - reader.shift_mm, -reader.shift_mm),
+                         "fz_n": float(res["fz_n"][st]), "shear_ratio": SHEAR_RATIO}
+    return out
+
+
 def fast_signals(model, fresh, reader: Reader, load_n_per_mm: float, ratio: float, taxel_mm: float) -> dict:
     """The fast model's rod pressed to a line load at taxel_mm from a taxel's centre, sheared
     while sticking to F_t / F_z = ratio (as compare.fast_side); fresh: its unloaded state."""
@@ -107,22 +131,31 @@ def _summary(values: list[float]) -> dict:
     return {"mean": float(v.mean()), "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
 
 
+def section_signals(sim, data: Path = DATA) -> dict:
+    """The section's signals over its alignments: {"cells": {branch: [signals per alignment]},
+    "homogenised": {...}} (cells: each wall alignment x each taxel alignment; homogenised: each
+    taxel alignment, it has no walls); with the model that read them."""
+    model = line_model(line_sim(sim, "bonded"))
+    runs = {"cells": [load_fem("bonded", data)] + [load_fem(f"alignment/x0_{x0:.2f}", data) for x0 in ALIGN_X0_MM[1:]],
+            "homogenised": [load_fem("homogenised", data)]}
+    out: dict = {"model": model}
+    for kind, fems in runs.items():
+        by: dict = {}
+        for fem in fems:
+            for t in ALIGN_TAXEL_MM:
+                for b, sig in fem_signals(fem, model, t).items():
+                    by.setdefault(b, []).append(sig)
+        out[kind] = by
+    return out
+
+
 def alignment_table(sim, data: Path = DATA) -> dict:
     """{branch: {signal: {"fem": summary, "homogenised": summary, "fast": summary}}} (see the
     module docstring); summaries are mean, min, max over the alignments."""
-    model = line_model(line_sim(sim, "bonded"))
+    sec = section_signals(sim, data)
+    model = sec["model"]
     fresh = model.mech_state()  # unloaded, nothing stuck
-    runs = [load_fem("bonded", data)] + [load_fem(f"alignment/x0_{x0:.2f}", data) for x0 in ALIGN_X0_MM[1:]]
-    fem_by: dict = {}
-    for fem in runs:
-        for t in ALIGN_TAXEL_MM:
-            for b, sig in fem_signals(fem, model, t).items():
-                fem_by.setdefault(b, []).append(sig)
-    hom = load_fem("homogenised", data)
-    hom_by: dict = {}
-    for t in ALIGN_TAXEL_MM:
-        for b, sig in fem_signals(hom, model, t).items():
-            hom_by.setdefault(b, []).append(sig)
+    fem_by, hom_by = sec["cells"], sec["homogenised"]
     out = {}
     for b, rows in sorted(fem_by.items()):
         load = float(np.mean([r["fz_n_per_mm"] for r in rows]))

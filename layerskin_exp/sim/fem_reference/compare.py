@@ -61,12 +61,38 @@ def line_model(sim: SimConfig) -> SkinModel:
     return SkinModel(sim, SKIN, "rod", np.random.default_rng(0), contact_radius_mm=rig.INDENTER_RADIUS_MM)
 
 
+def electrode_overlap(x_mm: np.ndarray, w_mm: np.ndarray, lo_mm: np.ndarray, hi_mm: np.ndarray) -> np.ndarray:
+    """(len(lo), n) share of each node's force that falls on each electrode [lo, hi]: node i
+    (x sorted) carries its force evenly over its tributary interval, the intervals tiling the
+    line from its first node (x_mm[0] + cumsum of w_mm)."""
+    bounds = np.concatenate([[x_mm[0]], x_mm[0] + np.cumsum(w_mm)])
+    a, b = bounds[:-1][None, :], bounds[1:][None, :]
+    inside = np.minimum(b, np.asarray(hi_mm, float)[:, None]) - np.maximum(a, np.asarray(lo_mm, float)[:, None])
+    return np.clip(inside, 0.0, None) / np.asarray(w_mm, float)[None, :]
+
+
+def _tensor_weights(xy_mm: np.ndarray, w_mm2: np.ndarray):
+    """A plane's nodes on a tensor grid: (x nodes, y nodes, their tributary lengths, index of
+    each node in the (nx, ny) grid); ValueError where the areas are not products of lengths."""
+    xs, ix = np.unique(np.round(xy_mm[:, 0], 9), return_inverse=True)
+    ys, iy = np.unique(np.round(xy_mm[:, 1], 9), return_inverse=True)
+    grid = np.zeros((len(xs), len(ys)))
+    grid[ix, iy] = w_mm2
+    wx = grid.sum(axis=1) / (ys[-1] - ys[0])
+    wy = grid.sum(axis=0) / (xs[-1] - xs[0])
+    if len(xs) * len(ys) != len(w_mm2) or not np.allclose(np.outer(wx, wy), grid, rtol=1e-6, atol=1e-12):
+        raise ValueError("the plane's node areas are not a tensor grid's (tributary length in x times in y): "
+                         "pass the plane as the 3D model writes it (shear3d.Stack3D.plane)")
+    return xs, ys, wx, wy, ix, iy
+
+
 class Reader:
     """Pressure (kPa) -> per-layer tared counts through one skin model's FSR law and readout."""
 
-    def __init__(self, model: SkinModel, shift_mm: float = 0.0):
+    def __init__(self, model: SkinModel, shift_mm: float = 0.0, shift_y_mm: float = 0.0):
         self.m = model
         self.shift_mm = shift_mm  # the taxel grid's offset in the profiles' frame (alignment.py)
+        self.shift_y_mm = shift_y_mm  # the same across the section (the 3D model's maps only)
         self.floor = self.counts(np.zeros((2, SKIN.n_taxels, SKIN.n_taxels)), tare=False)
 
     def taxel_profile(self, x_mm: np.ndarray, p_kpa: np.ndarray, w_mm: np.ndarray) -> np.ndarray:
@@ -76,13 +102,32 @@ class Reader:
         puts F_z on the taxels it covers. Tension (p < 0) reads as none."""
         order = np.argsort(x_mm)
         x, p, w = (np.asarray(a, float)[order] for a in (x_mm, p_kpa, w_mm))
-        bounds = np.concatenate([[x[0]], x[0] + np.cumsum(w)])
-        force = np.concatenate([[0.0], np.cumsum(np.clip(p, 0.0, None) * w)])
         c, half = SKIN.taxel_centres_mm() + self.shift_mm, 0.5 * SKIN.electrode_mm
-        return (np.interp(c + half, bounds, force) - np.interp(c - half, bounds, force)) / SKIN.electrode_mm
+        return electrode_overlap(x, w, c - half, c + half) @ (np.clip(p, 0.0, None) * w) / SKIN.electrode_mm
+
+    def taxel_map(self, xy_mm: np.ndarray, p_kpa: np.ndarray, w_mm2: np.ndarray, half_y: bool = True) -> np.ndarray:
+        """(16, 16) electrode-mean pressure (rows y, columns x) from a plane's nodal map on a
+        tensor grid (areas w = w_x w_y), read as taxel_profile reads a line in each direction.
+        half_y: the nodes cover y >= 0 of a map symmetric about y = 0 (the 3D half-model);
+        each electrode also gets the mirror half's force."""
+        xs, ys, wx, wy, ix, iy = _tensor_weights(np.asarray(xy_mm, float), np.asarray(w_mm2, float))
+        f = np.zeros((len(xs), len(ys)))
+        f[ix, iy] = np.clip(np.asarray(p_kpa, float), 0.0, None) * np.asarray(w_mm2, float)
+        half = 0.5 * SKIN.electrode_mm
+        cx = SKIN.taxel_centres_mm() + self.shift_mm
+        cy = SKIN.taxel_centres_mm() + self.shift_y_mm
+        ax = electrode_overlap(xs, wx, cx - half, cx + half)
+        ay = electrode_overlap(ys, wy, cy - half, cy + half)
+        if half_y:
+            ay = ay + electrode_overlap(ys, wy, -cy - half, -cy + half)
+        return ay @ f.T @ ax.T / SKIN.electrode_mm ** 2
 
     def maps(self, fem: dict, sup_kpa, deep_kpa) -> np.ndarray:
-        """(2, 16, 16) maps of a line contact along y: every row the same column profile."""
+        """(2, 16, 16) maps of a line contact along y: every row the same column profile; of
+        the 3D half-model's planes (`superficial_xy_mm` in fem) each layer's taxel_map."""
+        if "superficial_xy_mm" in fem:
+            return np.stack([self.taxel_map(fem[f"{ln}_xy_mm"], p, fem[f"{ln}_w_mm2"])
+                             for ln, p in (("superficial", sup_kpa), ("deep", deep_kpa))])
         n = SKIN.n_taxels
         out = np.empty((2, n, n))
         out[0] = self.taxel_profile(fem["superficial_x_mm"], sup_kpa, fem["superficial_w_mm"])[None, :]
