@@ -34,6 +34,7 @@ from layerskin_exp.sim.fem_reference.compare import (
     _asymmetry,
     _cop_x,
     _fem_at_ratio,
+    at_ratio,
     line_model,
     line_sim,
     load_fem,
@@ -88,13 +89,11 @@ def fem3d_signals(res: dict, model, taxel_mm: float, taxel_y_mm: float) -> dict:
     """{branch depth: signals} of the 3D half-model (shear3d.npz, the cap pressed at x = y = 0),
     read with the cap starting taxel_mm from a taxel's centre along x and taxel_y_mm across;
     branches that did not reach F_t / F_z = SHEAR_RATIO are left out."""
-    from layerskin_exp.sim.fem_reference.shear3d import _at_ratio
-
     reader = Reader(model, shift_mm=-taxel_mm - _centre(), shift_y_mm=-taxel_y_mm - _centre())
     keys = ("cap_x_mm", "fx_n", "fz_n", "sheet_x_under_cap_mm", "superficial_kpa", "deep_kpa")
     out = {}
     for b in sorted(set(np.round(res["branch_depth_mm"][res["phase"] == 1], 6))):
-        s = _at_ratio(res, "fz_n", "fx_n", b, keys)
+        s = at_ratio(res, "fz_n", "fx_n", b, keys)
         if s is None:
             continue
         st = s["start"]

@@ -159,6 +159,26 @@ class Side:
     values: dict
 
 
+def at_ratio(res: dict, fz_key: str, fx_key: str, branch: float, keys) -> dict | None:
+    """A branch's state at F_x / F_z = SHEAR_RATIO (linear between the states around it), with the
+    press state it started from; None where the branch did not reach the ratio. res: the 3D
+    check's data or a section's; fz_key, fx_key name its force columns."""
+    idx = np.flatnonzero((res["phase"] == 1) & np.isclose(res["branch_depth_mm"], branch))
+    start = np.flatnonzero((res["phase"] == 0) & np.isclose(res["depth_mm"], branch))
+    if len(idx) == 0 or len(start) == 0:
+        return None
+    ratio = res[fx_key][idx] / res[fz_key][idx]
+    if ratio.max() < SHEAR_RATIO:
+        return None
+    k = int(np.argmax(ratio >= SHEAR_RATIO))
+    i0 = idx[k - 1] if k > 0 else int(start[0])
+    r0 = 0.0 if k == 0 else ratio[k - 1]
+    t = (SHEAR_RATIO - r0) / (ratio[k] - r0)
+    out = {key: (1 - t) * np.asarray(res[key][i0], float) + t * np.asarray(res[key][idx[k]], float) for key in keys}
+    out["start"] = int(start[0])
+    return out
+
+
 def _fem_at_ratio(fem: dict, branch: float) -> dict:
     """The FEM branch's state at F_t / F_z = SHEAR_RATIO (linear between the two states around
     it; the branch's last state, at the ratio it reached, where it stopped short of it) and the

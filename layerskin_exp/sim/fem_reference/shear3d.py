@@ -40,6 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from layerskin_exp.sim.fem_reference.compare import SHEAR_RATIO, at_ratio
 from layerskin_exp.sim.fem_reference.model import (
     KPA,
     CapContact,
@@ -52,7 +53,6 @@ from layerskin_exp.sim.fem_reference.model import (
 
 DATA = Path(__file__).resolve().parent / "reference"
 SHEAR_FROM_MM = (0.3, 0.6)
-SHEAR_RATIO = 1.0 / 3.0
 # the study's normal loads (it presses to 3-6 N): branches pressed to F_z = each, within LOAD_TOL
 LOADS_N = (3.0,)
 LOAD_TOL = 0.02
@@ -538,25 +538,6 @@ def require_balance3d(res: dict, log=print) -> dict:
     return res
 
 
-def _at_ratio(res: dict, fz_key: str, fx_key: str, branch: float, keys) -> dict | None:
-    """A branch's state at F_x / F_z = SHEAR_RATIO (linear between the states around it), with
-    the press state it started from; None where the branch did not reach the ratio."""
-    idx = np.flatnonzero((res["phase"] == 1) & np.isclose(res["branch_depth_mm"], branch))
-    start = np.flatnonzero((res["phase"] == 0) & np.isclose(res["depth_mm"], branch))
-    if len(idx) == 0 or len(start) == 0:
-        return None
-    ratio = res[fx_key][idx] / res[fz_key][idx]
-    if ratio.max() < SHEAR_RATIO:
-        return None
-    k = int(np.argmax(ratio >= SHEAR_RATIO))
-    i0 = idx[k - 1] if k > 0 else int(start[0])
-    r0 = 0.0 if k == 0 else ratio[k - 1]
-    t = (SHEAR_RATIO - r0) / (ratio[k] - r0)
-    out = {key: (1 - t) * np.asarray(res[key][i0], float) + t * np.asarray(res[key][idx[k]], float) for key in keys}
-    out["start"] = int(start[0])
-    return out
-
-
 def plane_strain_shear(section: dict, res: dict) -> dict:
     """The section (a cylinder, per mm) beside the 3D half-model (the hemisphere, N) per press
     depth: contact half-width, peak superficial and deep pressures, lattice strain at the press;
@@ -568,9 +549,9 @@ def plane_strain_shear(section: dict, res: dict) -> dict:
     cop3 = {ln: lambda p, ln=ln: cop_x(res[f"{ln}_xy_mm"][:, 0], p, res[f"{ln}_w_mm2"]) for ln in ("superficial", "deep")}
     rows = {}
     for depth in SHEAR_FROM_MM:
-        a = _at_ratio(section, "fz_n_per_mm", "fx_n_per_mm", depth,
+        a = at_ratio(section, "fz_n_per_mm", "fx_n_per_mm", depth,
                       ("cap_x_mm", "superficial_kpa", "deep_kpa", "sheet_shift_mm"))
-        b = _at_ratio(res, "fz_n", "fx_n", depth, ("cap_x_mm", "superficial_kpa", "deep_kpa", "sheet_shift_mm"))
+        b = at_ratio(res, "fz_n", "fx_n", depth, ("cap_x_mm", "superficial_kpa", "deep_kpa", "sheet_shift_mm"))
         i = np.flatnonzero((section["phase"] == 0) & np.isclose(section["depth_mm"], depth))
         j = np.flatnonzero((res["phase"] == 0) & np.isclose(res["depth_mm"], depth))
         if len(i) == 0 or len(j) == 0:
