@@ -41,6 +41,28 @@ def popen_cli(module: str, args: list[str], cwd: Path, stdout=subprocess.DEVNULL
                             stdout=stdout, stderr=stderr, text=True)
 
 
+def sigterm_while_connecting(module: str, args: list[str], cwd: Path, job_log: Path, connected: str) -> str:
+    """Run `module`, wait until its job log says `connected` (the device that connects just before
+    the stalled one), send SIGTERM: the run must exit 143 within 10 s (a deadline for a loaded
+    machine; the measured figures are in the commit messages). Returns its stderr."""
+    import signal
+    import time
+
+    proc = popen_cli(module, args, cwd, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 200
+        while proc.poll() is None and time.monotonic() < deadline and \
+                connected not in (job_log.read_text() if job_log.is_file() else ""):
+            time.sleep(0.01)
+        assert proc.poll() is None, "the run ended before the signal could be sent"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 143
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.stderr.read()
+
+
 def design_dir(protocol_root: Path) -> Path:
     """The one design folder a run without design overrides writes under <data_root>/<protocol>/."""
     dirs = [d for d in protocol_root.iterdir() if d.is_dir()]

@@ -15,7 +15,15 @@ import pytest
 from hardware import build_rig
 from layerskin_exp.log import load_session
 from protocols.calibration import plan_trials, run_campaign
-from tests.protocols.conftest import TINY_CALIBRATION, TINY_GRIP, compose_app, design_dir, popen_cli, run_cli
+from tests.protocols.conftest import (
+    TINY_CALIBRATION,
+    TINY_GRIP,
+    compose_app,
+    design_dir,
+    popen_cli,
+    run_cli,
+    sigterm_while_connecting,
+)
 
 LABEL_KEYS_CAL = {"protocol", "position_index", "position_mm", "kind", "repeat", "direction_rad", "z_offset_mm"}
 
@@ -352,21 +360,10 @@ def test_sigterm_while_a_device_is_still_connecting_ends_the_run(tmp_path, hydra
     args = ["hardware=loopback", "+hardware.faults.platform.stall_after_s=0", "hardware.platform.connect_timeout_s=60",
             "positions.count=1", "press.repeats=1", "slide.repeats=0", f"data_root={data}", "progress=false",
             *hydra_dirs]
-    proc = popen_cli("protocols.force_calibration", args, tmp_path, stderr=subprocess.PIPE)
-    job_log = tmp_path / "out" / "force_calibration.log"
-    try:
-        deadline = time.monotonic() + 200
-        # the F/T box connects just before the platform: from then on the run waits on the platform
-        while proc.poll() is None and time.monotonic() < deadline and \
-                "ft: streaming" not in (job_log.read_text() if job_log.is_file() else ""):
-            time.sleep(0.01)
-        assert proc.poll() is None, "the run ended before the signal could be sent"
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=10) == 143
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert "terminated (SIGTERM) while connecting" in proc.stderr.read()
+    # the F/T box connects just before the platform: from then on the run waits on the platform
+    stderr = sigterm_while_connecting("protocols.force_calibration", args, tmp_path,
+                                      tmp_path / "out" / "force_calibration.log", "ft: streaming")
+    assert "terminated (SIGTERM) while connecting" in stderr
     assert not list(data.glob("**/*.mcap*"))
 
 

@@ -318,30 +318,12 @@ def test_sigterm_while_the_arm_stalls_at_connect_ends_the_run(tmp_path):
     # status and one line, without waiting out the probe or the connect timeout. Measured on the
     # shared 2-core host (5 runs, median) in the commit message; 10 s here only has to hold on a
     # loaded machine (an unended wait takes the probe's 2 s and exits 1).
-    import os
-    import signal
-    import subprocess
-    import sys
-    from pathlib import Path
+    from tests.protocols.conftest import sigterm_while_connecting
 
-    repo = Path(__file__).resolve().parents[3]
     args = ["hardware=loopback", "+hardware.faults.ur5e.stall_after_s=0", "hardware.ur5e.connect_timeout_s=60",
             "progress=false", f"data_root={tmp_path / 'data'}", f"hydra.run.dir={tmp_path / 'out'}"]
-    proc = subprocess.Popen([sys.executable, "-m", "protocols.grip_depth", *args], cwd=tmp_path,
-                            env={**os.environ, "PYTHONPATH": str(repo)}, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
-    job_log = tmp_path / "out" / "grip_depth.log"
-    try:
-        deadline = time.monotonic() + 200
-        # the skin board connects just before the arm: from then on the run waits on the arm
-        while proc.poll() is None and time.monotonic() < deadline and \
-                "skin board on" not in (job_log.read_text() if job_log.is_file() else ""):
-            time.sleep(0.01)
-        assert proc.poll() is None, "the run ended before the signal could be sent"
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=10) == 143
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert "terminated (SIGTERM) while connecting" in proc.stderr.read()
+    # the skin board connects just before the arm: from then on the run waits on the arm
+    stderr = sigterm_while_connecting("protocols.grip_depth", args, tmp_path, tmp_path / "out" / "grip_depth.log",
+                                      "skin board on")
+    assert "terminated (SIGTERM) while connecting" in stderr
     assert not list((tmp_path / "data").glob("**/*.mcap*"))
