@@ -74,18 +74,29 @@ class ReplyWatch:
 
     def __init__(self, allowance_ns: float) -> None:
         self.allowance_ns = allowance_ns
+        self._lock = threading.Lock()
         self._answer_ns: int | None = None
         self._asked_ns: int | None = None  # the oldest request sent since the last answer
 
     def reset(self) -> None:
-        self._answer_ns = self._asked_ns = None
+        with self._lock:
+            self._answer_ns = self._asked_ns = None
 
-    def asked(self, host_ns: int) -> None:
-        if self._asked_ns is None:
-            self._asked_ns = host_ns
+    def asked(self, host_ns: int, sending_from_ns: int | None = None) -> None:
+        """A request went out; host_ns: once it was sent (a thread descheduled before sending
+        asked nothing yet). sending_from_ns: when sending began, where the answer is read by
+        another thread: an answer read since then means the device answers (a sender descheduled
+        between sending and this call would otherwise leave an answered request waiting, and
+        the next request, if its sender is late too, could not clear it)."""
+        with self._lock:
+            if sending_from_ns is not None and self._answer_ns is not None and self._answer_ns >= sending_from_ns:
+                return
+            if self._asked_ns is None:
+                self._asked_ns = host_ns
 
     def answered(self, host_ns: int) -> None:
-        self._answer_ns, self._asked_ns = host_ns, None
+        with self._lock:
+            self._answer_ns, self._asked_ns = host_ns, None
 
     def silent_ns(self, now_ns: int) -> int | None:
         """Time since the last answer while a request waits beyond the allowance; else None."""

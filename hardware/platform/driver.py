@@ -368,7 +368,13 @@ class GrblPlatform(Platform):
             try:
                 waiting = ser.in_waiting
                 if not waiting and not from_reader:
-                    return
+                    # a poll hands the line discipline what the kernel's tty buffer still holds (the
+                    # byte count does not): under load its worker moves bytes tens of ms late
+                    if not select.select([ser.fileno()], [], [], 0)[0]:
+                        return
+                    waiting = ser.in_waiting
+                    if not waiting:
+                        return
                 data = ser.read(max(1, waiting))
             except Exception:  # noqa: BLE001 - the reader reports a lost port
                 if from_reader:
@@ -391,12 +397,14 @@ class GrblPlatform(Platform):
             next_t += period
             if next_t < time.monotonic():
                 next_t = time.monotonic() + period
+            sending_ns = time.monotonic_ns()
             try:
                 self._write(wire.STATUS_QUERY)
             except DeviceError:
                 return
-            # asked once the byte is on its way: a poller descheduled before writing asked nothing yet
-            self._replies.asked(time.monotonic_ns())
+            # asked once the byte is on its way: a poller descheduled before writing asked nothing yet;
+            # a report the reader took since sending began answered it (or a later '?')
+            self._replies.asked(time.monotonic_ns(), sending_ns)
 
     def _handle(self, line: str, host_ns: int) -> None:
         self._recent.append(line)

@@ -36,6 +36,7 @@ log = logging.getLogger(__name__)
 
 _LOG_EVERY_NS = 1_000_000_000
 _REFILL_WAIT_S = 0.001
+_FAULT_DRAINS = 8  # fault() reads on while each read fills a chunk (a backlog), this many chunks at most
 
 
 class SkinBoardReader(SkinReader):
@@ -144,7 +145,9 @@ class SkinBoardReader(SkinReader):
             return f"skin: link lost ({self._link_error}) on {self.cfg.port}"
         silent_ns = self._board_clock.silent_ns(now_ns)
         if silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9:
-            self._drain()  # frames the receive thread has not been scheduled to read yet
+            for _ in range(_FAULT_DRAINS):  # frames the receive thread has not been scheduled to read yet
+                if self._drain() < self.cfg.read_chunk_bytes:
+                    break
             silent_ns = self._board_clock.silent_ns(now_ns)
             if silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9:
                 return (f"skin stalled: no frame for {silent_ns / 1e6:.0f} ms on {self.cfg.port} (board time of "
@@ -183,22 +186,25 @@ class SkinBoardReader(SkinReader):
         """Block up to read_timeout_s for bytes (outside the read lock, so fault() may drain)."""
         return bool(select.select([ser.fileno()], [], [], self.cfg.read_timeout_s)[0])
 
-    def _drain(self, until_empty: bool = True) -> None:
-        """Read and parse what the OS holds for the port, without blocking. From the receive
-        thread (until_empty=False, after select said readable: a readable port with nothing
-        waiting is an unplugged one, whose read raises) or from fault() (errors left to the
-        receive thread, which reports them)."""
+    def _drain(self, until_empty: bool = True) -> int:
+        """Read and parse what the OS holds for the port, without blocking; returns the bytes
+        read (at most read_chunk_bytes). From the receive thread (until_empty=False, after select
+        said readable: a readable port with nothing waiting is an unplugged one, whose read
+        raises) or from fault() (errors left to the receive thread, which reports them)."""
         ser = self._ser
         if ser is None:
-            return
+            return 0
         with self._rx_lock:
             data = b""
             try:
                 # the tty layer hands over its buffer a few KiB at a time, refilling it just after a
-                # read: after each read that found bytes, a short wait for the next part
+                # read: after each read that found bytes, a short wait for the next part. A poll,
+                # unlike the byte count, first hands the line discipline what the kernel's tty
+                # buffer holds (its worker runs tens of ms late on a busy host): fault() asks that way.
                 while len(data) < self.cfg.read_chunk_bytes:
                     waiting = ser.in_waiting
-                    if not waiting and data and select.select([ser.fileno()], [], [], _REFILL_WAIT_S)[0]:
+                    if not waiting and (data or until_empty) and select.select(
+                            [ser.fileno()], [], [], _REFILL_WAIT_S if data else 0)[0]:
                         waiting = ser.in_waiting
                     if waiting:
                         data += ser.read(min(waiting, self.cfg.read_chunk_bytes - len(data)))
@@ -213,6 +219,7 @@ class SkinBoardReader(SkinReader):
                     raise
             if data:
                 self._receive(data, time.monotonic_ns())
+            return len(data)
 
     def _receive(self, data: bytes, host_ns: int) -> None:
         self.bytes_received += len(data)

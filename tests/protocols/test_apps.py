@@ -33,10 +33,16 @@ def _rate_hz(t_ns: np.ndarray) -> float:
 
 
 def _device_rate_hz(stream: dict) -> float:
-    """The rate the device sampled at, from its own clock: the spacing of samples the host read
-    back to back (the 10th percentile of the device-clock spacings). A sample the host polled too
-    late to see widens one spacing; a device streaming slower widens them all."""
-    return 1e9 / float(np.percentile(np.diff(np.asarray(stream["device_t_ns"], dtype=np.int64)), 10))
+    """The rate the device sampled at, from its own clock. The host polls the client's cache of
+    the newest sample and, when it polls late (a busy host: most of the time under a load of twice
+    the core count), misses samples: every spacing of the device clock is then a whole number of
+    device periods. The period is the smallest spacing, and every spacing must be a whole multiple
+    of it (a device streaming slower, or unevenly, fails that)."""
+    d = np.diff(np.asarray(stream["device_t_ns"], dtype=np.int64))
+    assert d.size and d.min() > 0, "device clock not increasing"
+    periods = d / d.min()
+    assert np.allclose(periods, np.round(periods), atol=0.02), f"device spacings not whole periods: {np.unique(d)}"
+    return 1e9 / float(d.min())
 
 
 def test_calibration_cli_writes_labelled_trials(tmp_path, hydra_dirs):
