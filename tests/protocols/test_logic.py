@@ -11,6 +11,7 @@ import pytest
 
 from hardware.interfaces import DeviceError
 from layerskin_exp.log import load_session
+from layerskin_exp.types import Wrench
 from protocols.calibration import distance_to_edge_mm, plan_trials, run_campaign
 from protocols.config import ForceCalibrationConfig, GripDepthConfig
 from protocols.grip import run_grip_trial, trajectory_poses
@@ -227,3 +228,26 @@ def test_grip_rig_skin_load_guard_aborts_a_crushing_grip(tmp_path):
     level = s.streams["skin"]["superficial"][:, 0, 0] / 4095
     over = np.flatnonzero(level > 0.15)
     assert len(over) >= 1 and rig.gripper.opening_mm >= 30.0 - (level[over[0]] * 4095 / 40) - 0.2
+
+
+def test_a_late_sample_after_a_slow_zone_stop_does_not_trip_the_zone_again(tmp_path, monkeypatch):
+    # A press aimed above the slow zone (0.9 x 6 N) is stopped there and goes on at a crawl. On a
+    # busy host a sample from before the stop can be read only after the trip was acknowledged;
+    # it must not trip the zone for the slow move about to start (it did: SafetyError, trial lost).
+    cfg = _cal_cfg(tmp_path, **{"slide.repeats": 0, "press.target_normal_n": 5.8})
+    rig = _connected(platform_rig(k_n_per_mm=4.0))
+    clear = rig.clear_trip
+    late = []
+
+    def clear_then_a_late_sample():
+        reason = clear()
+        if reason and reason.startswith("slow_zone"):
+            late.append(rig.check_guards(Wrench(np.array([0.0, 0.0, 5.5]), np.zeros(3), 0, 0, 0)))
+        return reason
+
+    monkeypatch.setattr(rig, "clear_trip", clear_then_a_late_sample)
+    (result,) = run_campaign(cfg, rig, META)
+    assert late and late == [None] * len(late)  # the stage stood: a late sample trips nothing
+    assert result.stop_reason == "target_reached"
+    s = load_session(result.path, warn=False)
+    assert s.outcome == "complete" and s.streams["wrench"]["force_n"][:, 2].max() < 6.0
