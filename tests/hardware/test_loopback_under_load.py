@@ -9,23 +9,26 @@ import pytest
 from tests.hardware import test_loopback as unloaded
 from tests.load import CpuLoad
 
-# The skin board, Net F/T, GRBL, UR5e and Hand-E emulators run in processes of their own, on their
-# own clocks. Under this load the calibration's trials run to the end; the reader used to mark their
-# files damaged (host-side records all had sequence 0, so two /tf messages from one GRBL batch at
-# an unchanged position were byte-identical); since the writer numbers them per channel (issue 31)
-# the loaded calibration passed in the merge's run, but some loaded runs still fail to connect
-# (skin board: no valid frame within 2 s), so it stays an expected failure until that is explained.
-# Two loaded runs once the Hand-E had its own process (2-core machine shared with other work): the
-# calibration aborted both times, once on "skin stalled: no frame for 65 ms (board time ...)",
-# once on "platform stalled: no status report for 51 ms (a '?' unanswered)".
-LOADED_CONNECT = "some loaded runs fail to connect (skin board: no valid frame within 2 s), not yet explained"
-GRIP_UNDER_LOAD = ("the grip trial passed 1 of 2 loaded runs; the other aborted on the skin board's watchdog "
-                   "('skin stalled: no frame for 52 ms', skin frames received after the detection), not the gripper's")
-GRIPPER_STALL_MARGIN = ("passed 2 of 2 loaded runs (the gripper's own stall caught 54 and 79 ms after its last "
-                        "sample, bound 80-82 ms): too thin a margin under load to call it settled")
+# Measured on a 2-core machine, 10 loaded runs each (issue 30; the figures are in the closing
+# note of 2026-11-27). What still fails here is no longer the watchdogs taking a busy host for a
+# silent device, except for one kernel path:
+# - the kernel moves a pseudo-terminal's bytes in a normal-priority worker thread (kworker), which
+#   this load leaves runnable but unscheduled for 80-330 ms (sampled from /proc: the device's
+#   real-time thread waits in __flush_work under n_tty_poll meanwhile). A '?' the host wrote then
+#   reaches GRBL late, and its report counts as missing ("platform stalled");
+# - the press's stop on the target force acts on samples the starved host reads late: the stage
+#   runs on and the force guard stops it above its limit (a safety stop, "force_limit", where the
+#   test expects "target_reached"); 3 of 10 calibration runs;
+# - the camera's frames are rendered by the world in the trial's process, which this load starves
+#   past the camera's 200 ms stall bound; 2 of 10 grip runs.
+CALIBRATION_UNDER_LOAD = ("under load the press overshoots its target (late F/T samples) into the force guard, and "
+                  "the kernel's pty worker can delay GRBL's '?' past the stall bound: see the comment")
+GRIP_UNDER_LOAD = "the camera's frames, rendered in the trial's starved process, can come later than its 200 ms bound"
+GRIPPER_STALL_MARGIN = ("passed 1 of 3 loaded runs on 2026-11-27 (caught 82 and 87 ms after the last sample, bound 60 ms "
+                        "plus one polling round): the host starved by the load reacts late")
 
 
-@pytest.mark.xfail(strict=False, reason=LOADED_CONNECT)
+@pytest.mark.xfail(strict=False, reason=CALIBRATION_UNDER_LOAD)
 def test_calibration_on_loopback_under_load(tmp_path, hydra_dirs):
     with CpuLoad() as load:
         assert load.running == load.n
@@ -41,17 +44,18 @@ def test_grip_on_loopback_under_load(tmp_path, hydra_dirs):
         unloaded.test_grip_on_loopback_with_the_ur_rtde_client(tmp_path, hydra_dirs)
 
 
-# Passed under load before the emulators moved (the stall was caught within the bound); at the
-# end of this session's work, on this shared 2-core machine at load 4-7 plus the generator, the
-# loaded rig failed to connect (skin board: no valid frame within the 2 s connect timeout, though
-# the same bench started under the same load without the CLI streams) or GRBL left a '?'
-# unanswered 58 ms before the stall came. Not yet explained: issue 30.
-@pytest.mark.xfail(strict=False, reason="the loaded rig's connect is not yet reliable (see the comment)")
+# The stall is timed from the board's power-on. At the unloaded case's 2.5 s, 3 of 3 loaded runs
+# (2026-11-27) stalled the board before the driver connected (the bench took 3 s to start) and
+# recorded no trial; 6 s lands inside the calibration's two trials whether loaded or not.
+LOADED_SKIN_STALL_S = 6.0
+
+
+@pytest.mark.xfail(strict=False, reason="passed 2 of 2 loaded runs with the later stall (caught 52-53 ms board time): too few to call it settled")
 def test_stalled_skin_board_is_caught_under_load(tmp_path, hydra_dirs):
     with CpuLoad() as load:
         assert load.running == load.n
         unloaded.test_stalled_stream_on_loopback_stops_safely(tmp_path, hydra_dirs, "force_calibration",
-                                                              "skin_board", "skin", 2.5)
+                                                              "skin_board", "skin", LOADED_SKIN_STALL_S)
 
 
 # The Hand-E's own process answers under the load; a gripper that genuinely goes silent must still
