@@ -22,7 +22,7 @@ from tests.load import CpuLoad
 # - the camera's frames are rendered by the world in the trial's process, which this load starves
 #   past the camera's 200 ms stall bound; 2 of 10 grip runs.
 CALIBRATION_UNDER_LOAD = ("under load the press overshoots its target (late F/T samples) into the force guard, and "
-                  "the kernel's pty worker can delay GRBL's '?' past the stall bound: see the comment")
+                          "the kernel's pty worker can delay GRBL's '?' past the stall bound: see the comment")
 GRIP_UNDER_LOAD = "the camera's frames, rendered in the trial's starved process, can come later than its 200 ms bound"
 GRIPPER_STALL_MARGIN = ("passed 1 of 3 loaded runs on 2026-11-27 (caught 82 and 87 ms after the last sample, bound 60 ms "
                         "plus one polling round): the host starved by the load reacts late")
