@@ -167,14 +167,14 @@ class PlatformControl:
             self.wait_stopped()
             if trip_name(reason) == FORCE_LIMIT:
                 return FORCE_LIMIT
-            if trip_name(reason) != SLOW_ZONE:
-                rig.clear_trip()  # a stop condition checked per sample, not a fault
-            else:  # near the limit: go on at a crawl
+            slow_zone = trip_name(reason) == SLOW_ZONE
+            if slow_zone:
                 # The stage stands, so no fast move is under way: a sample still in flight from
                 # before the stop (a busy host reads them late) must not trip the zone again
                 # between this acknowledgement and the slow move (seen under load: SafetyError).
                 self.safety.platform_speed_mm_s = 0.0
-                rig.clear_trip()
+            rig.clear_trip()  # a stop condition checked per sample, not a fault
+            if slow_zone:  # near the limit: go on at a crawl
                 return self.move(target_mm, min(speed_mm_s, self.cfg.safety.slow_zone_speed_mm_s), stop_when)
         elif kind == "stop":
             self.platform.stop()

@@ -370,9 +370,8 @@ class GrblPlatform(Platform):
                 if not waiting and not from_reader:
                     # a poll hands the line discipline what the kernel's tty buffer still holds (the
                     # byte count does not): under load its worker moves bytes tens of ms late
-                    if not select.select([ser.fileno()], [], [], 0)[0]:
-                        return
-                    waiting = ser.in_waiting
+                    if select.select([ser.fileno()], [], [], 0)[0]:
+                        waiting = ser.in_waiting
                     if not waiting:
                         return
                 data = ser.read(max(1, waiting))
