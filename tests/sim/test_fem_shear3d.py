@@ -42,12 +42,84 @@ def test_the_homogenised_lattice_meets_the_honeycombs_moduli():
     assert g13 == pytest.approx(g_hc, rel=0.15), (g13, g_hc)
 
 
-def test_the_moduli_check_sees_a_missing_fibre(monkeypatch):
-    """Without its fibre term the layer is the matrix alone (E = 2 G13): the check must fail."""
+def test_the_moduli_check_sees_a_missing_through_thickness_term(monkeypatch):
+    """Without its through-thickness term the layer is the matrix alone (E = 2 G13): the check must fail."""
     monkeypatch.setattr(fe_model, "lattice_constants", lambda sec: {"mu": sec.honeycomb_moduli_kpa()[1] * KPA,
                                                              "bulk": 0.0, "k": 0.0})
     e3, _ = lattice_moduli3d()
     assert e3 != pytest.approx(SEC.honeycomb_moduli_kpa()[0], rel=0.05)
+
+
+def _fibre(k: float, axis: int):
+    """The lattice term this model had before: W = k / 8 (C_aa - 1)^2 on the material fibre along
+    the axis (a counter-example for the checks below)."""
+    def stress(x, k):
+        F, sv = x[0], x[-1]
+        c = np.einsum("a...,a...->...", F[:, axis], F[:, axis])
+        P = np.zeros_like(F)
+        P[:, axis] = 0.5 * k * (c - 1.0) * F[:, axis]
+        return [P, sv]
+
+    def elasticity(x, k):
+        F = x[0]
+        c = np.einsum("a...,a...->...", F[:, axis], F[:, axis])
+        A = np.zeros((3, 3, 3, 3, *F.shape[2:]))
+        A[:, axis, :, axis] = k * np.einsum("i...,k...->ik...", F[:, axis], F[:, axis])
+        for i in range(3):
+            A[i, axis, i, axis] += 0.5 * k * (c - 1.0)
+        return [A]
+
+    return fe_model.fem.Material(stress, elasticity, k=k)
+
+
+@pytest.mark.parametrize("axis", [1, 2])
+def test_the_plane_separation_terms_derivatives_are_its_energys(axis):
+    """P = dW/dF and A = dP/dF of `plane_separation` against central differences of
+    W = k / 8 (1 / (C^-1)_aa - 1)^2 at a random deformation."""
+    k = 1.3
+    umat = fe_model.plane_separation(k, axis)
+    F = (np.eye(3) + 0.3 * np.random.default_rng(axis).standard_normal((3, 3)))[:, :, None, None]
+
+    def energy(F):
+        g = np.linalg.inv(F[:, :, 0, 0])[axis]
+        return k / 8 * (1.0 / (g @ g) - 1.0) ** 2
+
+    P, A = umat.gradient([F, None])[0][..., 0, 0], umat.hessian([F, None])[0][..., 0, 0]
+    eps = 1e-6
+    for m in range(3):
+        for n in range(3):
+            d = np.zeros((3, 3, 1, 1))
+            d[m, n] = eps
+            assert P[m, n] == pytest.approx((energy(F + d) - energy(F - d)) / (2 * eps), abs=1e-8)
+            dP = (umat.gradient([F + d, None])[0] - umat.gradient([F - d, None])[0])[..., 0, 0] / (2 * eps)
+            np.testing.assert_allclose(A[:, :, m, n], dP, atol=1e-8)
+
+
+def transverse_shear_tangent_kpa(umat, stretch: float) -> float:
+    """dP_xz / dF_xz (kPa) after compressing along z to `stretch`: the layer's resistance to a
+    transverse shear under that preload."""
+    F = np.diag([1.0, 1.0, stretch])[:, :, None, None]
+    return float(umat.hessian([F, None])[0][0, 2, 0, 2, 0, 0] / KPA)
+
+
+@pytest.mark.parametrize("stretch", [0.9, 0.5, 0.3])
+def test_the_compressed_lattice_still_resists_transverse_shear(stretch):
+    """Pressed to the study's 3 N the lattice reaches C33 ~ 0.1 (stretch 0.3): its transverse shear
+    tangent must stay positive there (it is the matrix's G13), or no sticking shear converges."""
+    g = SEC.honeycomb_moduli_kpa()[1]
+    assert transverse_shear_tangent_kpa(s3.lattice_material(SEC), stretch) == pytest.approx(g, rel=1e-6)
+
+
+def test_the_shear_tangent_check_sees_the_fibres_instability():
+    """The fibre term the lattice had (W on C33): its shear tangent mu + k (C33 - 1) / 2 turns
+    negative below C33 = 0.495, and the check above sees it."""
+    c = fe_model.lattice_constants(SEC)
+    fibre = fe_model.fem.CompositeMaterial(fe_model.fem.NeoHookeCompressible(mu=c["mu"], lmbda=0.0), _fibre(c["k"], 2))
+    assert transverse_shear_tangent_kpa(fibre, 0.9) > 0
+    assert transverse_shear_tangent_kpa(fibre, 0.5) < 0
+    # the same uniaxial modulus, so the moduli tests cannot tell the two apart
+    assert _fibre(c["k"], 2).hessian([np.diag([1, 1, 0.99])[:, :, None, None], None])[0][2, 2, 2, 2, 0, 0] == pytest.approx(
+        fe_model.plane_separation(c["k"], 2).hessian([np.diag([1, 1, 0.99])[:, :, None, None], None])[0][2, 2, 2, 2, 0, 0])
 
 
 def test_the_merged_sheet_bends_like_the_laminate():
@@ -217,3 +289,4 @@ def test_every_3d_branch_reaches_the_ratio_or_says_where_it_stopped(committed):
     if stopped:
         first = next(iter(stopped))
         assert _unexplained(committed, {k: v for k, v in stopped.items() if k != first}) != []
+

@@ -5,6 +5,8 @@
     python -m layerskin_exp.sim.fem_reference --shear3d     # the 3D half-model's press and shear (shear3d.py):
         # to 0.3 and 0.6 mm and to 3 N (--shear3d-load), each sheared to F_x / F_z = 1/3, read
         # through the taxel grid beside the section (shear3d.json's count_signals)
+    python -m layerskin_exp.sim.fem_reference --shear3d-refinement  # the 3D branch at 0.3 mm again on
+        # a mesh halved under the cap (reference/refinement/shear3d.npz): shear3d_convergence.json
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
         # homogenised (homogenised.npz, 34 s) beside the cells: homogenisation.json
     python -m layerskin_exp.sim.fem_reference --alignments  # the cap pressed in 0.5, 1, 1.5 mm from
@@ -312,6 +314,9 @@ def main(argv=None) -> int:
     ap.add_argument("--shear3d-load", type=float, nargs="*", default=None, metavar="N",
                     help="with --shear3d: the whole skin's normal loads (N) the 3D model is also pressed to and "
                          "sheared from (default: shear3d.LOADS_N; none given: the depths only)")
+    ap.add_argument("--shear3d-refinement", action="store_true",
+                    help="the 3D branch pressed to shear3d.REFINEMENT_DEPTH_MM again on the refined mesh "
+                         "(reference/refinement/shear3d.npz) beside the committed one: reference/shear3d_convergence.json")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
@@ -323,7 +328,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: the package's reference/)")
     args = ap.parse_args(argv)
     sim = load_sim([])
-    if not (args.convergence_only or args.axisymmetric or args.shear3d or args.homogenised_lattice or args.alignments):
+    if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
+            or args.alignments):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -367,6 +373,19 @@ def main(argv=None) -> int:
         res = run_shear3d(sim, loads_n=loads, partial=lambda r: write_shear3d(r, out, time.time() - t0, sim))
         check = write_shear3d(res, out, time.time() - t0, sim)
         print(json.dumps({k: check[k] for k in ("depths", "count_signals", "stopped")}, indent=1))
+    if args.shear3d_refinement:
+        from layerskin_exp.sim.fem_reference import shear3d as s3
+
+        t0 = time.time()
+        out = args.out or DATA
+        (out / "refinement").mkdir(parents=True, exist_ok=True)
+        fine = s3.run_shear3d(sim, x_edges=s3.REFINED_X_EDGES_MM, y_edges=s3.REFINED_Y_EDGES_MM,
+                              depths=(s3.REFINEMENT_DEPTH_MM,), loads_n=())
+        np.savez_compressed(out / "refinement" / "shear3d.npz", **fine)
+        check = {"seconds": round(time.time() - t0, 1),
+                 **s3.refinement3d(dict(np.load(out / "shear3d.npz")), fine, sim, data=out)}
+        (out / "shear3d_convergence.json").write_text(json.dumps(check, indent=1))
+        print(json.dumps(check, indent=1))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 

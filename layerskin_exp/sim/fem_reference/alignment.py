@@ -3,7 +3,7 @@
 The section's walls (2 mm pitch) carry the lattice's load about ten times the cells' level, and
 the taxels (1.5 mm pitch) sample it; at the one alignment of the committed section (the cap on the
 centre wall, between two taxels) the walls decide the sign of every count-CoP shear signal
-(reference/homogenisation.json: homogenised, the inter-layer shift is -0.11 / -0.18 mm where the
+(reference/homogenisation.json: homogenised, the inter-layer shift is -0.23 / -0.33 mm where the
 cells give +0.24 / +0.53). A campaign presses at a hundred positions, every alignment. So each
 signal is also taken here over a grid of alignments:
 

@@ -292,30 +292,56 @@ def fill_shear_modulus_mpa(sec: Section) -> float:
 
 
 def lattice_constants(sec: Section) -> dict:
-    """The homogenised lattice's matrix shear modulus and bulk modulus (nu = 0) and its fibre
-    stiffness (MPa): E3 = 2 mu + k = rho E_s, G13 = mu = rho G_s / 2."""
+    """The homogenised lattice's matrix shear modulus and bulk modulus (nu = 0) and its
+    through-thickness stiffness k (MPa): E3 = 2 mu + k = rho E_s, G13 = mu = rho G_s / 2."""
     e3_kpa, g13_kpa = sec.honeycomb_moduli_kpa()
     mu = g13_kpa * KPA
     return {"mu": mu, "bulk": 2.0 * mu / 3.0, "k": e3_kpa * KPA - 2.0 * mu}
 
 
-def fibre(k: float, axis: int) -> fem.Material:
-    """W = k / 8 (C_aa - 1)^2, a = axis: stiffness along that axis only (P = dW/dF, A = dP/dF)."""
+def plane_separation(k: float, axis: int) -> fem.Material:
+    """W = k / 8 (s - 1)^2 with s = 1 / (C^-1)_aa, a = axis: the squared stretch of the distance
+    between the material planes normal to the axis (h / H = 1 / |F^-T e_a|).
+
+    In uniaxial stretch along the axis s is C_aa, so this is a fibre's W = k / 8 (C_aa - 1)^2 and
+    gives the same through-thickness modulus; unlike the fibre, s does not change under a
+    transverse simple shear (F = 1 + gamma e_x (x) e_a), so the term adds no shear stiffness at
+    any preload. The fibre's C_aa grows as 1 + gamma^2 under that shear, so under a compressive
+    preload (C_aa < 1) it softened the transverse shear tangent, mu + k (C_aa - 1) / 2, to zero at
+    C_aa = 1 - 2 mu / k (0.495 here): a material instability the press to 3 N reaches (issue 28).
+    A honeycomb's walls carry transverse shear in their own plane and the through-thickness load
+    across planes z = const, which is what the planes' separation measures.
+
+    With g = F^-T e_a, h = F^-1 g, b = g.g and s = 1 / b:
+        P_kl = Q g_k h_l,  Q = k / 2 (s - 1) s^2,
+        dP_kl / dF_mn = k s^3 (3 s - 2) g_k h_l g_m h_n
+                        - Q (g_m Fi_nk h_l + g_k Fi_lm h_n + g_k g_m Ci_ln),
+    Fi = F^-1, Ci = C^-1 (tests/sim/test_fem_shear3d.py checks both against finite differences).
+    """
+
+    def _parts(F):
+        Fi = np.linalg.inv(np.moveaxis(F, (0, 1), (-2, -1)))  # (..., 3, 3)
+        Fi = np.moveaxis(Fi, (-2, -1), (0, 1))
+        g = Fi[axis]  # g_i = Fi_ai
+        h = np.einsum("li...,i...->l...", Fi, g)
+        s = 1.0 / np.einsum("i...,i...->...", g, g)
+        return Fi, g, h, s
 
     def stress(x, k):
         F, statevars = x[0], x[-1]
-        c = np.einsum("a...,a...->...", F[:, axis], F[:, axis])
-        P = np.zeros_like(F)
-        P[:, axis] = 0.5 * k * (c - 1.0) * F[:, axis]
+        _, g, h, s = _parts(F)
+        P = 0.5 * k * (s - 1.0) * s * s * np.einsum("k...,l...->kl...", g, h)
         return [P, statevars]
 
     def elasticity(x, k):
         F = x[0]
-        c = np.einsum("a...,a...->...", F[:, axis], F[:, axis])
-        A = np.zeros((3, 3, 3, 3, *F.shape[2:]))
-        A[:, axis, :, axis] = k * np.einsum("i...,k...->ik...", F[:, axis], F[:, axis])
-        for i in range(3):
-            A[i, axis, i, axis] += 0.5 * k * (c - 1.0)
+        Fi, g, h, s = _parts(F)
+        q = 0.5 * k * (s - 1.0) * s * s
+        gh = np.einsum("k...,l...->kl...", g, h)
+        ci = np.einsum("la...,na...->ln...", Fi, Fi)
+        A = k * s ** 3 * (3.0 * s - 2.0) * np.einsum("kl...,mn...->klmn...", gh, gh)
+        A -= q * (np.einsum("m...,nk...,l...->klmn...", g, Fi, h) + np.einsum("k...,lm...,n...->klmn...", g, Fi, h)
+                  + np.einsum("k...,m...,ln...->klmn...", g, g, ci))
         return [A]
 
     return fem.Material(stress, elasticity, k=k)
@@ -323,11 +349,12 @@ def fibre(k: float, axis: int) -> fem.Material:
 
 def homogenised_lattice(sec: Section, axis: int):
     """The lattice as a transversely isotropic solid about `axis` (the through-thickness one): a
-    compressible neo-Hooke matrix (nu = 0) with the honeycomb's G13 = rho G_s / 2 plus a fibre
-    term along the axis, so that its through-thickness modulus is the honeycomb's E3 = rho E_s
-    (Gibson & Ashby 1997, sec. 4.4); in-plane moduli are the matrix's, 2 G13."""
+    compressible neo-Hooke matrix (nu = 0) with the honeycomb's G13 = rho G_s / 2 plus a term on
+    the separation of the planes normal to the axis (`plane_separation`), so that its
+    through-thickness modulus is the honeycomb's E3 = rho E_s (Gibson & Ashby 1997, sec. 4.4);
+    in-plane moduli are the matrix's, 2 G13."""
     c = lattice_constants(sec)
-    return fem.CompositeMaterial(fem.NeoHookeCompressible(mu=c["mu"], lmbda=0.0), fibre(c["k"], axis))
+    return fem.CompositeMaterial(fem.NeoHookeCompressible(mu=c["mu"], lmbda=0.0), plane_separation(c["k"], axis))
 
 
 def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
