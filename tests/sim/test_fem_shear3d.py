@@ -290,3 +290,37 @@ def test_every_3d_branch_reaches_the_ratio_or_says_where_it_stopped(committed):
         first = next(iter(stopped))
         assert _unexplained(committed, {k: v for k, v in stopped.items() if k != first}) != []
 
+
+
+def _sticking_keeps(anchor_where) -> float:
+    """Largest change of a contact node's force (N) when a pressed contact switches to sticking:
+    three nodes penetrating a sphere of radius 2 mm by 0.01-0.03 mm."""
+    from types import SimpleNamespace
+
+    from layerskin_exp.sim.fem_reference.model import CapContact
+
+    centre = np.array([0.0, 0.0, 4.0])
+    down = np.array([[0.0, 0.0, -1.0], [0.15, 0.0, -1.0], [0.0, 0.2, -1.0], [1.0, 0.0, -0.2]])
+    down /= np.linalg.norm(down, axis=1)[:, None]
+    points = centre + (2.0 - np.array([0.01, 0.02, 0.03, -0.5]))[:, None] * down  # the last one off the cap
+    contact = CapContact(np.arange(4), np.full(4, 0.25), 2.0, 50.0, dim=3)
+    fe = SimpleNamespace(contact=contact, points=points, u=np.zeros_like(points), centre=centre)
+    before = contact.forces(points, centre)[0]
+    anchor_where(fe)
+    return float(np.abs(contact.forces(points, centre)[0] - before).max())
+
+
+def test_switching_to_sticking_keeps_the_presss_contact_forces():
+    assert _sticking_keeps(s3.Stack3D.stick_all_in_contact) < 1e-12
+
+
+def test_the_sticking_switch_check_sees_ties_anchored_inside_the_cap():
+    """Anchored where each node is (inside the cap), the ties carry nothing at the switch: the
+    press's normal force is lost (the 0.6 mm press lost 3.5 % of F_z at its first shear step)."""
+    def where_it_is(fe):
+        c = fe.contact
+        d = fe.points[c.nodes] + fe.u[c.nodes] - fe.centre
+        c.stuck[:] = c.radius - np.linalg.norm(d, axis=1) > 0
+        c.anchor[c.stuck] = d[c.stuck]
+
+    assert _sticking_keeps(where_it_is) > 1e-4
