@@ -324,3 +324,45 @@ def test_the_sticking_switch_check_sees_ties_anchored_inside_the_cap():
         c.anchor[c.stuck] = d[c.stuck]
 
     assert _sticking_keeps(where_it_is) > 1e-4
+
+
+def _refinement() -> dict:
+    import json
+
+    return json.loads((s3.DATA / "shear3d_convergence.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def refined():
+    with np.load(s3.DATA / "refinement" / "shear3d.npz") as z:
+        return {k: z[k] for k in z.files}
+
+
+def test_the_3d_refinement_rows_are_what_the_committed_data_give(committed, refined):
+    """shear3d_convergence.json against refinement3d on the two committed npz files: the refined
+    mesh is finer, and every quantity's change is the data's."""
+    conv = _refinement()
+    assert int(refined["dof"]) > int(committed["dof"]) == conv["committed_dof"]
+    got = s3.refinement3d(committed, refined, SimConfig(), depth=conv["depth_mm"])
+    assert set(got["quantities"]) == set(conv["quantities"])
+    for name, q in conv["quantities"].items():
+        assert got["quantities"][name]["change"] == pytest.approx(q["change"], abs=1e-6), name
+        assert got["quantities"][name]["converged"] == q["converged"], name
+    # the count signals (through the taxel grid) are among them
+    assert set(s3.COUNT_SIGNALS) <= set(conv["quantities"])
+
+
+def test_every_3d_quantity_converged_or_its_mesh_error_is_recorded():
+    from layerskin_exp.sim.fem_reference.compare import load_tolerances
+
+    assert s3.uncovered3d(_refinement(), load_tolerances()) == []
+
+
+def test_the_3d_mesh_error_check_sees_a_larger_change():
+    """Each quantity's change doubled (and a converged one pushed past its limit): the check fails."""
+    from layerskin_exp.sim.fem_reference.compare import load_tolerances
+
+    conv = _refinement()
+    worse = {"quantities": {n: {**q, "change": 2.0 * q["change"] + 0.1 * np.sign(q["change"] or 1.0), "converged": False}
+                            for n, q in conv["quantities"].items()}}
+    assert len(s3.uncovered3d(worse, load_tolerances())) == len(conv["quantities"])
