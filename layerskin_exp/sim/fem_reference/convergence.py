@@ -30,6 +30,16 @@ POSITIONS = ("interlayer_shift_counts_mm", "deep_cop_counts_mm", "superficial_of
 METRIC = {"contact_width_mm": "contact_width"}
 
 
+def judge(before: float, after: float, position: bool) -> dict:
+    """A quantity's change between two meshes: in mm for a position, else relative to `before`;
+    converged below POS_TOL_MM or REL_TOL."""
+    if position:
+        change, limit, kind = after - before, POS_TOL_MM, "mm"
+    else:
+        change, limit, kind = (after - before) / abs(before), REL_TOL, "relative"
+    return {"change": round(float(change), 6), "kind": kind, "converged": bool(np.isfinite(change) and abs(change) < limit)}
+
+
 def level_path(level: str, data: Path = DATA) -> Path:
     return data / ("" if level == "default" else f"refinement/{level}")
 
@@ -58,13 +68,8 @@ def study(sim: SimConfig, data: Path = DATA) -> dict:
     for metric, by_load in per_level["default"].items():
         for load in by_load:
             vals = {lv: per_level[lv].get(metric, {}).get(load, np.nan) for lv in LEVELS}
-            if metric in POSITIONS:
-                change, limit, kind = vals["fine"] - vals["default"], POS_TOL_MM, "mm"
-            else:
-                change, limit, kind = (vals["fine"] - vals["default"]) / abs(vals["default"]), REL_TOL, "relative"
             rows[f"{metric} @ {load}"] = {"metric": metric, "load": load, **{lv: round(v, 6) for lv, v in vals.items()},
-                                          "change": round(float(change), 6), "kind": kind,
-                                          "converged": bool(np.isfinite(change) and abs(change) < limit)}
+                                          **judge(vals["default"], vals["fine"], metric in POSITIONS)}
     return {"rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "quantities": rows}
 
 

@@ -353,7 +353,7 @@ class Stack3D:
         nearest it (its penetration stays, so the tie pushes it out as the frictionless contact
         did and the press's F_z is kept). Tied where it was (inside the cap), each node lost its
         normal force at the switch: the 0.6 mm press's F_z fell 3.5 % at the first shear step,
-        and at 3 N (penetrations ~10 times larger under this penalty) no first step converged."""
+        and at 3 N (larger penetrations under this penalty) no first step converged."""
         c = self.contact
         d = self.points[c.nodes] + self.u[c.nodes] - self.centre
         dist = np.linalg.norm(d, axis=1)
@@ -668,7 +668,7 @@ def quantities3d(res: dict, sim, depth: float = REFINEMENT_DEPTH_MM, data: Path 
     """Every quantity the 3D check reports for the branch pressed to `depth`: the press's (contact
     half-width, peak pressures, lattice strain, F_z), the force CoPs' at F_x / F_z = 1/3 and the
     count signals' means over the taxel grid's alignments; the same functions as shear3d.json's."""
-    section = {k: v for k, v in np.load(data / "bonded.npz").items()}
+    section = dict(np.load(data / "bonded.npz"))
     label = f"{depth:.2f} mm"
     row = plane_strain_shear(section, res)[label]
     out = {k: v["3d"] for k, v in row.items() if isinstance(v, dict) and "3d" in v}
@@ -684,19 +684,11 @@ def quantities3d(res: dict, sim, depth: float = REFINEMENT_DEPTH_MM, data: Path 
 def refinement3d(coarse: dict, fine: dict, sim, depth: float = REFINEMENT_DEPTH_MM, data: Path = DATA) -> dict:
     """Each 3D quantity on the committed mesh and on the refined one, and its change: relative,
     or in mm for POSITIONS3D; converged as the section's are (convergence.REL_TOL / POS_TOL_MM)."""
-    from layerskin_exp.sim.fem_reference.convergence import POS_TOL_MM, REL_TOL
+    from layerskin_exp.sim.fem_reference.convergence import POS_TOL_MM, REL_TOL, judge
 
     a, b = quantities3d(coarse, sim, depth, data), quantities3d(fine, sim, depth, data)
-    rows = {}
-    for name in a:
-        if name not in b:
-            continue
-        if name in POSITIONS3D:
-            change, limit, kind = b[name] - a[name], POS_TOL_MM, "mm"
-        else:
-            change, limit, kind = (b[name] - a[name]) / abs(a[name]), REL_TOL, "relative"
-        rows[name] = {"committed": round(float(a[name]), 6), "refined": round(float(b[name]), 6),
-                      "change": round(float(change), 6), "kind": kind, "converged": bool(abs(change) < limit)}
+    rows = {name: {"committed": round(float(a[name]), 6), "refined": round(float(b[name]), 6),
+                   **judge(a[name], b[name], name in POSITIONS3D)} for name in a if name in b}
     return {"depth_mm": depth, "committed_dof": int(coarse["dof"]), "refined_dof": int(fine["dof"]),
             "rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "quantities": rows}
 
