@@ -25,6 +25,17 @@ What is modelled (lengths mm, stresses MPa, forces N):
   node whose tie pulls (tension) is released only on the stuck patch's edge, then slides
   (frictionless) until it lifts off or the step ends.
 
+Where the 3D branches stop (measured 2026-11-27, coarse mesh; the figures in the closing note):
+the cover's neo-Hooke holds a volume change with K / 2 (J - 1)^2, K = E / 3(1 - 2 nu) = 0.58 MPa
+at the simulator's nu 0.49, so it carries at most ~K of pressure and gives up its volume beyond.
+The section's cover keeps J >= 0.78 to 1.2 mm (its peak contact pressure 197 kPa); in 3D the cap's
+pressure is higher (peak superficial 543 kPa at 0.6 mm, ~1.7 MPa at 3 N) and the cover's smallest
+volume ratio under the cap is 0.36 / 0.10 / 0.05 at 0.3 mm / 0.6 mm / 3 N: the contact stops
+spreading (a sticking press: half-width 1.07 mm from 0.6 mm to 3 N) and the crushed elements
+defeat Newton under any tangential motion, full stick or Coulomb friction (mu 1, tried). A cover that holds its volume
+(nu -> 0.5 with a mixed formulation, or a volumetric law that does not saturate) and a mesh that
+resolves the crushed zone are what the 3 N branch needs.
+
 Each layer's load is read as in the section: the internal forces of the elements above a node
 plane, at its nodes, over the nodes' tensor-Simpson areas. Every layer's sum must carry F_z
 within BALANCE_TOL, or the run fails. The shear signals are read from those maps as the
