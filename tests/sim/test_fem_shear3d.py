@@ -352,6 +352,42 @@ def test_the_3d_refinement_rows_are_what_the_committed_data_give(committed, refi
     assert set(s3.COUNT_SIGNALS) <= set(conv["quantities"])
 
 
+def _through_thickness() -> dict:
+    import json
+
+    return json.loads((s3.DATA / "shear3d_through_thickness.json").read_text())
+
+
+def test_the_3d_through_thickness_rows_are_what_the_committed_data_give(committed):
+    """shear3d_through_thickness.json against through_thickness3d on the committed npz files: each
+    step has more elements through the cover, and every quantity's change is the data's."""
+    tt = _through_thickness()
+    by_cover = {s3.COVER_ELEMENTS: committed}
+    for n in s3.THROUGH_THICKNESS_COVER_ELEMENTS:
+        with np.load(s3.DATA / "refinement" / f"shear3d_cover{n}.npz") as z:
+            by_cover[n] = {k: z[k] for k in z.files}
+        assert int(by_cover[n]["cover_elements"]) == n
+    got = s3.through_thickness3d(by_cover, SimConfig(), depth=tt["depth_mm"])
+    assert set(got["steps"]) == set(tt["steps"]) == {"1->2", "2->4"}
+    for step, want in tt["steps"].items():
+        assert int(got["steps"][step]["refined_dof"]) > int(got["steps"][step]["committed_dof"])
+        for name, q in want["quantities"].items():
+            assert got["steps"][step]["quantities"][name]["change"] == pytest.approx(q["change"], abs=1e-6), (step, name)
+            assert got["steps"][step]["quantities"][name]["converged"] == q["converged"], (step, name)
+
+
+def test_the_mesh_error_adds_the_through_thickness_change():
+    """A quantity converged in plane but not through the cover is not converged, and its error is
+    the two changes' sum; without the through-thickness study it is the in-plane change alone."""
+    conv = {"quantities": {"fz_n": {"change": -0.04, "converged": True}}}
+    through = {"steps": {"1->2": {"quantities": {"fz_n": {"change": -0.1, "converged": False}}}}}
+    assert s3.mesh_error3d(conv)["fz_n"] == {"change": 0.04, "converged": True}
+    err = s3.mesh_error3d(conv, through)["fz_n"]
+    assert err["change"] == pytest.approx(0.14) and not err["converged"]
+    assert s3.uncovered3d(conv, {"plane_strain_mesh": {"fz_n": 0.1}}, through) == ["fz_n"]
+    assert s3.uncovered3d(conv, {"plane_strain_mesh": {"fz_n": 0.15}}, through) == []
+
+
 def test_every_3d_quantity_converged_or_its_mesh_error_is_recorded():
     from layerskin_exp.sim.fem_reference.compare import load_tolerances
 
