@@ -391,7 +391,7 @@ def test_the_mesh_error_adds_the_through_thickness_change():
 def test_every_3d_quantity_converged_or_its_mesh_error_is_recorded():
     from layerskin_exp.sim.fem_reference.compare import load_tolerances
 
-    assert s3.uncovered3d(_refinement(), load_tolerances()) == []
+    assert s3.uncovered3d(_refinement(), load_tolerances(), _through_thickness()) == []
 
 
 def test_the_3d_mesh_error_check_sees_a_larger_change():
@@ -401,4 +401,10 @@ def test_the_3d_mesh_error_check_sees_a_larger_change():
     conv = _refinement()
     worse = {"quantities": {n: {**q, "change": 2.0 * q["change"] + 0.1 * np.sign(q["change"] or 1.0), "converged": False}
                             for n, q in conv["quantities"].items()}}
-    assert len(s3.uncovered3d(worse, load_tolerances())) == len(conv["quantities"])
+    assert len(s3.uncovered3d(worse, load_tolerances(), _through_thickness())) == len(conv["quantities"])
+    # and the recorded figures cover the in-plane change alone, not its sum with the cover's
+    assert s3.uncovered3d(conv, load_tolerances(), _through_thickness()) == []
+    tt = _through_thickness()
+    doubled = {"steps": {k: {"quantities": {n: {**q, "change": 2.0 * q["change"] + 0.1 * np.sign(q["change"] or 1.0)}
+                                            for n, q in step["quantities"].items()}} for k, step in tt["steps"].items()}}
+    assert set(s3.uncovered3d(conv, load_tolerances(), doubled)) >= {"fz_n", "max_lattice_strain", "peak_deep_kpa"}
