@@ -360,17 +360,19 @@ def _through_thickness() -> dict:
 
 def test_the_3d_through_thickness_rows_are_what_the_committed_data_give(committed):
     """shear3d_through_thickness.json against through_thickness3d on the committed npz files: each
-    step has more elements through the cover, and every quantity's change is the data's."""
+    run has the elements it says through each layer, and every quantity's change is the data's."""
+    import json
+
     tt = _through_thickness()
-    by_cover = {s3.COVER_ELEMENTS: committed}
-    for n in s3.THROUGH_THICKNESS_COVER_ELEMENTS:
-        with np.load(s3.DATA / "refinement" / f"shear3d_cover{n}.npz") as z:
-            by_cover[n] = {k: z[k] for k in z.files}
-        assert int(by_cover[n]["cover_elements"]) == n
-    got = s3.through_thickness3d(by_cover, SimConfig(), depth=tt["depth_mm"])
-    assert set(got["steps"]) == set(tt["steps"]) == {"1->2", "2->4"}
+    by_name = {}
+    for name, elements in s3.THROUGH_THICKNESS.items():
+        with np.load(s3.DATA / "refinement" / f"shear3d_{name}.npz") as z:
+            by_name[name] = {k: z[k] for k in z.files}
+        assert json.loads(str(by_name[name]["elements"])) == {**s3.STACK_ELEMENTS, **elements}
+        assert int(by_name[name]["dof"]) > int(committed["dof"])
+    got = s3.through_thickness3d(committed, by_name, SimConfig(), depth=tt["depth_mm"])
+    assert set(got["steps"]) == set(tt["steps"]) == set(s3.THROUGH_THICKNESS_STEPS)
     for step, want in tt["steps"].items():
-        assert int(got["steps"][step]["refined_dof"]) > int(got["steps"][step]["committed_dof"])
         for name, q in want["quantities"].items():
             assert got["steps"][step]["quantities"][name]["change"] == pytest.approx(q["change"], abs=1e-6), (step, name)
             assert got["steps"][step]["quantities"][name]["converged"] == q["converged"], (step, name)
@@ -378,9 +380,11 @@ def test_the_3d_through_thickness_rows_are_what_the_committed_data_give(committe
 
 def test_the_mesh_error_adds_the_through_thickness_change():
     """A quantity converged in plane but not through the cover is not converged, and its error is
-    the two changes' sum; without the through-thickness study it is the in-plane change alone."""
+    the sum of the changes from the committed mesh (a step between two finer runs is not one of
+    them); without the through-thickness study it is the in-plane change alone."""
     conv = {"quantities": {"fz_n": {"change": -0.04, "converged": True}}}
-    through = {"steps": {"1->2": {"quantities": {"fz_n": {"change": -0.1, "converged": False}}}}}
+    through = {"steps": {"cover 1->2": {"from": None, "quantities": {"fz_n": {"change": -0.1, "converged": False}}},
+                         "cover 2->4": {"from": "cover2", "quantities": {"fz_n": {"change": 0.5, "converged": False}}}}}
     assert s3.mesh_error3d(conv)["fz_n"] == {"change": 0.04, "converged": True}
     err = s3.mesh_error3d(conv, through)["fz_n"]
     assert err["change"] == pytest.approx(0.14) and not err["converged"]
@@ -405,6 +409,7 @@ def test_the_3d_mesh_error_check_sees_a_larger_change():
     # and the recorded figures cover the in-plane change alone, not its sum with the cover's
     assert s3.uncovered3d(conv, load_tolerances(), _through_thickness()) == []
     tt = _through_thickness()
-    doubled = {"steps": {k: {"quantities": {n: {**q, "change": 2.0 * q["change"] + 0.1 * np.sign(q["change"] or 1.0)}
-                                            for n, q in step["quantities"].items()}} for k, step in tt["steps"].items()}}
+    doubled = {"steps": {k: {**step, "quantities": {n: {**q, "change": 2.0 * q["change"] + 0.1 * np.sign(q["change"] or 1.0)}
+                                                     for n, q in step["quantities"].items()}}
+                         for k, step in tt["steps"].items()}}
     assert set(s3.uncovered3d(conv, load_tolerances(), doubled)) >= {"fz_n", "max_lattice_strain", "peak_deep_kpa"}

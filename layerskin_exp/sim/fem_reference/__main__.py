@@ -7,8 +7,9 @@
         # through the taxel grid beside the section (shear3d.json's count_signals)
     python -m layerskin_exp.sim.fem_reference --shear3d-refinement  # the 3D branch at 0.3 mm again on
         # a mesh halved under the cap (reference/refinement/shear3d.npz): shear3d_convergence.json
-    python -m layerskin_exp.sim.fem_reference --shear3d-through-thickness  # the same branch with 2 and 4
-        # elements through the cover (refinement/shear3d_cover*.npz): shear3d_through_thickness.json
+    python -m layerskin_exp.sim.fem_reference --shear3d-through-thickness  # the same branch with more
+        # elements through the cover, the sheets and the lattice (refinement/shear3d_*.npz):
+        # shear3d_through_thickness.json
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
         # homogenised (homogenised.npz, 34 s) beside the cells: homogenisation.json
     python -m layerskin_exp.sim.fem_reference --alignments  # the cap pressed in 0.5, 1, 1.5 mm from
@@ -320,8 +321,9 @@ def main(argv=None) -> int:
                     help="the 3D branch pressed to shear3d.REFINEMENT_DEPTH_MM again on the refined mesh "
                          "(reference/refinement/shear3d.npz) beside the committed one: reference/shear3d_convergence.json")
     ap.add_argument("--shear3d-through-thickness", action="store_true",
-                    help="the 3D branch pressed to shear3d.REFINEMENT_DEPTH_MM again with the cover in more elements "
-                         "through its thickness (reference/refinement/shear3d_cover*.npz) beside the committed one: "
+                    help="the 3D branch pressed to shear3d.REFINEMENT_DEPTH_MM again with more elements through the "
+                         "layers' thickness (shear3d.THROUGH_THICKNESS; reference/refinement/shear3d_*.npz) beside the "
+                         "committed one: "
                          "reference/shear3d_through_thickness.json")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
@@ -398,11 +400,12 @@ def main(argv=None) -> int:
         t0 = time.time()
         out = args.out or DATA
         (out / "refinement").mkdir(parents=True, exist_ok=True)
-        by_cover = {s3.COVER_ELEMENTS: dict(np.load(out / "shear3d.npz"))}
-        for n in s3.THROUGH_THICKNESS_COVER_ELEMENTS:
-            by_cover[n] = s3.run_shear3d(sim, depths=(s3.REFINEMENT_DEPTH_MM,), loads_n=(), cover_elements=n)
-            np.savez_compressed(out / "refinement" / f"shear3d_cover{n}.npz", **by_cover[n])
-        check = {"seconds": round(time.time() - t0, 1), **s3.through_thickness3d(by_cover, sim, data=out)}
+        by_name = {}
+        for name, elements in s3.THROUGH_THICKNESS.items():
+            by_name[name] = s3.run_shear3d(sim, depths=(s3.REFINEMENT_DEPTH_MM,), loads_n=(), elements=elements)
+            np.savez_compressed(out / "refinement" / f"shear3d_{name}.npz", **by_name[name])
+        check = {"seconds": round(time.time() - t0, 1),
+                 **s3.through_thickness3d(dict(np.load(out / "shear3d.npz")), by_name, sim, data=out)}
         (out / "shear3d_through_thickness.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check, indent=1))
     if args.refinement or args.convergence_only:

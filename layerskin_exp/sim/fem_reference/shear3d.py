@@ -96,11 +96,16 @@ Y_EDGES_MM = (0.0, 0.5, 1.5, 4.0, 13.0)
 REFINED_X_EDGES_MM = (-13.0, -4.0, -1.5, -1.0, -0.5, -0.25, 0.0, 0.25, 0.5, 1.0, 1.5, 4.0, 13.0)
 REFINED_Y_EDGES_MM = (0.0, 0.25, 0.5, 1.0, 1.5, 4.0, 13.0)
 REFINEMENT_DEPTH_MM = 0.3
-# The committed mesh's cover is one hex27 through its 0.2 mm. `--shear3d-through-thickness` solves
-# the same branch with the cover in THROUGH_THICKNESS_COVER_ELEMENTS (the elements through the
-# sheets and the lattice are the committed mesh's): reference/shear3d_through_thickness.json
-COVER_ELEMENTS = 1
-THROUGH_THICKNESS_COVER_ELEMENTS = (2, 4)
+# The committed mesh's elements through each layer's thickness (hex27). `--shear3d-through-thickness`
+# solves the same branch with the layers of each THROUGH_THICKNESS entry in more elements (the
+# in-plane mesh is the committed one) and judges each step of THROUGH_THICKNESS_STEPS:
+# reference/shear3d_through_thickness.json. Its steps from the committed mesh (`from` None) add to
+# the in-plane refinement's changes in mesh_error3d.
+STACK_ELEMENTS = {"deep_sheet": 2, "lattice": 2, "sheet": 2, "cover": 1}
+THROUGH_THICKNESS = {"cover2": {"cover": 2}, "cover4": {"cover": 4},
+                     "sheets_lattice4": {"deep_sheet": 4, "lattice": 4, "sheet": 4}}
+THROUGH_THICKNESS_STEPS = {"cover 1->2": (None, "cover2"), "cover 2->4": ("cover2", "cover4"),
+                           "sheets and lattice 2->4": (None, "sheets_lattice4")}
 
 
 def graded_edges(lo: float, hi: float, fine: tuple[float, float], h: float, outer=OUTER_MM) -> np.ndarray:
@@ -133,23 +138,26 @@ def lattice_material(sec: Section):
     return homogenised_lattice(sec, axis=2)
 
 
-def stack(sec: Section, cover_elements: int = 1) -> list[tuple[str, float, int]]:
-    """The layers from the base up: name, thickness (mm) and elements through it."""
-    return [("deep_sheet", 2 * sec.film_mm + sec.core_mm, 2), ("lattice", sec.lattice_mm, 2),
-            ("sheet", 2 * sec.film_mm + sec.core_mm, 2), ("cover", sec.cover_mm, cover_elements)]
+def stack(sec: Section, elements: dict | None = None) -> list[tuple[str, float, int]]:
+    """The layers from the base up: name, thickness (mm) and elements through it (STACK_ELEMENTS,
+    updated by `elements`)."""
+    n = {**STACK_ELEMENTS, **(elements or {})}
+    sheet = 2 * sec.film_mm + sec.core_mm
+    return [("deep_sheet", sheet, n["deep_sheet"]), ("lattice", sec.lattice_mm, n["lattice"]),
+            ("sheet", sheet, n["sheet"]), ("cover", sec.cover_mm, n["cover"])]
 
 
 class Stack3D:
     """The half-model, its bodies and a Newton solver with the sphere's contact."""
 
-    def __init__(self, sec: Section, penalty: float = 50.0, x_edges=None, y_edges=None, cover_elements: int = 1):
+    def __init__(self, sec: Section, penalty: float = 50.0, x_edges=None, y_edges=None, elements: dict | None = None):
         self.sec = sec
-        self.cover_elements = cover_elements
+        self.elements = {name: n for name, _, n in stack(sec, elements)}
         half = 0.5 * sec.width_mm
         self.xe = graded_edges(-half, half, FINE_X_MM, FINE_H_MM) if x_edges is None else np.asarray(x_edges)
         self.ye = graded_edges(0.0, half, (0.0, FINE_Y_MM), FINE_H_MM) if y_edges is None else np.asarray(y_edges)
         ze, self.layer_z, lay_rows = [0.0], {}, []
-        for name, t, n in stack(sec, cover_elements):
+        for name, t, n in stack(sec, elements):
             self.layer_z[name] = (ze[-1], ze[-1] + t)
             ze += list(ze[-1] + np.linspace(0, t, n + 1)[1:])
             lay_rows += [name] * n
@@ -447,12 +455,12 @@ def cop_x(x_mm: np.ndarray, p_kpa: np.ndarray, w_mm2: np.ndarray) -> float:
 
 
 def run_shear3d(sim, log=print, x_edges=X_EDGES_MM, y_edges=Y_EDGES_MM, depths=SHEAR_FROM_MM, loads_n=LOADS_N,
-                partial=None, cover_elements: int = COVER_ELEMENTS) -> dict:
+                partial=None, elements: dict | None = None) -> dict:
     """Press to each of `depths` (mm), then to each of `loads_n` (the whole skin's F_z, N), and
     from each shear sticking to F_x / F_z = 1/3; `partial(res)` gets the data after each branch.
     res["stopped"] (json) says, per branch, where and why a press or shear stopped short."""
     sec = Section.from_sim(sim)
-    fe = Stack3D(sec, x_edges=x_edges, y_edges=y_edges, cover_elements=cover_elements)
+    fe = Stack3D(sec, x_edges=x_edges, y_edges=y_edges, elements=elements)
     log(f"  3D half-model: {len(fe.cells)} hex27, {len(fe.free)} free DOF")
     top = fe.height_mm + sec.radius_mm
     states, stopped = [], {}
@@ -556,7 +564,7 @@ def _pack(fe: Stack3D, states: list, sec: Section) -> dict:
         out[f"{name}_kpa"] = np.stack([s[f"{name}_kpa"] for s in states])
         out[f"{name}_shear_kpa"] = np.stack([s[f"{name}_shear_kpa"] for s in states]).astype(np.float32)
     out["dof"] = np.array(len(fe.free))
-    out["cover_elements"] = np.array(fe.cover_elements)
+    out["elements"] = json.dumps(fe.elements)
     out["factorisations"] = np.array(fe.factorisations)
     out["factor_seconds"] = np.array(fe.factor_seconds)
     out["section"] = json.dumps(sec.__dict__)
@@ -712,26 +720,29 @@ def refinement3d(coarse: dict, fine: dict, sim, depth: float = REFINEMENT_DEPTH_
             "rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "quantities": rows}
 
 
-def through_thickness3d(by_cover: dict, sim, depth: float = REFINEMENT_DEPTH_MM, data: Path = DATA) -> dict:
-    """`by_cover`: the branch pressed to `depth` solved with each count of elements through the
-    cover (1: the committed mesh). Each step to the next count, as `refinement3d` judges a step."""
-    counts = sorted(by_cover)
-    return {"depth_mm": depth, "cover_elements": counts,
-            "steps": {f"{a}->{b}": {**refinement3d(by_cover[a], by_cover[b], sim, depth, data), "cover_elements": [a, b]}
-                      for a, b in zip(counts[:-1], counts[1:], strict=True)}}
+def through_thickness3d(committed: dict, by_name: dict, sim, depth: float = REFINEMENT_DEPTH_MM,
+                        data: Path = DATA) -> dict:
+    """Each step of THROUGH_THICKNESS_STEPS (from the committed mesh's branch, or from one of
+    `by_name`'s, THROUGH_THICKNESS's runs, to another), judged as `refinement3d` judges a step."""
+    def run(name):
+        return committed if name is None else by_name[name]
+
+    return {"depth_mm": depth, "committed_elements": STACK_ELEMENTS, "runs": THROUGH_THICKNESS,
+            "steps": {step: {**refinement3d(run(a), run(b), sim, depth, data), "from": a, "to": b}
+                      for step, (a, b) in THROUGH_THICKNESS_STEPS.items()}}
 
 
 def mesh_error3d(conv: dict, through: dict | None = None) -> dict:
     """Each 3D quantity's mesh error on the committed mesh: its change under the in-plane
-    refinement (`conv`, shear3d_convergence.json) plus its change when the committed cover's
-    elements through its thickness are doubled (`through`, shear3d_through_thickness.json, the
-    step from COVER_ELEMENTS); converged where both changes are."""
-    step = None if through is None else through["steps"].get(f"{COVER_ELEMENTS}->{2 * COVER_ELEMENTS}")
+    refinement (`conv`, shear3d_convergence.json) plus its change in each through-thickness step
+    from the committed mesh (`through`, shear3d_through_thickness.json); converged where every
+    one of those changes is."""
+    steps = [] if through is None else [st for st in through["steps"].values() if st.get("from") is None]
     out = {}
     for name, q in conv["quantities"].items():
-        t = None if step is None else step["quantities"].get(name)
-        out[name] = {"change": abs(q["change"]) + (0.0 if t is None else abs(t["change"])),
-                     "converged": q["converged"] and (t is None or t["converged"])}
+        more = [st["quantities"][name] for st in steps if name in st["quantities"]]
+        out[name] = {"change": abs(q["change"]) + sum(abs(t["change"]) for t in more),
+                     "converged": q["converged"] and all(t["converged"] for t in more)}
     return out
 
 
