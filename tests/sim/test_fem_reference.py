@@ -276,3 +276,41 @@ def test_the_sections_homogenised_lattice_meets_the_honeycombs_moduli():
     e3, g13 = moduli(axis=1)
     assert e3 == pytest.approx(e_hc, rel=0.05) and g13 == pytest.approx(g_hc, rel=0.15), (e3, g13, e_hc, g_hc)
     assert moduli(axis=2)[0] != pytest.approx(e_hc, rel=0.05)  # the fibre along z: the section's y is soft
+
+
+def test_the_cover_compressibility_study_is_of_the_committed_data():
+    """reference/cover_compressibility.json: the committed section beside the same section with
+    only its cover's Poisson ratio changed (the run's Section says so), each change the data's."""
+    study = json.loads((fc.DATA / "cover_compressibility.json").read_text())
+    sim = SimConfig()
+    assert study["committed_cover_nu"] == sim.spacer.poisson
+    nus = [float(k) for k in study["by_cover_nu"]]
+    for nu in nus:
+        with np.load(fc.DATA / "cover_poisson" / f"nu_{nu:.4f}.npz") as z:
+            ran = json.loads(str(z["section"]))
+        want = {**Section.from_sim(sim).__dict__, "cover_nu": nu}
+        assert ran == pytest.approx(want), "only the cover's Poisson ratio may differ from the committed section"
+    got = conv.cover_compressibility(sim, nus)
+    assert set(got["by_cover_nu"]) == set(study["by_cover_nu"])
+    for nu, rows in study["by_cover_nu"].items():
+        assert set(got["by_cover_nu"][nu]) == set(rows)
+        for name, q in rows.items():
+            assert got["by_cover_nu"][nu][name]["change"] == pytest.approx(q["change"], abs=1e-6), name
+
+
+def test_the_cover_poisson_ratio_reaches_the_covers_material_only():
+    """A Section's cover_nu changes the cover's bulk modulus and nothing else's (the walls keep the
+    spacer's): the cover's material differs, every other material is the same."""
+    from layerskin_exp.sim.fem_reference.model import build_mesh, materials
+
+    sec = Section.from_sim(SimConfig())
+    stiff = replace(sec, cover_nu=0.499)
+    mesh = build_mesh(sec, Mesher())
+    names = np.array(mesh.names)
+    cover_seen = False
+    for (mask, a), (mask2, b) in zip(materials(sec, mesh), materials(stiff, mesh), strict=True):
+        assert np.array_equal(mask, mask2)
+        is_cover = bool(np.all(names[mesh.layer[mask]] == "cover"))
+        cover_seen |= is_cover
+        assert (a.kwargs == b.kwargs) != is_cover, (names[mesh.layer[mask]][0], a.kwargs, b.kwargs)
+    assert cover_seen

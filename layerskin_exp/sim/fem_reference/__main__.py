@@ -10,6 +10,8 @@
     python -m layerskin_exp.sim.fem_reference --shear3d-through-thickness  # the same branch with more
         # elements through the cover, the sheets and the lattice (refinement/shear3d_*.npz):
         # shear3d_through_thickness.json
+    python -m layerskin_exp.sim.fem_reference --cover-poisson 0.499  # the section with a less
+        # compressible cover (cover_poisson/): cover_compressibility.json
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
         # homogenised (homogenised.npz, 34 s) beside the cells: homogenisation.json
     python -m layerskin_exp.sim.fem_reference --alignments  # the cap pressed in 0.5, 1, 1.5 mm from
@@ -62,11 +64,11 @@ BALANCE_TOL = 0.02
 
 
 def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = False,
-              cap_x0_mm: float = 0.0) -> dict:
+              cap_x0_mm: float = 0.0, cover_nu: float | None = None) -> dict:
     """The section's press and shear branches. cap_x0_mm: where the cap presses in, from the
     wall under the pad's centre (the walls stay where they are; `--alignments`)."""
     interface = BOUND
-    sec = replace(Section.from_sim(sim), homogenised=homogenised)
+    sec = replace(Section.from_sim(sim), homogenised=homogenised, cover_nu=cover_nu)
     mesher = mesher or Mesher()
     fe = StackFE(sec, mesher)
     states = []
@@ -331,13 +333,17 @@ def main(argv=None) -> int:
     ap.add_argument("--homogenised-lattice", action="store_true",
                     help="the section again with its lattice homogenised (reference/homogenised.npz) and "
                          "reference/homogenisation.json: what the cells do to each compared quantity")
+    ap.add_argument("--cover-poisson", type=float, nargs="+", default=None, metavar="NU",
+                    help="the section again with the cover's Poisson ratio NU (reference/cover_poisson/nu_*.npz) and "
+                         "reference/cover_compressibility.json: what the cover's assumed compressibility does to each "
+                         "compared quantity")
     ap.add_argument("--convergence-only", action="store_true",
                     help="recompute reference/convergence.json from the data already there")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: the package's reference/)")
     args = ap.parse_args(argv)
     sim = load_sim([])
     if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
-            or args.alignments or args.shear3d_through_thickness):
+            or args.alignments or args.shear3d_through_thickness or args.cover_poisson):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -393,6 +399,19 @@ def main(argv=None) -> int:
         check = {"seconds": round(time.time() - t0, 1),
                  **s3.refinement3d(dict(np.load(out / "shear3d.npz")), fine, sim, data=out)}
         (out / "shear3d_convergence.json").write_text(json.dumps(check, indent=1))
+        print(json.dumps(check, indent=1))
+    if args.cover_poisson:
+        from layerskin_exp.sim.fem_reference.convergence import cover_compressibility
+
+        t0 = time.time()
+        out = args.out or DATA
+        folder = out / "cover_poisson"
+        folder.mkdir(parents=True, exist_ok=True)
+        for nu in args.cover_poisson:
+            res = run_bound(sim, MESHES["default"], cover_nu=nu)
+            np.savez_compressed(folder / f"nu_{nu:.4f}.npz", **res)
+        check = {"seconds": round(time.time() - t0, 1), **cover_compressibility(sim, args.cover_poisson, out)}
+        (out / "cover_compressibility.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check, indent=1))
     if args.shear3d_through_thickness:
         from layerskin_exp.sim.fem_reference import shear3d as s3

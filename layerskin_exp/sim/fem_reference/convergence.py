@@ -73,6 +73,26 @@ def study(sim: SimConfig, data: Path = DATA) -> dict:
     return {"rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "quantities": rows}
 
 
+def cover_compressibility(sim: SimConfig, nus, data: Path = DATA) -> dict:
+    """Each compared quantity of the committed section (the cover at the spacer's Poisson ratio)
+    beside the same section with the cover at each of `nus` (cover_poisson/nu_*.npz), and the
+    change, judged as a mesh step is (`judge`)."""
+    reader = fc.Reader(fc.line_model(fc.line_sim(sim, "bonded")))
+    base = quantities(fc.load_fem("bonded", data), reader)
+    out = {}
+    for nu in nus:
+        with np.load(data / "cover_poisson" / f"nu_{nu:.4f}.npz") as z:
+            alt = quantities({k: z[k] for k in z.files}, reader)
+        rows = {}
+        for metric, by_load in base.items():
+            for load, v in by_load.items():
+                w = alt.get(metric, {}).get(load, np.nan)
+                rows[f"{metric} @ {load}"] = {"metric": metric, "load": load, "committed": round(v, 6),
+                                              "cover_nu": round(float(w), 6), **judge(v, w, metric in POSITIONS)}
+        out[f"{nu:.4f}"] = rows
+    return {"committed_cover_nu": float(sim.spacer.poisson), "rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "by_cover_nu": out}
+
+
 def write_convergence(sim: SimConfig, data: Path = DATA) -> str:
     res = study(sim, data)
     (data / "convergence.json").write_text(json.dumps(res, indent=1))

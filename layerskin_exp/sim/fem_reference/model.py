@@ -91,6 +91,10 @@ class Section:
     # True: the lattice as one homogenised layer (`homogenised_lattice`) instead of walls and
     # smeared medium: the section's own measure of what its cells do to each compared quantity
     homogenised: bool = False
+    # the cover's Poisson ratio; None: the spacer's silicone_nu (the simulator has one for both).
+    # Its neo-Hooke's volume term resists at most ~K = E / 3(1 - 2 nu) of pressure (0.58 MPa at
+    # 0.49): `--cover-poisson` measures what that choice does to each compared quantity
+    cover_nu: float | None = None
 
     @classmethod
     def from_sim(cls, sim: SimConfig) -> Section:
@@ -107,6 +111,9 @@ class Section:
                    silicone_nu=sp_.poisson, cover_e_mpa=sim.cover.modulus_kpa * KPA,
                    film_along_e_mpa=along / t_film, film_across_e_mpa=across / t_film,
                    core_e_mpa=sh.velostat_modulus_mpa, radius_mm=rig.INDENTER_RADIUS_MM)
+
+    def cover_poisson(self) -> float:
+        return self.silicone_nu if self.cover_nu is None else self.cover_nu
 
     def honeycomb_moduli_kpa(self) -> tuple[float, float]:
         """The honeycomb's through-thickness Young's modulus and transverse shear modulus
@@ -381,7 +388,7 @@ def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
         (is_("film_across", "deep_film_across"), _neo_hooke(sec.film_across_e_mpa, 0.34)),
         (is_("film_along", "deep_film_along"), _neo_hooke(sec.film_along_e_mpa, 0.34)),
         (is_("core", "deep_core"), _neo_hooke(sec.core_e_mpa, 0.4)),
-        (is_("cover"), _neo_hooke(sec.cover_e_mpa, sec.silicone_nu)),
+        (is_("cover"), _neo_hooke(sec.cover_e_mpa, sec.cover_poisson())),
     ]
     return [(m, u) for m, u in out if m.any()]
 

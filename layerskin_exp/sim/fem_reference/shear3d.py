@@ -171,7 +171,7 @@ class Stack3D:
         self.cell_layer = np.array(lay_rows)[row]
         self.height_mm = float(self.ze[-1])
         mats = {"deep_sheet": _neo_hooke(merged_sheet_e_mpa(sec), 0.34), "sheet": _neo_hooke(merged_sheet_e_mpa(sec), 0.34),
-                "lattice": lattice_material(sec), "cover": _neo_hooke(sec.cover_e_mpa, sec.silicone_nu)}
+                "lattice": lattice_material(sec), "cover": _neo_hooke(sec.cover_e_mpa, sec.cover_poisson())}
         self._first = None
         self.bodies = []
         for name, umat in mats.items():
