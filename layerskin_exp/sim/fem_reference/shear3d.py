@@ -32,9 +32,10 @@ The section's cover keeps J >= 0.78 to 1.2 mm (its peak contact pressure 197 kPa
 pressure is higher (peak superficial 543 kPa at 0.6 mm, ~1.7 MPa at 3 N) and the cover's smallest
 volume ratio under the cap is 0.36 / 0.10 / 0.05 at 0.3 mm / 0.6 mm / 3 N: the contact stops
 spreading (a sticking press: half-width 1.07 mm from 0.6 mm to 3 N) and the crushed elements
-defeat Newton under any tangential motion, full stick or Coulomb friction (mu 1, tried). A cover that holds its volume
-(nu -> 0.5 with a mixed formulation, or a volumetric law that does not saturate) and a mesh that
-resolves the crushed zone are what the 3 N branch needs.
+defeat Newton under any tangential motion, full stick or Coulomb friction (mu 1, tried). A cover
+that holds its volume (nu -> 0.5 with a mixed formulation, or a volumetric law that does not
+saturate) and a mesh that resolves the crushed zone are what the 3 N branch needs. The section's
+own sensitivity to the cover's nu: `--cover-poisson` (cover_compressibility.json).
 
 Each layer's load is read as in the section: the internal forces of the elements above a node
 plane, at its nodes, over the nodes' tensor-Simpson areas. Every layer's sum must carry F_z
@@ -92,7 +93,7 @@ Y_EDGES_MM = (0.0, 0.5, 1.5, 4.0, 13.0)
 # The refinement of the 3D model (`--shear3d-refinement`): every element of the committed mesh
 # within 1.5 mm of the cap's axis in x and y halved (0.25 mm under the cap, 13k DOF), the press
 # to REFINEMENT_DEPTH_MM and its shear solved again. The coarser elements outside, and the
-# through-thickness elements, are the committed mesh's: the cover's are refined on their own below.
+# through-thickness elements, are the committed mesh's (those are refined on their own below).
 REFINED_X_EDGES_MM = (-13.0, -4.0, -1.5, -1.0, -0.5, -0.25, 0.0, 0.25, 0.5, 1.0, 1.5, 4.0, 13.0)
 REFINED_Y_EDGES_MM = (0.0, 0.25, 0.5, 1.0, 1.5, 4.0, 13.0)
 REFINEMENT_DEPTH_MM = 0.3
