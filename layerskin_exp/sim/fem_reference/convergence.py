@@ -64,13 +64,19 @@ def study(sim: SimConfig, data: Path = DATA) -> dict:
     model = fc.line_model(fc.line_sim(sim, "bonded"))
     reader = fc.Reader(model)
     per_level = {lv: quantities(fc.load_fem("bonded", level_path(lv, data)), reader) for lv in LEVELS}
+    return {"rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "quantities": _rows(per_level, "default", "fine")}
+
+
+def _rows(runs: dict, before: str, after: str) -> dict:
+    """"metric @ load" -> each run's value of it (a column per run) and its change from run
+    `before` to run `after` (`judge`); the quantities are `before`'s."""
     rows = {}
-    for metric, by_load in per_level["default"].items():
+    for metric, by_load in runs[before].items():
         for load in by_load:
-            vals = {lv: per_level[lv].get(metric, {}).get(load, np.nan) for lv in LEVELS}
-            rows[f"{metric} @ {load}"] = {"metric": metric, "load": load, **{lv: round(v, 6) for lv, v in vals.items()},
-                                          **judge(vals["default"], vals["fine"], metric in POSITIONS)}
-    return {"rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "quantities": rows}
+            vals = {name: float(q.get(metric, {}).get(load, np.nan)) for name, q in runs.items()}
+            rows[f"{metric} @ {load}"] = {"metric": metric, "load": load, **{k: round(v, 6) for k, v in vals.items()},
+                                          **judge(vals[before], vals[after], metric in POSITIONS)}
+    return rows
 
 
 def cover_compressibility(sim: SimConfig, nus, data: Path = DATA) -> dict:
@@ -83,13 +89,7 @@ def cover_compressibility(sim: SimConfig, nus, data: Path = DATA) -> dict:
     for nu in nus:
         with np.load(data / "cover_poisson" / f"nu_{nu:.4f}.npz") as z:
             alt = quantities({k: z[k] for k in z.files}, reader)
-        rows = {}
-        for metric, by_load in base.items():
-            for load, v in by_load.items():
-                w = alt.get(metric, {}).get(load, np.nan)
-                rows[f"{metric} @ {load}"] = {"metric": metric, "load": load, "committed": round(v, 6),
-                                              "cover_nu": round(float(w), 6), **judge(v, w, metric in POSITIONS)}
-        out[f"{nu:.4f}"] = rows
+        out[f"{nu:.4f}"] = _rows({"committed": base, "cover_nu": alt}, "committed", "cover_nu")
     return {"committed_cover_nu": float(sim.spacer.poisson), "rel_tol": REL_TOL, "pos_tol_mm": POS_TOL_MM, "by_cover_nu": out}
 
 

@@ -153,12 +153,13 @@ class Stack3D:
 
     def __init__(self, sec: Section, penalty: float = 50.0, x_edges=None, y_edges=None, elements: dict | None = None):
         self.sec = sec
-        self.elements = {name: n for name, _, n in stack(sec, elements)}
+        layers = stack(sec, elements)
+        self.elements = {name: n for name, _, n in layers}
         half = 0.5 * sec.width_mm
         self.xe = graded_edges(-half, half, FINE_X_MM, FINE_H_MM) if x_edges is None else np.asarray(x_edges)
         self.ye = graded_edges(0.0, half, (0.0, FINE_Y_MM), FINE_H_MM) if y_edges is None else np.asarray(y_edges)
         ze, self.layer_z, lay_rows = [0.0], {}, []
-        for name, t, n in stack(sec, elements):
+        for name, t, n in layers:
             self.layer_z[name] = (ze[-1], ze[-1] + t)
             ze += list(ze[-1] + np.linspace(0, t, n + 1)[1:])
             lay_rows += [name] * n
