@@ -336,14 +336,17 @@ FEM_CATCHES = {
 
 
 def fem_checks(sim: SimConfig, model_sim: SimConfig | None = None, bounds=None) -> tuple[list[Check], dict]:
-    """The fast model against the FEM reference, within layerskin_exp/sim/fem_reference/tolerances.yaml."""
+    """The fast model against the FEM reference, within layerskin_exp/sim/fem_reference/tolerances.yaml;
+    the count-CoP shear rows on their means over the alignments of cap, walls and taxels
+    (fem_reference.alignment.gate)."""
+    from layerskin_exp.sim.fem_reference import alignment
     from layerskin_exp.sim.fem_reference import compare as fc
 
     hook = None
     if model_sim is not None:
         def hook(fsim, _ms=model_sim):  # the injected design, in the comparison's geometry and bound
             return replace(fc.line_sim(_ms, fsim.sheet.interface))
-    rows, record = fc.compare(sim, model_hook=hook, bounds=bounds)
+    rows, record = alignment.gate(sim, model_hook=hook, bounds=bounds)
     checks = []
     for r in rows:
         unit = "fast / FEM" if r.kind == "ratio" else "fast - FEM"

@@ -177,6 +177,69 @@ def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, 
             assert ((factor < lo) | (factor > hi)).any(), (metric, base, inj)
 
 
+# The gate (validate) judges the count-CoP shear rows on their means over the alignments of cap,
+# walls and taxels (fem_reference.alignment.gate): which of those rows see each error
+ALIGNED_INJECTIONS = {
+    "flank pressure lost": ("superficial_asymmetry_counts",),
+    "cover rigid in shear": ("deep_cop_counts_mm", "superficial_asymmetry_counts"),
+    "lattice 10x too stiff in shear": ("interlayer_shift_counts_mm", "deep_cop_counts_mm"),
+    "sheet 100x too stiff in bending": ("interlayer_shift_counts_mm", "effective_height_counts", "deep_cop_counts_mm",
+                                        "effective_height_rise"),
+}
+
+
+def _aligned(rows) -> dict:
+    out: dict = {}
+    for r in rows:
+        if r.load.endswith("aligned mean") or r.load.endswith("aligned means"):
+            out.setdefault(r.metric, []).append(r)
+    return out
+
+
+@pytest.fixture(scope="module")
+def gate_base():
+    from layerskin_exp.sim.fem_reference import alignment as al
+
+    skin._TABLE_CACHE.clear()
+    return al.gate(SIM, bounds=("bonded",))
+
+
+def test_the_gate_judges_every_count_row_on_the_alignment_means(gate_base):
+    from layerskin_exp.sim.fem_reference import alignment as al
+
+    rows, record = gate_base
+    aligned = _aligned(rows)
+    assert set(aligned) == {*al.SIGNALS, "effective_height_rise"}
+    single = [r for r in rows if r.metric in aligned and r not in sum(aligned.values(), [])]
+    assert single == []  # no count row at the committed section's one alignment is left
+    table = record["alignments"]
+    for name in al.SIGNALS:
+        assert [(r.fem, r.fast) for r in aligned[name]] == [
+            (row[name]["fem"]["mean"], row[name]["fast"]["mean"]) for row in table.values()]
+    # the same rows and bands as compare's, where compare's are not count rows
+    plain, _ = fc.compare(SIM, bounds=("bonded",))
+    others = [(r.metric, r.load, r.fem, r.fast, r.lo, r.hi) for r in plain if r.metric not in aligned]
+    assert others == [(r.metric, r.load, r.fem, r.fast, r.lo, r.hi) for r in rows if r.metric not in aligned]
+
+
+@pytest.mark.parametrize("error", list(ALIGNED_INJECTIONS))
+def test_each_aligned_count_row_sees_the_error_it_names(error, gate_base, monkeypatch, fresh_tables):
+    from layerskin_exp.sim.fem_reference import alignment as al
+
+    patch, hook, _ = INJECTIONS[error]
+    if patch is not None:
+        patch(monkeypatch)
+    got = _aligned(al.gate(SIM, bounds=("bonded",), model_hook=hook)[0])
+    base = _aligned(gate_base[0])
+    for metric in ALIGNED_INJECTIONS[error]:
+        b, g = np.array([r.fast for r in base[metric]]), np.array([r.fast for r in got[metric]])
+        lo, hi = base[metric][0].lo, base[metric][0].hi
+        if base[metric][0].kind == "difference":
+            assert (np.abs(g - b) > hi).any(), (metric, b, g)
+        else:
+            assert ((g / b < lo) | (g / b > hi)).any(), (metric, b, g)
+
+
 # ---------------------------------------------------------------- the committed data
 @pytest.fixture(scope="module")
 def committed():
