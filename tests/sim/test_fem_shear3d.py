@@ -413,3 +413,72 @@ def test_the_3d_mesh_error_check_sees_a_larger_change():
                                                      for n, q in step["quantities"].items()}}
                          for k, step in tt["steps"].items()}}
     assert set(s3.uncovered3d(conv, load_tolerances(), doubled)) >= {"fz_n", "max_lattice_strain", "peak_deep_kpa"}
+
+
+@pytest.fixture(scope="module")
+def load_branch():
+    with np.load(s3.DATA / "shear3d_load_branch.npz") as z:
+        return {k: z[k] for k in z.files}
+
+
+def test_the_load_branch_is_the_study_load_with_a_volume_keeping_cover(load_branch):
+    """The committed branch is what shear3d.LOAD_BRANCH says: pressed sticking to 3 N within
+    LOAD_TOL, the cover at nu 0.499, on the refined mesh; it balances and was sheared."""
+    import json
+
+    sec = json.loads(str(load_branch["section"]))
+    assert sec["cover_nu"] == s3.LOAD_BRANCH["cover_nu"]
+    assert bool(load_branch["sticking_press"])
+    press = load_branch["phase"] == 0
+    assert press.sum() == 1
+    assert abs(load_branch["fz_n"][press][0] / 3.0 - 1.0) <= s3.LOAD_TOL
+    assert int(load_branch["dof"]) > 10_000  # the refined mesh (the committed coarse one: ~6k)
+    s3.require_balance3d(load_branch, log=lambda *_: None)
+    sheared = load_branch["phase"] == 1
+    assert sheared.any() and np.all(load_branch["fx_n"][sheared] > 0)
+
+
+def test_the_load_branch_rows_are_what_its_data_give(load_branch):
+    import json
+
+    committed = json.loads((s3.DATA / "shear3d_load_branch.json").read_text())
+    assert committed["branches"] == json.loads(json.dumps(s3.load_branch3d(load_branch)))
+    assert committed["stopped"] == json.loads(str(load_branch["stopped"]))
+
+
+def _first_step_over_closed_form(res: dict, closed_form=s3.series_shear_stiffness) -> float:
+    """The first sheared state's secant stiffness F_x / travel over the closed form's."""
+    import json
+
+    sec = Section(**json.loads(str(res["section"])))
+    j = int(np.flatnonzero(res["phase"] == 0)[0])
+    k = closed_form(sec, 0.5 * float(res["contact_to_mm"][j] - res["contact_from_mm"][j]), float(res["contact_y_mm"][j]))
+    i = int(np.flatnonzero(res["phase"] == 1)[0])
+    return float(res["fx_n"][i] / res["cap_x_mm"][i] / k["series_n_per_mm"])
+
+
+# the tolerances' band for stiffness-like quantities (fem_reference/tolerances.yaml: a factor of 1.5)
+STIFFNESS_BAND = (0.67, 1.5)
+
+
+def test_the_load_branchs_shear_stiffness_is_the_cover_patch_and_the_lattice_in_series(load_branch):
+    """At 3 N the cap's tangential load reaches the sheet through the cover's shear under the
+    contact patch, in series with the lattice's shear over the pad."""
+    assert STIFFNESS_BAND[0] <= _first_step_over_closed_form(load_branch) <= STIFFNESS_BAND[1]
+
+
+@pytest.mark.parametrize("injected", ["lattice only", "cover over the pad", "cover twice as thick"])
+def test_the_series_stiffness_check_sees_a_missing_or_wrong_spring(load_branch, injected):
+    def wrong(sec, a_x, a_y):
+        if injected == "lattice only":
+            k = s3.series_shear_stiffness(sec, a_x, a_y)
+            return {**k, "series_n_per_mm": k["lattice_n_per_mm"]}
+        if injected == "cover over the pad":
+            half = 0.5 * sec.width_mm
+            return s3.series_shear_stiffness(sec, half, half)
+        import dataclasses
+
+        return s3.series_shear_stiffness(dataclasses.replace(sec, cover_mm=2 * sec.cover_mm), a_x, a_y)
+
+    ratio = _first_step_over_closed_form(load_branch, wrong)
+    assert not STIFFNESS_BAND[0] <= ratio <= STIFFNESS_BAND[1], ratio

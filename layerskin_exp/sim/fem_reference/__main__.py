@@ -10,6 +10,9 @@
     python -m layerskin_exp.sim.fem_reference --shear3d-through-thickness  # the same branch with more
         # elements through the cover, the sheets and the lattice (refinement/shear3d_*.npz):
         # shear3d_through_thickness.json
+    python -m layerskin_exp.sim.fem_reference --shear3d-load-branch  # the 3D branch at 3 N with a cover
+        # that keeps its volume, pressed sticking, on the refined mesh (shear3d_load_branch.npz):
+        # its tangential stiffness beside a closed form, shear3d_load_branch.json
     python -m layerskin_exp.sim.fem_reference --cover-poisson 0.499  # the section with a less
         # compressible cover (cover_poisson/): cover_compressibility.json
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
@@ -327,6 +330,10 @@ def main(argv=None) -> int:
                          "layers' thickness (shear3d.THROUGH_THICKNESS; reference/refinement/shear3d_*.npz) beside the "
                          "committed one: "
                          "reference/shear3d_through_thickness.json")
+    ap.add_argument("--shear3d-load-branch", action="store_true",
+                    help="the 3D model pressed to the study's load with shear3d.LOAD_BRANCH's cover, contact and mesh "
+                         "and sheared sticking (reference/shear3d_load_branch.npz): its tangential stiffness beside the "
+                         "series closed form, reference/shear3d_load_branch.json")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
@@ -343,7 +350,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     sim = load_sim([])
     if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
-            or args.alignments or args.shear3d_through_thickness or args.cover_poisson):
+            or args.alignments or args.shear3d_through_thickness or args.cover_poisson or args.shear3d_load_branch):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -426,6 +433,17 @@ def main(argv=None) -> int:
         check = {"seconds": round(time.time() - t0, 1),
                  **s3.through_thickness3d(dict(np.load(out / "shear3d.npz")), by_name, sim, data=out)}
         (out / "shear3d_through_thickness.json").write_text(json.dumps(check, indent=1))
+        print(json.dumps(check, indent=1))
+    if args.shear3d_load_branch:
+        from layerskin_exp.sim.fem_reference import shear3d as s3
+
+        t0 = time.time()
+        out = args.out or DATA
+        res = s3.run_shear3d(sim, depths=(), **s3.LOAD_BRANCH)
+        np.savez_compressed(out / "shear3d_load_branch.npz", **res)
+        check = {"seconds": round(time.time() - t0, 1), "dof": int(res["dof"]),
+                 "stopped": json.loads(str(res["stopped"])), "branches": s3.load_branch3d(res)}
+        (out / "shear3d_load_branch.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check, indent=1))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
