@@ -482,3 +482,51 @@ def test_the_series_stiffness_check_sees_a_missing_or_wrong_spring(load_branch, 
 
     ratio = _first_step_over_closed_form(load_branch, wrong)
     assert not STIFFNESS_BAND[0] <= ratio <= STIFFNESS_BAND[1], ratio
+
+
+def test_the_fast_model_is_compared_with_the_load_branch_on_its_own_figures(load_branch):
+    from layerskin_exp.sim.fem_reference import compare as fc
+
+    tol = fc.load_tolerances()
+    rows = s3.load_branch_rows(SimConfig(), tol)
+    assert [r.metric for r in rows] == list(s3.LOAD_BRANCH_METRICS.values())
+    by = {r.metric: r for r in rows}
+    j = int(np.flatnonzero(load_branch["phase"] == 0)[0])
+    i = int(np.flatnonzero(load_branch["phase"] == 1)[0])
+    travel = float(load_branch["cap_x_mm"][i])
+    assert by["line_load_at_depth"].fem == float(load_branch["fz_n"][j])
+    assert by["tangential_stiffness"].fem == pytest.approx(float(load_branch["fx_n"][i]) / travel)
+    assert by["sheet_share_of_travel"].fem == pytest.approx(float(load_branch["sheet_shift_mm"][i]) / travel)
+    assert (by["tangential_stiffness"].lo, by["tangential_stiffness"].hi) == tuple(tol["ratio"]["tangential_stiffness"])
+    # the fast model was pressed to the branch's load, not its depth
+    rec = s3.fast_at_load_branch(SimConfig(), load_branch)
+    assert next(iter(rec.values()))["fast_fz_n"] == pytest.approx(float(load_branch["fz_n"][j]), rel=1e-3)
+
+
+# which load-branch rows see each error of tests/sim/fem_injections.py (the others move none of them
+# out of its band at 3 N)
+LOAD_BRANCH_INJECTIONS = {"cover rigid in shear": ("tangential_stiffness", "sheet_share_of_travel"),
+                          "lattice 10x too stiff in shear": ("tangential_stiffness", "sheet_share_of_travel"),
+                          "sheet 100x too stiff in bending": ("line_load_at_depth",)}
+
+
+@pytest.mark.parametrize("error", list(LOAD_BRANCH_INJECTIONS))
+def test_each_load_branch_row_sees_an_error_of_the_fast_model(error, monkeypatch):
+    from layerskin_exp.sim import skin
+    from layerskin_exp.sim.fem_reference import compare as fc
+    from tests.sim.fem_injections import INJECTIONS
+
+    patch, hook, _ = INJECTIONS[error]
+    metrics = LOAD_BRANCH_INJECTIONS[error]
+
+    tol = fc.load_tolerances()
+    monkeypatch.setattr(skin, "_TABLE_CACHE", {})
+    base = {r.metric: r for r in s3.load_branch_rows(SimConfig(), tol)}
+    if patch is not None:
+        patch(monkeypatch)
+    monkeypatch.setattr(skin, "_TABLE_CACHE", {})
+    got = {r.metric: r for r in s3.load_branch_rows(SimConfig(), tol, model_hook=hook)}
+    for metric in metrics:
+        b, g = base[metric], got[metric].fast
+        moved = abs(g - b.fast) > b.hi if b.kind == "difference" else not b.lo <= g / b.fast <= b.hi
+        assert moved, (error, metric, b.fast, g)

@@ -445,6 +445,9 @@ def main(argv=None) -> int:
                  "stopped": json.loads(str(res["stopped"])), "branches": s3.load_branch3d(res)}
         (out / "shear3d_load_branch.json").write_text(json.dumps(check, indent=1))
         print(json.dumps(check, indent=1))
+        from layerskin_exp.sim.fem_reference.compare import load_tolerances, table
+
+        print(table(s3.load_branch_rows(sim, load_tolerances(), out)))  # the fast model beside it (not gated)
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 
