@@ -810,8 +810,9 @@ def thin_layer_half_width_mm(sec: Section, load_n: float) -> float:
     incompressible layer (the cover, thickness t, shear modulus G) bonded to a rigid backing and
     stuck to the sphere: the layer's squeeze flow between two no-slip faces, (t^3 / 12 G) lap(p) =
     -(delta - r^2 / 2R), with p = p' = 0 at the contact's edge, gives p = 12 G (a^2 - r^2)^2 /
-    (32 R t^3) and P = pi G a^6 / (8 R t^3) (the thin-layer limit of Johnson 1985, sec. 5.9; valid
-    for a >> t, and it leaves out the backing's own deflection)."""
+    (32 R t^3) and P = pi G a^6 / (8 R t^3) (derived here: the incompressible counterpart of the
+    thin compressible layer of Johnson 1985, sec. 5.9, which tests/sim/test_fem_closed_forms.py
+    checks; valid for a >> t, and it leaves out the backing's own deflection)."""
     g_cover = sec.cover_e_mpa / (2.0 * (1.0 + sec.cover_poisson()))
     return float((8.0 * load_n * sec.radius_mm * sec.cover_mm ** 3 / (np.pi * g_cover)) ** (1.0 / 6.0))
 
