@@ -307,6 +307,14 @@ def write_shear3d(res: dict, out: Path, seconds: float, sim=None) -> dict:
     return check
 
 
+def _write_study(path: Path, t0: float, body: dict) -> dict:
+    """A study's record: its wall time since t0, then body; written to path as JSON and printed."""
+    check = {"seconds": round(time.time() - t0, 1), **body}
+    path.write_text(json.dumps(check, indent=1))
+    print(json.dumps(check, indent=1))
+    return check
+
+
 def main(argv=None) -> int:
     from layerskin_exp.sim.config import load_sim
 
@@ -381,10 +389,8 @@ def main(argv=None) -> int:
         hom = run_bound(sim, MESHES["default"], homogenised=True)
         require_balance(hom)
         np.savez_compressed(out / "homogenised.npz", **hom)
-        check = {"seconds": round(time.time() - t0, 1),
-                 "branches": homogenisation_check(dict(np.load(out / f"{BOUND}.npz")), hom, sim)}
-        (out / "homogenisation.json").write_text(json.dumps(check, indent=1))
-        print(json.dumps(check, indent=1))
+        _write_study(out / "homogenisation.json", t0,
+                     {"branches": homogenisation_check(dict(np.load(out / f"{BOUND}.npz")), hom, sim)})
     if args.shear3d:
         from layerskin_exp.sim.fem_reference.shear3d import LOADS_N, run_shear3d
 
@@ -403,10 +409,8 @@ def main(argv=None) -> int:
         fine = s3.run_shear3d(sim, x_edges=s3.REFINED_X_EDGES_MM, y_edges=s3.REFINED_Y_EDGES_MM,
                               depths=(s3.REFINEMENT_DEPTH_MM,), loads_n=())
         np.savez_compressed(out / "refinement" / "shear3d.npz", **fine)
-        check = {"seconds": round(time.time() - t0, 1),
-                 **s3.refinement3d(dict(np.load(out / "shear3d.npz")), fine, sim, data=out)}
-        (out / "shear3d_convergence.json").write_text(json.dumps(check, indent=1))
-        print(json.dumps(check, indent=1))
+        _write_study(out / "shear3d_convergence.json", t0,
+                     s3.refinement3d(dict(np.load(out / "shear3d.npz")), fine, sim, data=out))
     if args.cover_poisson:
         from layerskin_exp.sim.fem_reference.convergence import cover_compressibility
 
@@ -417,9 +421,7 @@ def main(argv=None) -> int:
         for nu in args.cover_poisson:
             res = run_bound(sim, MESHES["default"], cover_nu=nu)
             np.savez_compressed(folder / f"nu_{nu:.4f}.npz", **res)
-        check = {"seconds": round(time.time() - t0, 1), **cover_compressibility(sim, args.cover_poisson, out)}
-        (out / "cover_compressibility.json").write_text(json.dumps(check, indent=1))
-        print(json.dumps(check, indent=1))
+        _write_study(out / "cover_compressibility.json", t0, cover_compressibility(sim, args.cover_poisson, out))
     if args.shear3d_through_thickness:
         from layerskin_exp.sim.fem_reference import shear3d as s3
 
@@ -430,10 +432,8 @@ def main(argv=None) -> int:
         for name, elements in s3.THROUGH_THICKNESS.items():
             by_name[name] = s3.run_shear3d(sim, depths=(s3.REFINEMENT_DEPTH_MM,), loads_n=(), elements=elements)
             np.savez_compressed(out / "refinement" / f"shear3d_{name}.npz", **by_name[name])
-        check = {"seconds": round(time.time() - t0, 1),
-                 **s3.through_thickness3d(dict(np.load(out / "shear3d.npz")), by_name, sim, data=out)}
-        (out / "shear3d_through_thickness.json").write_text(json.dumps(check, indent=1))
-        print(json.dumps(check, indent=1))
+        _write_study(out / "shear3d_through_thickness.json", t0,
+                     s3.through_thickness3d(dict(np.load(out / "shear3d.npz")), by_name, sim, data=out))
     if args.shear3d_load_branch:
         from layerskin_exp.sim.fem_reference import shear3d as s3
 
@@ -441,10 +441,8 @@ def main(argv=None) -> int:
         out = args.out or DATA
         res = s3.run_shear3d(sim, depths=(), **s3.LOAD_BRANCH)
         np.savez_compressed(out / "shear3d_load_branch.npz", **res)
-        check = {"seconds": round(time.time() - t0, 1), "dof": int(res["dof"]),
-                 "stopped": json.loads(str(res["stopped"])), "branches": s3.load_branch3d(res)}
-        (out / "shear3d_load_branch.json").write_text(json.dumps(check, indent=1))
-        print(json.dumps(check, indent=1))
+        _write_study(out / "shear3d_load_branch.json", t0, {"dof": int(res["dof"]), "stopped": json.loads(str(res["stopped"])),
+                                                            "branches": s3.load_branch3d(res)})
         from layerskin_exp.sim.fem_reference.compare import load_tolerances, table
 
         print(table(s3.load_branch_rows(sim, load_tolerances(), out)))  # the fast model beside it (not gated)
