@@ -378,6 +378,125 @@ class Pty:
         self.master, self.slave = -1, None
 
 
+class TcpSerialLink:
+    """A serial line carried over TCP, as a serial device server (ser2net) or a networked GRBL
+    (Grbl_ESP32, FluidNC) carries one: the emulator listens on a loopback port and a driver opens
+    `path`, a pyserial URL ("socket://127.0.0.1:PORT"). The same surface as `Pty` (read, write,
+    host_attached, forget_unread, close), so an emulator's protocol loop runs on either.
+
+    Why a loopback bench uses it: the kernel hands a pseudo-terminal's bytes from one side to the
+    other in a worker thread of ordinary priority (flush_to_ldisc on a kworker). On a busy host that
+    worker waits for a CPU like any other thread (80-330 ms sampled beside twice the core count of
+    busy processes, while a stream of skin frames kept the same pool busy), so a '?' reached the
+    emulated GRBL late however it was scheduled itself, and its report counted as missing. Loopback
+    TCP delivers in the sender's own system call.
+
+    Bytes written while no host is connected wait, up to `hold_bytes`, for the next host (as a pty
+    whose slave stays open keeps them); a host that connects while another is connected takes the
+    line over (a serial port has one user). The listening port stays until close().
+    """
+
+    def __init__(self, host: str = "127.0.0.1", hold_bytes: int = 4096) -> None:
+        self._listener: socket.socket | None = socket.create_server((host, 0))
+        self._listener.setblocking(False)
+        self.path = f"socket://{host}:{self._listener.getsockname()[1]}"
+        self._client: socket.socket | None = None
+        self._held = bytearray()
+        self._hold_bytes = int(hold_bytes)
+
+    @property
+    def closed(self) -> bool:
+        return self._listener is None
+
+    def _accept(self) -> None:
+        if self._listener is None:
+            return
+        try:
+            client, _ = self._listener.accept()
+        except (BlockingIOError, InterruptedError):
+            return
+        self._drop_client()
+        client.setblocking(False)
+        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._client = client
+        held, self._held = bytes(self._held), bytearray()
+        if held:
+            self.write(held)
+
+    def _drop_client(self) -> None:
+        if self._client is not None:
+            try:
+                self._client.close()
+            except OSError:
+                pass
+            self._client = None
+
+    def host_attached(self) -> bool:
+        self._accept()
+        return self._client is not None
+
+    def forget_unread(self) -> None:
+        """Discard bytes held for a host that is not connected."""
+        self._held.clear()
+
+    def read(self, timeout_s: float = 0.0) -> bytes:
+        """What the host wrote (b"" when nothing came within timeout_s or no host is connected)."""
+        if self._listener is None:
+            return b""
+        watched = [self._listener] + ([self._client] if self._client is not None else [])
+        ready, _, _ = select.select(watched, [], [], max(timeout_s, 0.0))
+        if self._listener in ready:
+            self._accept()
+        client = self._client
+        if client is None or client not in ready:
+            return b""
+        try:
+            data = client.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        except OSError:
+            data = b""
+        if not data:  # the host closed its end
+            self._drop_client()
+        return data
+
+    def write(self, data) -> int:
+        """Write what the link takes now; returns the bytes taken (the rest did not fit)."""
+        if self._listener is None:
+            return 0
+        self._accept()
+        if self._client is None:
+            take = min(len(data), self._hold_bytes - len(self._held))
+            self._held += bytes(data[:take])
+            return take
+        try:
+            return self._client.send(data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError:
+            self._drop_client()
+            return 0
+
+    def close(self) -> None:
+        self._drop_client()
+        if self._listener is not None:
+            self._listener.close()
+            self._listener = None
+
+
+SERIAL_LINKS = ("pty", "tcp")
+
+
+def serial_link(kind: str, hold: bool = False) -> Pty | TcpSerialLink:
+    """An emulated serial device's end of its line: "pty" (a path any serial program opens) or
+    "tcp" (a pyserial socket:// URL; see TcpSerialLink for why a loopback bench uses it)."""
+    if kind == "pty":
+        return Pty(hold_slave=hold)
+    if kind == "tcp":
+        return TcpSerialLink(hold_bytes=4096 if hold else 0)
+    raise ValueError(f"serial link {kind!r}: choose one of {SERIAL_LINKS}: 'pty' (a port path) or 'tcp' (a socket:// URL)")
+
+
 def free_loopback_host(ports: dict[int, int], first: int = 2, last: int = 254) -> str:
     """A loopback address 127.0.0.N on which every (port, socket type) of `ports` can be bound,
     so that emulators on a device's usual ports do not collide with each other."""

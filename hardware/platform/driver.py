@@ -28,12 +28,20 @@ Stall: GRBL's reports carry no clock, so a stall is judged by its answers to `?`
 longer than the bound less one poll period, and fault() first reads what the OS holds for the
 port (a status report may sit there unread while the reader thread is not scheduled). A poller
 the host did not run leaves no query unanswered: that is a busy host, not a silent GRBL.
+
+The port is opened with pyserial's `serial_for_url`: a device path (/dev/ttyUSB0, a pty) or a
+URL such as socket://HOST:PORT (a serial device server, a networked GRBL such as Grbl_ESP32; the
+loopback bench serves GRBL this way, see hardware.emulation.TcpSerialLink).
 """
 
 from __future__ import annotations
 
+import fcntl
 import logging
 import select
+import socket
+import struct
+import termios
 import threading
 import time
 from collections import deque
@@ -112,10 +120,13 @@ class GrblPlatform(Platform):
         cfg = self.cfg
         self._reset_link_state()
         try:
-            self._ser = serial.Serial(cfg.port, cfg.baudrate, timeout=0.005, write_timeout=0.5)
+            self._ser = serial.serial_for_url(cfg.port, cfg.baudrate, timeout=0.005, write_timeout=0.5)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeviceError(f"platform: cannot open the GRBL serial port {cfg.port!r} ({exc}); check the USB "
                               "cable, that the port exists, and that no other program (a G-code sender) holds it") from exc
+        if cfg.port.startswith("socket://"):  # '?' is one byte: sent at once, not held back to fill a segment
+            with socket.fromfd(self._ser.fileno(), socket.AF_INET, socket.SOCK_STREAM) as sock:  # a duplicate
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._stop_threads.clear()
         self._connecting = True
         self._threads = [threading.Thread(target=self._read_loop, name="grbl-reader", daemon=True)]
@@ -366,12 +377,12 @@ class GrblPlatform(Platform):
             return
         with self._rx_lock:
             try:
-                waiting = ser.in_waiting
+                waiting = _bytes_waiting(ser)
                 if not waiting and not from_reader:
                     # a poll hands the line discipline what the kernel's tty buffer still holds (the
                     # byte count does not): under load its worker moves bytes tens of ms late
                     if select.select([ser.fileno()], [], [], 0)[0]:
-                        waiting = ser.in_waiting
+                        waiting = _bytes_waiting(ser)
                     if not waiting:
                         return
                 data = ser.read(max(1, waiting))
@@ -548,3 +559,9 @@ class GrblPlatform(Platform):
         if st is None:
             return "unknown"
         return st.state if st.substate is None else f"{st.state}:{st.substate}"
+
+
+def _bytes_waiting(ser) -> int:
+    """Bytes the OS holds for the port, on a tty and on a socket:// link alike (FIONREAD; pyserial's
+    socket in_waiting says only 0 or 1)."""
+    return struct.unpack("I", fcntl.ioctl(ser.fileno(), termios.FIONREAD, b"\0\0\0\0"))[0]

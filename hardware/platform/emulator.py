@@ -62,7 +62,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hardware.emulation import DeviceProcess, Emulator, Pty
+from hardware.emulation import SERIAL_LINKS, DeviceProcess, Emulator, Pty, TcpSerialLink, serial_link
 from hardware.interfaces import DeviceError
 from hardware.platform import gcode, wire
 
@@ -102,9 +102,10 @@ class GrblMachine(Emulator):
 
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, start_in_alarm: bool = False,
                  planner_blocks: int = wire.PLANNER_BLOCKS, rx_buffer_bytes: int = wire.RX_BUFFER_BYTES,
-                 tick_s: float = 0.001, stall_after_s: float | None = None,
+                 tick_s: float = 0.001, link: str = "pty", stall_after_s: float | None = None,
                  disconnect_after_s: float | None = None) -> None:
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
+        self.link = link  # "pty" | "tcp" (hardware.emulation.serial_link)
         self.start_in_alarm = start_in_alarm
         self.planner_blocks = int(planner_blocks)
         self.rx_buffer_bytes = int(rx_buffer_bytes)
@@ -130,13 +131,13 @@ class GrblMachine(Emulator):
         self.status_reports = 0
         self.resets = 0
         self.path: str | None = None
-        self.pty: Pty | None = None
+        self.pty: Pty | TcpSerialLink | None = None
         self._reset_state(power_up=True)
 
     # ---- life cycle ----------------------------------------------------------------------------
     def _open(self) -> str:
-        # The slave stays open here: GRBL's replies wait in the port for the host to read them.
-        self.pty = Pty(hold_slave=True)
+        # Held: GRBL's replies wait in the port for the host to read them.
+        self.pty = serial_link(self.link, hold=True)
         self.path = self.pty.path
         self._come_up()
         self._spawn(self._run, "serial")
@@ -685,11 +686,13 @@ class GrblEmulator(Emulator):
 
     def __init__(self, rt, host: str = "127.0.0.1", port: int = 0, *, start_in_alarm: bool = False,
                  planner_blocks: int = wire.PLANNER_BLOCKS, rx_buffer_bytes: int = wire.RX_BUFFER_BYTES,
-                 tick_s: float = 0.001, stall_after_s: float | None = None,
+                 tick_s: float = 0.001, link: str = "pty", stall_after_s: float | None = None,
                  disconnect_after_s: float | None = None) -> None:
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
+        if link not in SERIAL_LINKS:  # refused here, not in the device process
+            raise ValueError(f"GRBL emulator: link {link!r}: choose one of {SERIAL_LINKS} (see hardware.emulation.serial_link)")
         self._options = {"start_in_alarm": bool(start_in_alarm), "planner_blocks": int(planner_blocks),
-                         "rx_buffer_bytes": int(rx_buffer_bytes), "tick_s": float(tick_s)}
+                         "rx_buffer_bytes": int(rx_buffer_bytes), "tick_s": float(tick_s), "link": link}
         self.tick_s = float(tick_s)
         self.path: str | None = None
         self._machine: DeviceProcess | None = None

@@ -1,15 +1,17 @@
 """The emulator base: one fault vocabulary for the six emulators, and no stream queued that no
-emulator drains (the structural cause of a standalone emulator's memory growth)."""
+emulator drains (the structural cause of a standalone emulator's memory growth); the serial line
+over loopback TCP."""
 
 from __future__ import annotations
 
 import math
+import socket
 import time
 
 import pytest
 
 from hardware.camera.emulator import CameraEmulator
-from hardware.emulation import FAULTS, Emulator
+from hardware.emulation import FAULTS, Emulator, serial_link
 from hardware.hande.emulator import HandEEmulator
 from hardware.loopback import EMULATORS, emulator_class
 from hardware.netft.emulator import NetFTEmulator
@@ -78,3 +80,62 @@ def test_streams_no_emulator_serves_are_not_queued(realtime_world):
     with SkinBoardEmulator(rt) as emu:  # a served stream goes to its emulator, not to the bin
         assert wait_for(lambda: emu.counts["no_host_frames"] > 50)
     assert rt._claims == {}  # released at stop
+
+
+def _read_until(sock, n: int, timeout_s: float = 5.0) -> bytes:
+    sock.settimeout(timeout_s)
+    got = b""
+    while len(got) < n:
+        chunk = sock.recv(n - len(got))
+        if not chunk:
+            break
+        got += chunk
+    return got
+
+
+def _link_read(link, n: int, timeout_s: float = 5.0) -> bytes:
+    got, deadline = b"", time.monotonic() + timeout_s
+    while len(got) < n and time.monotonic() < deadline:
+        got += link.read(0.05)
+    return got
+
+
+def test_a_serial_line_over_tcp_holds_carries_and_hands_over():
+    link = serial_link("tcp", hold=True)
+    try:
+        host, port = link.path.removeprefix("socket://").rsplit(":", 1)
+        assert host == "127.0.0.1" and not link.host_attached()
+        banner = b"Grbl 1.1h ['$' for help]\r\n"
+        assert link.write(banner) == len(banner)  # no host yet: held for the next one
+        first = socket.create_connection((host, int(port)))
+        link.read(0.05)  # the device's loop polls its line: the host is taken on
+        assert _read_until(first, len(banner)) == banner
+        first.sendall(b"?")
+        assert _link_read(link, 1) == b"?"
+        assert link.host_attached()
+        second = socket.create_connection((host, int(port)))  # a second host takes the line over
+        assert link.read(0.05) == b"" and link.host_attached()
+        assert link.write(b"ok\r\n") == 4
+        assert _read_until(second, 4) == b"ok\r\n"
+        assert _read_until(first, 1, 1.0) == b""  # the first was let go
+        second.close()
+        assert _link_read(link, 1, 0.5) == b"" and not link.host_attached()
+        third = socket.create_connection((host, int(port)))
+        link.read(0.05)
+        link.close()
+        assert link.closed and link.write(b"x") == 0 and link.read(0.01) == b""
+        assert _read_until(third, 1, 1.0) == b""  # closing is the line going away
+        first.close()
+        third.close()
+    finally:
+        link.close()
+
+
+def test_an_unheld_tcp_line_drops_what_no_host_reads_and_bad_kinds_are_refused():
+    link = serial_link("tcp")
+    try:
+        assert link.write(b"frame") == 0
+    finally:
+        link.close()
+    with pytest.raises(ValueError, match="'usb'.*'pty'.*'tcp'"):
+        serial_link("usb")

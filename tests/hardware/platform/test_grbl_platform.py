@@ -1,6 +1,9 @@
-"""GrblPlatform driver against the GRBL emulator on a pty, backed by the simulated stage."""
+"""GrblPlatform driver against the GRBL emulator, backed by the simulated stage: every case on
+both serial links, a pty (a port path) and loopback TCP (a socket:// URL, as the loopback bench
+serves GRBL)."""
 
 import os
+import socket
 import threading
 import time
 
@@ -15,15 +18,16 @@ from tests.hardware.waiting import healthy, wait_for
 HOME = np.array([0.0, 0.0, 5.0])  # the simulated stage's home (sim.rig.platform.home_mm)
 
 
-@pytest.fixture
-def bench(realtime_world):
+@pytest.fixture(params=["pty", "tcp"])
+def bench(realtime_world, request):
     """(driver, emulator, world); the driver connected. Keyword args go to the emulator."""
     made = []
 
     def make(connect=True, cfg_kw=None, **emu_kw):
         rt = realtime_world("platform")
-        emu = GrblEmulator(rt, **emu_kw)
+        emu = GrblEmulator(rt, link=request.param, **emu_kw)
         path = emu.start()
+        assert path.startswith("socket://127.0.0.1:") == (request.param == "tcp")
         drv = GrblPlatform(GrblPlatformConfig(port=path, connect_timeout_s=2.0, **(cfg_kw or {})))
         made.append((drv, emu))
         if connect:
@@ -153,9 +157,7 @@ def test_character_counting_never_overflows_the_receive_buffer(bench):
     # the same lines written without counting overflow GRBL's buffer
     emu.stall()
     raw = b"".join(wire.encode_move(t, 1200.0) for t in targets)
-    fd = os.open(emu.path, os.O_WRONLY | os.O_NOCTTY)
-    os.write(fd, raw)
-    os.close(fd)
+    drv._write(raw)  # the port's raw write, past the counter
     emu.resume()
     assert wait_for(lambda: emu.rx_overflow_bytes > 0)
 
@@ -187,6 +189,11 @@ def test_noise_is_counted_and_the_stream_goes_on(bench):
 def test_connect_errors_name_the_port(tmp_path):
     with pytest.raises(DeviceError, match="nonexistent"):
         GrblPlatform(GrblPlatformConfig(port=str(tmp_path / "nonexistent"))).connect()
+    with socket.socket() as unused:  # a serial device server that is not there
+        unused.bind(("127.0.0.1", 0))
+        url = f"socket://127.0.0.1:{unused.getsockname()[1]}"
+    with pytest.raises(DeviceError, match=f"cannot open the GRBL serial port '{url}'"):
+        GrblPlatform(GrblPlatformConfig(port=url)).connect()
     master, slave = os.openpty()  # a port where nothing answers
     try:
         drv = GrblPlatform(GrblPlatformConfig(port=os.ttyname(slave), connect_timeout_s=0.2))
