@@ -46,7 +46,7 @@ spindle overrides (0x95-0x9E are taken and ignored: `Ov:` keeps 100 for them), `
 EEPROM timing, the 500 ms pause GRBL takes after printing an ALARM, baud-rate pacing.
 
 Faults (hardware.emulation's vocabulary): stall() (stops reading and answering: a hung
-controller; resume() ends it), disconnect() (closes the pty master: the host sees the port vanish),
+controller; resume() ends it), disconnect() (closes the line's device end: the host sees the port vanish),
 drop(n) (the next n messages to the host are lost), corrupt(n, how) (the next n messages arrive as
 "noise": line noise before the message, or "garbled": a byte of the message changed);
 start_in_alarm=True (power-up alarm, as with homing enabled).
@@ -90,7 +90,8 @@ class _Move:
 
 
 class GrblMachine(Emulator):
-    """GRBL 1.1h on a pty, backed by `rt.rig.platform`; `start()` returns the slave path to open.
+    """GRBL 1.1h on a serial line (a pty, or loopback TCP with link="tcp"), backed by
+    `rt.rig.platform`; `start()` returns what to open: the pty's path or a socket:// URL.
     (Runs in the controller's own process, hardware.platform.machine; `GrblEmulator` starts it.)
 
     host/port: accepted for the common emulator signature; a serial device has neither.
@@ -131,21 +132,21 @@ class GrblMachine(Emulator):
         self.status_reports = 0
         self.resets = 0
         self.path: str | None = None
-        self.pty: Pty | TcpSerialLink | None = None
+        self.line: Pty | TcpSerialLink | None = None  # the serial line's device end
         self._reset_state(power_up=True)
 
     # ---- life cycle ----------------------------------------------------------------------------
     def _open(self) -> str:
         # Held: GRBL's replies wait in the port for the host to read them.
-        self.pty = serial_link(self.link, hold=True)
-        self.path = self.pty.path
+        self.line = serial_link(self.link, hold=True)
+        self.path = self.line.path
         self._come_up()
         self._spawn(self._run, "serial")
         return self.path
 
     def _close(self) -> None:
-        if self.pty is not None:
-            self.pty.close()
+        if self.line is not None:
+            self.line.close()
 
     @property
     def state(self) -> str:
@@ -211,15 +212,15 @@ class GrblMachine(Emulator):
 
     # ---- main loop -----------------------------------------------------------------------------
     def _run(self) -> None:
-        pty = self.pty
+        line = self.line
         while not self._stop.is_set():
             if self.disconnected:
-                pty.close()
+                line.close()
                 return
             if self.stalled:
                 time.sleep(self.tick_s)
                 continue
-            for b in pty.read(self.tick_s):
+            for b in line.read(self.tick_s):
                 self._receive_byte(b)
             self._step()
 
@@ -236,7 +237,7 @@ class GrblMachine(Emulator):
                 data = bytes(data)
         view = memoryview(data)
         while view:
-            n = self.pty.write(view)
+            n = self.line.write(view)
             if n == 0:
                 self.tx_dropped_bytes += len(view)
                 return
@@ -670,7 +671,8 @@ class GrblMachine(Emulator):
 
 
 class GrblEmulator(Emulator):
-    """GRBL 1.1h on a pty, backed by `rt.rig.platform`; `start()` returns the slave path to open.
+    """GRBL 1.1h on a serial line (a pty, or loopback TCP with link="tcp"), backed by
+    `rt.rig.platform`; `start()` returns what to open: the pty's path or a socket:// URL.
 
     The controller (GrblMachine) runs in a process of its own (hardware.platform.machine, which
     says why); this object starts it and runs the bridge thread that, every millisecond, pushes

@@ -1,4 +1,4 @@
-"""The emulated GRBL controller's own process: its pty, its protocol loop, its faults.
+"""The emulated GRBL controller's own process: its serial line, its protocol loop, its faults.
 
 Run as `python -m hardware.platform.machine FD OPTIONS_JSON`, started by `GrblEmulator`, for the
 reason a real GRBL board is another machine: it answers `?` whatever the host is doing (in the
