@@ -154,9 +154,14 @@ class PlatformControl:
         self.platform.move_to(target_mm, speed_mm_s)
 
         def step(_frames, wrenches):
-            if rig.tripped is not None and not self.safety.unloading:
-                return "trip", rig.tripped
             reason = stop_when(wrenches) if stop_when is not None else None
+            if rig.tripped is not None and not self.safety.unloading:
+                if reason is not None and trip_name(rig.tripped) == SLOW_ZONE:
+                    # the sample that entered the zone also met the stop condition (a stiff contact,
+                    # or samples read late on a busy host): the stage has stopped for the zone and the
+                    # move is done; going on at a crawl would press past the target into the guard
+                    return "zone_stop", reason
+                return "trip", rig.tripped
             if reason is not None:
                 return "stop", reason
             return None if self.platform.is_moving() else ("arrived", None)
@@ -179,6 +184,10 @@ class PlatformControl:
         elif kind == "stop":
             self.platform.stop()
             self.wait_stopped()
+        elif kind == "zone_stop":
+            self.wait_stopped()
+            self.safety.platform_speed_mm_s = 0.0  # the stage stands (see the slow zone above)
+            rig.clear_trip()
         return reason
 
     def wait_stopped(self) -> None:

@@ -88,12 +88,18 @@ def test_slide_vertical_offset_is_spread_over_the_move_or_its_first_millimetre(t
     np.testing.assert_allclose(dz, expected, atol=0.01)
 
 
+# a slow zone no sample of the coarse presses below falls in (0.99 x 6 N, 6 N], as in test_apps
+NO_ZONE = {"safety.slow_zone_speed_mm_s": 1.0, "safety.slow_zone_fraction": 0.99}
+
+
 def test_force_guard_stops_within_one_sample(tmp_path):
     # A coarse 0.1 s loop at 10 mm/s on a stiff 40 N/mm spring: the loop alone would overshoot by
     # 40 N; the per-sample guard must stop the platform within one F/T sample (40 N/mm x 10 um).
+    # The slow zone is set out of the way (NO_ZONE): where it stops the stage, the press ends at its
+    # target, met in the same tick, and never reaches the guard.
     k, v, ft_hz = 40.0, 10.0, 1000.0
     cfg = _cal_cfg(tmp_path, **{"press.speed_mm_s": v, "control_period_s": 0.1, "slide.repeats": 0,
-                                "press.stop_on_sample": False, "press.slow_above_n": 100.0})
+                                "press.stop_on_sample": False, "press.slow_above_n": 100.0, **NO_ZONE})
     results = run_campaign(cfg, _connected(platform_rig(k_n_per_mm=k, ft_hz=ft_hz)), META)
     s = load_session(results[0].path, warn=False)
     assert results[0].stop_reason == "force_limit"
@@ -105,7 +111,7 @@ def test_a_safety_trip_is_in_the_outcome_and_logged_as_a_warning(tmp_path, caplo
     # The press of test_force_guard_stops_within_one_sample trips the 6 N limit: the trial retracts
     # and finishes, so it is complete (analysed, not run again) but its outcome says why it stopped.
     cfg = _cal_cfg(tmp_path, **{"press.speed_mm_s": 10.0, "control_period_s": 0.1, "slide.repeats": 0,
-                                "press.stop_on_sample": False, "press.slow_above_n": 100.0})
+                                "press.stop_on_sample": False, "press.slow_above_n": 100.0, **NO_ZONE})
     with caplog.at_level(logging.INFO, logger="protocols.runner"):
         (result,) = run_campaign(cfg, _connected(platform_rig(k_n_per_mm=40.0, ft_hz=1000.0)), META)
     s = load_session(result.path, warn=False)
@@ -251,3 +257,39 @@ def test_a_late_sample_after_a_slow_zone_stop_does_not_trip_the_zone_again(tmp_p
     assert result.stop_reason == "target_reached"
     s = load_session(result.path, warn=False)
     assert s.outcome == "complete" and s.streams["wrench"]["force_n"][:, 2].max() < 6.0
+
+
+def test_a_sample_that_meets_the_target_as_it_enters_the_slow_zone_ends_the_press(tmp_path, monkeypatch):
+    # Force jumps by 1 N between two samples (a stiff contact, or on the loopback bench a world that
+    # caught up in a burst on a busy host): from 4.8 N, below the 5 N target, to 5.8 N, past both the
+    # target and the slow zone (0.9 x 6 N). The zone's guard is checked first and stops the stage;
+    # the press must end there at its target, not go on at a crawl (it did, and a second burst took
+    # a loopback press into the 6 N force guard: "force_limit" instead of "target_reached").
+    cfg = _cal_cfg(tmp_path, **{"slide.repeats": 0, "press.target_normal_n": 5.0, "press.slow_above_n": 100.0})
+    rig = _connected(platform_rig(k_n_per_mm=4.0))
+    world = rig.clock.world
+    force = world.force_n
+
+    def jumping(pos_mm):
+        f = force(pos_mm)
+        if f[2] > 4.8:
+            f[2] += 1.0
+        return f
+
+    monkeypatch.setattr(world, "force_n", jumping)
+    moves = []
+    move_to = rig.platform.move_to
+
+    def recorded(target_mm, speed_mm_s):
+        moves.append(float(speed_mm_s))
+        return move_to(target_mm, speed_mm_s)
+
+    monkeypatch.setattr(rig.platform, "move_to", recorded)
+    (result,) = run_campaign(cfg, rig, META)
+    s = load_session(result.path, warn=False)
+    fz = s.streams["wrench"]["force_n"][:, 2]
+    first = fz[np.argmax(fz >= 5.0)]
+    assert 5.4 < first < 6.0  # the sample entered the zone and met the target at once
+    assert result.stop_reason == "target_reached" and s.outcome == "complete"
+    assert cfg.safety.slow_zone_speed_mm_s not in moves  # no crawl after the zone stop
+    assert fz.max() <= first + 1e-9  # nothing pressed further
