@@ -16,7 +16,8 @@ def build_rig(cfg, setup: str) -> Rig:
     cfg: the composed app config (DictConfig with `hardware`, `skin`, `sim` nodes) or any object
     with those attributes already typed. Config errors raise ConfigError naming the key. On
     `loopback` this powers on the emulators (they stop when the rig disconnects); on `lab` it only
-    builds the drivers (nothing is opened before `rig.connect()`).
+    builds the drivers (nothing is opened before `rig.connect()`). On both, this process runs at
+    `hardware.nice` from here until the rig disconnects (hardware.priority).
     """
     from omegaconf import DictConfig
 
@@ -32,12 +33,25 @@ def build_rig(cfg, setup: str) -> Rig:
         from hardware.sim import build_sim_rig
 
         return build_sim_rig(typed("sim"), typed("skin"), setup)
-    if backend == "lab":
-        from hardware.lab import build_lab_rig
+    if backend in ("lab", "loopback"):
+        from hardware.priority import raise_priority
 
-        return build_lab_rig(hw, typed("skin"), setup)
-    if backend == "loopback":
-        from hardware.loopback import build_loopback_rig
+        # Raised before anything starts, so every driver thread (and on loopback every emulator
+        # process) takes the bench's priority from this thread; put back when the rig disconnects.
+        restore = raise_priority(hw.nice)
+        try:
+            if backend == "lab":
+                from hardware.lab import build_lab_rig
 
-        return build_loopback_rig(hw, typed("sim"), typed("skin"), setup)
+                rig = build_lab_rig(hw, typed("skin"), setup)
+            else:
+                from hardware.loopback import build_loopback_rig
+
+                rig = build_loopback_rig(hw, typed("sim"), typed("skin"), setup)
+        except BaseException:
+            if restore is not None:
+                restore()
+            raise
+        rig.restore_priority = restore
+        return rig
     raise DeviceError(f"hardware.backend={backend!r}: unknown backend; choose sim, lab or loopback")

@@ -8,7 +8,7 @@ serial ports); `hardware=loopback` points the same drivers at local emulators (p
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
 
@@ -25,6 +25,14 @@ def _check_backend(backend: str, expected: str) -> None:
 
 def _check_host(key: str, host: str) -> None:
     require(isinstance(host, str) and host.strip() != "", key, host, "must be a host name or IP address")
+
+
+def _check_nice(nice) -> None:
+    from hardware.priority import NICE_RANGE
+
+    lo, hi = NICE_RANGE
+    require(nice is None or (isinstance(nice, int) and lo <= nice <= hi), "hardware.nice", nice,
+            f"must be a niceness {lo}..{hi} (lower runs first) or null to leave the priority as started")
 
 
 @dataclass
@@ -58,9 +66,12 @@ class LabHardwareConfig:
     skin_board: readout board on a serial port; platform: GRBL stage on a serial port; netft:
     the Mini40's Net F/T box (UDP RDT); ur5e: the arm's controller (ur_rtde); hande: the Hand-E
     through the URCap socket; camera: the D435 (OpenCV capture) with its intrinsics.
+    nice: the niceness the bench's process (drivers, watchdog, protocol loop) runs at, raised
+    where the OS allows it (hardware.priority); null leaves it as started.
     """
 
     backend: str = "lab"
+    nice: Optional[int] = -10  # noqa: UP045 - OmegaConf reads typing.Optional, not `int | None`
     skin_board: _Skin = field(default_factory=_Skin)
     platform: _Platform = field(default_factory=_Platform)
     netft: _NetFT = field(default_factory=_NetFT)
@@ -70,11 +81,12 @@ class LabHardwareConfig:
 
     def __post_init__(self) -> None:
         _check_backend(self.backend, "lab")
+        _check_nice(self.nice)
 
 
 @dataclass
 class LoopbackHardwareConfig(LabHardwareConfig):
-    """The real drivers against emulators in this process, backed by the simulated world.
+    """The real drivers against local emulators of the devices, backed by the simulated world.
 
     The device nodes configure the drivers as on the bench; their addresses are replaced by the
     emulators' (pty paths, loopback ports). host: where the TCP/UDP emulators listen. ur_host:
@@ -93,6 +105,7 @@ class LoopbackHardwareConfig(LabHardwareConfig):
 
     def __post_init__(self) -> None:
         _check_backend(self.backend, "loopback")
+        _check_nice(self.nice)
         _check_host("hardware.host", self.host)
         require(self.host.startswith("127.") or self.host in ("localhost", "::1"), "hardware.host", self.host,
                 "emulators listen on loopback addresses only (127.x.y.z)")

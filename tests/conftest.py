@@ -19,6 +19,22 @@ def _no_disk_tables_in_process(monkeypatch):
     monkeypatch.setattr(table_cache, "ENABLED", False)
 
 
+@pytest.fixture(autouse=True)
+def _priority_as_started():
+    """A rig built in this process raises its priority until it disconnects (hardware.priority);
+    one built and dropped by a test must not leave the rest of the suite raised."""
+    from hardware.priority import _threads
+
+    before = os.getpriority(os.PRIO_PROCESS, 0)
+    yield
+    for tid in _threads():
+        try:
+            if os.getpriority(os.PRIO_PROCESS, tid) != before:
+                os.setpriority(os.PRIO_PROCESS, tid, before)
+        except OSError:
+            continue
+
+
 @pytest.fixture
 def hydra_dirs(tmp_path):
     """Overrides that keep Hydra's run/sweep folders inside tmp_path."""

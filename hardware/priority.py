@@ -1,0 +1,87 @@
+"""The bench's scheduling priority: a real-time rig's process (its drivers' receive and poll
+threads, the watchdog, the protocol loop, and on `loopback` the emulators it starts) runs at a
+raised priority where the OS allows it, as robot control software does (ur_rtde's `rt_priority`,
+ros2_control's real-time thread), so that an analysis job beside it cannot delay the stop path.
+
+This is CFS niceness, not a real-time policy: every thread still yields to the kernel's own
+workers, and a spinning bench cannot lock the machine up. Raising priority needs privilege:
+root, CAP_SYS_NICE, or an RLIMIT_NICE allowance (`nice` in /etc/security/limits.conf, e.g.
+`@robotics - nice -10`). Without it the bench runs at normal priority and says so once; its
+watchdogs still judge the devices, not the scheduler (hardware.watchdog), but a genuine stall is
+then caught later on a heavily loaded host.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from collections.abc import Callable
+
+log = logging.getLogger(__name__)
+
+NICE_RANGE = (-20, 19)
+
+
+def _threads() -> list[int]:
+    """The ids whose niceness makes up this process's priority: every thread on Linux (where
+    niceness is per thread, and a new thread or child process takes its creator's), else the
+    process itself."""
+    if sys.platform.startswith("linux"):
+        try:
+            return [int(t) for t in os.listdir("/proc/self/task")]
+        except OSError:
+            pass
+    return [0]
+
+
+def raise_priority(nice: int | None, key: str = "hardware.nice") -> Callable[[], None] | None:
+    """Set every thread of this process to niceness `nice` (None: leave it). Returns a function
+    that puts back what each had (call it when the rig disconnects), or None where nothing was
+    changed: `nice` is None, already in effect, or not permitted (logged as a warning naming
+    `key` and what to do)."""
+    if nice is None:
+        return None
+    before: dict[int, int] = {}
+    for tid in _threads():
+        try:
+            before[tid] = os.getpriority(os.PRIO_PROCESS, tid)
+        except OSError:  # the thread ended meanwhile
+            continue
+    if all(v == nice for v in before.values()):
+        return None
+    changed: dict[int, int] = {}
+    try:
+        for tid, old in before.items():
+            if old != nice:
+                os.setpriority(os.PRIO_PROCESS, tid, nice)
+                changed[tid] = old
+    except PermissionError:
+        _put_back(changed)
+        log.warning("%s=%d: not permitted to raise this process's priority (needs root, CAP_SYS_NICE or an "
+                    "RLIMIT_NICE allowance, e.g. '@robotics - nice %d' in /etc/security/limits.conf); the bench "
+                    "runs at normal priority. Set %s=null to silence this.", key, nice, nice, key)
+        return None
+    except ProcessLookupError:
+        pass  # a thread ended meanwhile: nothing to raise there
+    log.info("%s=%d: bench threads raised from niceness %s", key, nice, sorted(set(changed.values())))
+    restore_to = max(changed.values()) if changed else 0
+
+    def restore() -> None:
+        # Threads made since took `nice` from their creator; they go back with the rest.
+        for tid in _threads():
+            try:
+                if os.getpriority(os.PRIO_PROCESS, tid) == nice:
+                    os.setpriority(os.PRIO_PROCESS, tid, changed.get(tid, restore_to))
+            except OSError:  # ended meanwhile, or (never for a lower priority) not permitted
+                continue
+
+    return restore
+
+
+def _put_back(changed: dict[int, int]) -> None:
+    for tid, old in changed.items():
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, old)
+        except OSError:
+            continue
