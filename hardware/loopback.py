@@ -40,10 +40,11 @@ SETUP_DEVICES = {"platform": ("skin_board", "platform", "netft"),
                  "gripper": ("skin_board", "ur5e", "hande", "camera")}
 UR_PORTS = (29999, 30001, 30002, 30003, 30004)  # fixed on a UR controller; ur_rtde dials them
 # Emulator arguments a loopback bench always uses: the Net F/T box serves its calibration page, so
-# the driver reads counts-per-unit over HTTP as it does from a real box; GRBL's serial line is
-# carried over loopback TCP (socket://, as through a serial device server), which a busy host does
-# not delay as it delays a pty's kernel worker (hardware.emulation.TcpSerialLink says how much).
-BENCH_DEFAULTS = {"netft": {"http_port": 0}, "platform": {"link": "tcp"}}
+# the driver reads counts-per-unit over HTTP as it does from a real box; the serial lines (GRBL's,
+# the skin board's) are carried over loopback TCP (socket://, as through a serial device server),
+# which a busy host does not delay as it delays a pty's kernel worker (hardware.emulation.
+# TcpSerialLink says how much: a loaded suite run caught a "skin stalled" 112 ms on a pty).
+BENCH_DEFAULTS = {"netft": {"http_port": 0}, "platform": {"link": "tcp"}, "skin_board": {"link": "tcp"}}
 
 
 def free_ur_host(first: int = 2, last: int = 254) -> str:

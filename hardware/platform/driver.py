@@ -36,12 +36,8 @@ loopback bench serves GRBL this way, see hardware.emulation.TcpSerialLink).
 
 from __future__ import annotations
 
-import fcntl
 import logging
 import select
-import socket
-import struct
-import termios
 import threading
 import time
 from collections import deque
@@ -52,6 +48,7 @@ import numpy as np
 from hardware.interfaces import DeviceError, Platform
 from hardware.platform import wire
 from hardware.platform.config import GrblPlatformConfig
+from hardware.serial_port import bytes_waiting, open_port
 from hardware.watchdog import ReplyWatch
 from layerskin_exp.types import StagePosition
 
@@ -120,13 +117,10 @@ class GrblPlatform(Platform):
         cfg = self.cfg
         self._reset_link_state()
         try:
-            self._ser = serial.serial_for_url(cfg.port, cfg.baudrate, timeout=0.005, write_timeout=0.5)
+            self._ser = open_port(cfg.port, cfg.baudrate, timeout=0.005, write_timeout=0.5)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeviceError(f"platform: cannot open the GRBL serial port {cfg.port!r} ({exc}); check the USB "
                               "cable, that the port exists, and that no other program (a G-code sender) holds it") from exc
-        if cfg.port.startswith("socket://"):  # '?' is one byte: sent at once, not held back to fill a segment
-            with socket.fromfd(self._ser.fileno(), socket.AF_INET, socket.SOCK_STREAM) as sock:  # a duplicate
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._stop_threads.clear()
         self._connecting = True
         self._threads = [threading.Thread(target=self._read_loop, name="grbl-reader", daemon=True)]
@@ -377,12 +371,12 @@ class GrblPlatform(Platform):
             return
         with self._rx_lock:
             try:
-                waiting = _bytes_waiting(ser)
+                waiting = bytes_waiting(ser)
                 if not waiting and not from_reader:
                     # a poll hands the line discipline what the kernel's tty buffer still holds (the
                     # byte count does not): under load its worker moves bytes tens of ms late
                     if select.select([ser.fileno()], [], [], 0)[0]:
-                        waiting = _bytes_waiting(ser)
+                        waiting = bytes_waiting(ser)
                     if not waiting:
                         return
                 data = ser.read(max(1, waiting))
@@ -560,8 +554,3 @@ class GrblPlatform(Platform):
             return "unknown"
         return st.state if st.substate is None else f"{st.state}:{st.substate}"
 
-
-def _bytes_waiting(ser) -> int:
-    """Bytes the OS holds for the port, on a tty and on a socket:// link alike (FIONREAD; pyserial's
-    socket in_waiting says only 0 or 1)."""
-    return struct.unpack("I", fcntl.ioctl(ser.fileno(), termios.FIONREAD, b"\0\0\0\0"))[0]

@@ -1,4 +1,4 @@
-"""The emulated skin readout board's own process: its scan clock, its pty, its faults.
+"""The emulated skin readout board's own process: its scan clock, its serial line, its faults.
 
 Run as `python -m hardware.skin_board.board FD OPTIONS_JSON`, started by `SkinBoardEmulator`,
 for the reason a real board is another machine: a board never waits for the host. In the trial's
@@ -28,7 +28,7 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
-from hardware.emulation import Pty, serve_device
+from hardware.emulation import Pty, TcpSerialLink, serial_link, serve_device
 from hardware.skin_board.wire import FRAME_LEN, encode_frame
 
 CORRUPTIONS = ("bit_flip", "drop_byte", "insert_garbage")
@@ -39,8 +39,9 @@ READOUT_S = 0.01
 
 class Board:
     def __init__(self, conn: Connection, *, frame_period_s: float, seq_offset: int, seed: int, p: dict,
-                 p_drop_frame: float, garbage_max: int, stalls: list, t0_us: int) -> None:
+                 p_drop_frame: float, garbage_max: int, stalls: list, t0_us: int, link: str = "pty") -> None:
         self.conn = conn
+        self.link = link  # "pty" | "tcp" (hardware.emulation.serial_link; frames are never held for a host)
         self.period_s = float(frame_period_s)
         self.seq_offset = int(seq_offset)
         self.rng = np.random.default_rng(seed)
@@ -90,7 +91,7 @@ class Board:
 
     # ---- the scan loop ------------------------------------------------------------------------------
     def run(self) -> None:
-        pty = Pty()
+        pty = serial_link(self.link)
         self.conn.send(("ready", pty.path))
         t0 = time.monotonic()
         k, attached, next_readout = 0, False, t0
@@ -126,7 +127,7 @@ class Board:
         pty.close()
         self.readout()
 
-    def scan(self, pty: Pty, k: int, attached: bool) -> bool:
+    def scan(self, pty: Pty | TcpSerialLink, k: int, attached: bool) -> bool:
         """Scan k: make a frame from the present twin frame and write it, if a host listens."""
         while len(self.waiting) > MAX_BEHIND + 1:
             self.waiting.popleft()

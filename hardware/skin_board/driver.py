@@ -26,6 +26,7 @@ from collections import deque
 import serial
 
 from hardware.interfaces import DeviceError, SkinReader
+from hardware.serial_port import bytes_waiting, open_port
 from hardware.skin_board.config import SkinBoardConfig
 from hardware.skin_board.wire import VERSION, FrameParser, Unwrapper
 from hardware.watchdog import DeviceClock
@@ -106,7 +107,7 @@ class SkinBoardReader(SkinReader):
         cfg = self.cfg
         while True:
             try:
-                return serial.Serial(cfg.port, cfg.baud, timeout=cfg.read_timeout_s, exclusive=True)
+                return open_port(cfg.port, cfg.baud, timeout=cfg.read_timeout_s, exclusive=True)
             except (serial.SerialException, OSError, ValueError) as exc:
                 if time.monotonic() + 0.05 >= deadline:
                     raise DeviceError(
@@ -202,10 +203,10 @@ class SkinBoardReader(SkinReader):
                 # unlike the byte count, first hands the line discipline what the kernel's tty
                 # buffer holds (its worker runs tens of ms late on a busy host): fault() asks that way.
                 while len(data) < self.cfg.read_chunk_bytes:
-                    waiting = ser.in_waiting
+                    waiting = bytes_waiting(ser)
                     if not waiting and (data or until_empty) and select.select(
                             [ser.fileno()], [], [], _REFILL_WAIT_S if data else 0)[0]:
-                        waiting = ser.in_waiting
+                        waiting = bytes_waiting(ser)
                     if waiting:
                         data += ser.read(min(waiting, self.cfg.read_chunk_bytes - len(data)))
                     elif not data and not until_empty and select.select([ser.fileno()], [], [], 0)[0]:

@@ -1,4 +1,4 @@
-"""Emulator of the skin readout board on a pseudo-terminal, backed by the simulated world.
+"""Emulator of the skin readout board on a serial line (a pty, or loopback TCP), backed by the simulated world.
 
 The board runs in a process of its own (`hardware.skin_board.board`, which says why and how it
 scans): it owns the pty, scans on its own clock and writes each frame, encoded with the shared
@@ -34,7 +34,7 @@ import logging
 import time
 from collections import Counter, deque
 
-from hardware.emulation import DeviceProcess, Emulator
+from hardware.emulation import SERIAL_LINKS, DeviceProcess, Emulator
 from hardware.interfaces import DeviceError
 from hardware.skin_board.board import CORRUPTIONS
 from layerskin_exp.types import TwoLayerFrame
@@ -54,7 +54,9 @@ class SkinBoardEmulator(Emulator):
     network address; accepted so every emulator is built the same way). period_s: how often the
     twin is drained. seq_offset: added to the board's seq before it wraps to 16 bits (to reach
     the wrap quickly). sent_maxlen: how many intact frames `sent` remembers (4096: ~10 s of
-    frames, what a test compares against; a bound, so a long run does not grow).
+    frames, what a test compares against; a bound, so a long run does not grow). link: "pty" (a
+    port path, as /dev/ttyACM0) or "tcp" (a socket:// URL: the loopback bench's, where a pty's
+    bytes would wait for a kernel worker that a busy host runs late; hardware.emulation.TcpSerialLink).
     """
 
     DEVICE = "skin_board"
@@ -65,8 +67,13 @@ class SkinBoardEmulator(Emulator):
                  p_bit_flip: float = 0.0, p_drop_byte: float = 0.0, p_insert_garbage: float = 0.0,
                  p_drop_frame: float = 0.0, garbage_max: int = 64, stalls: tuple = (),
                  period_s: float = 0.0015, seq_offset: int = 0, sent_maxlen: int = 4096,
-                 stall_after_s: float | None = None, disconnect_after_s: float | None = None) -> None:
+                 stall_after_s: float | None = None, disconnect_after_s: float | None = None,
+                 link: str = "pty") -> None:
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
+        if link not in SERIAL_LINKS:  # refused here, not in the board's process
+            raise ValueError(f"skin board emulator: link {link!r}: choose one of {SERIAL_LINKS} "
+                             "(see hardware.emulation.serial_link)")
+        self.link = link
         for name, p in (("p_bit_flip", p_bit_flip), ("p_drop_byte", p_drop_byte),
                         ("p_insert_garbage", p_insert_garbage), ("p_drop_frame", p_drop_frame)):
             if not 0.0 <= p <= 1.0:
@@ -99,7 +106,7 @@ class SkinBoardEmulator(Emulator):
             period_s = self.rt.world.skin_cfg.frame_period_ms * 1e-3
         opts = {"frame_period_s": period_s, "seq_offset": self.seq_offset, "seed": self.seed, "p": self.p,
                 "p_drop_frame": self.p_drop_frame, "garbage_max": self.garbage_max,
-                "stalls": self.stalls, "t0_us": t0_us}
+                "stalls": self.stalls, "t0_us": t0_us, "link": self.link}
         self._board = DeviceProcess("hardware.skin_board.board", opts, self.DEVICE, log)
         self.path = self._serve_device(self._board, START_TIMEOUT_S)
         return self.path

@@ -1,4 +1,4 @@
-"""Skin board driver against the pty emulator on the realtime simulated world, faults included."""
+"""Skin board driver against the emulator (on a pty and on loopback TCP) on the realtime simulated world, faults included."""
 
 import os
 import threading
@@ -35,15 +35,18 @@ class Collector:
         return [f.seq for f in self.frames]
 
 
-@pytest.fixture
-def board(realtime_world):
-    """Factory: (emulator, connected driver, collector) on a fresh realtime world."""
+@pytest.fixture(params=["pty", "tcp"])
+def board(realtime_world, request):
+    """Factory: (emulator, connected driver, collector) on a fresh realtime world, over either
+    serial link: a pty (a port path) or loopback TCP (a socket:// URL, as the loopback bench)."""
     made = []
 
     def make(seq_offset=0, ring_frames=8192, **faults):
         rt = realtime_world("platform")
-        emu = SkinBoardEmulator(rt, seq_offset=seq_offset, **faults)
-        drv = SkinBoardReader(SkinBoardConfig(port=emu.start(), connect_timeout_s=3.0, ring_frames=ring_frames))
+        emu = SkinBoardEmulator(rt, seq_offset=seq_offset, link=request.param, **faults)
+        port = emu.start()
+        assert port.startswith("socket://127.0.0.1:") == (request.param == "tcp")
+        drv = SkinBoardReader(SkinBoardConfig(port=port, connect_timeout_s=3.0, ring_frames=ring_frames))
         made.append((emu, drv))
         drv.connect()
         return emu, drv, Collector(drv)
