@@ -487,6 +487,13 @@ class TcpSerialLink:
 SERIAL_LINKS = ("pty", "tcp")
 
 
+def check_serial_link(kind: str, emulator: str) -> None:
+    """Refuse an unknown link kind in the emulator's constructor (not later, in its device process)."""
+    if kind not in SERIAL_LINKS:
+        raise ValueError(f"{emulator} emulator: link {kind!r}: choose one of {SERIAL_LINKS} "
+                         "(see hardware.emulation.serial_link)")
+
+
 def serial_link(kind: str, hold: bool = False) -> Pty | TcpSerialLink:
     """An emulated serial device's end of its line: "pty" (a path any serial program opens) or
     "tcp" (a pyserial socket:// URL; see TcpSerialLink for why a loopback bench uses it)."""

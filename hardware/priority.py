@@ -35,53 +35,37 @@ def _threads() -> list[int]:
     return [0]
 
 
-def raise_priority(nice: int | None, key: str = "hardware.nice") -> Callable[[], None] | None:
-    """Set every thread of this process to niceness `nice` (None: leave it). Returns a function
-    that puts back what each had (call it when the rig disconnects), or None where nothing was
-    changed: `nice` is None, already in effect, or not permitted (logged as a warning naming
-    `key` and what to do)."""
-    if nice is None:
-        return None
-    before: dict[int, int] = {}
+def set_niceness(nice: int) -> None:
+    """Every thread of this process to niceness `nice` (threads that end meanwhile are skipped).
+    Raises PermissionError where the OS refuses (raising priority needs privilege)."""
     for tid in _threads():
         try:
-            before[tid] = os.getpriority(os.PRIO_PROCESS, tid)
-        except OSError:  # the thread ended meanwhile
+            os.setpriority(os.PRIO_PROCESS, tid, nice)
+        except ProcessLookupError:
             continue
-    if all(v == nice for v in before.values()):
+
+
+def raise_priority(nice: int | None, key: str = "hardware.nice") -> Callable[[], None] | None:
+    """Set every thread of this process to niceness `nice` (None: leave it). Returns a function
+    that puts back the niceness the process had (call it when the rig disconnects), or None
+    where nothing was changed: `nice` is None, already in effect, or not permitted (logged as a
+    warning naming `key` and what to do)."""
+    if nice is None:
         return None
-    changed: dict[int, int] = {}
+    before = os.getpriority(os.PRIO_PROCESS, 0)
+    if before == nice:
+        return None
     try:
-        for tid, old in before.items():
-            if old != nice:
-                os.setpriority(os.PRIO_PROCESS, tid, nice)
-                changed[tid] = old
+        set_niceness(nice)
     except PermissionError:
-        _put_back(changed)
+        try:
+            set_niceness(before)  # the threads raised before the refusal
+        except OSError:
+            pass
         log.warning("%s=%d: not permitted to raise this process's priority (needs root, CAP_SYS_NICE or an "
                     "RLIMIT_NICE allowance, e.g. '@robotics - nice %d' in /etc/security/limits.conf); the bench "
                     "runs at normal priority. Set %s=null to silence this.", key, nice, nice, key)
         return None
-    except ProcessLookupError:
-        pass  # a thread ended meanwhile: nothing to raise there
-    log.info("%s=%d: bench threads raised from niceness %s", key, nice, sorted(set(changed.values())))
-    restore_to = max(changed.values()) if changed else 0
-
-    def restore() -> None:
-        # Threads made since took `nice` from their creator; they go back with the rest.
-        for tid in _threads():
-            try:
-                if os.getpriority(os.PRIO_PROCESS, tid) == nice:
-                    os.setpriority(os.PRIO_PROCESS, tid, changed.get(tid, restore_to))
-            except OSError:  # ended meanwhile, or (never for a lower priority) not permitted
-                continue
-
-    return restore
-
-
-def _put_back(changed: dict[int, int]) -> None:
-    for tid, old in changed.items():
-        try:
-            os.setpriority(os.PRIO_PROCESS, tid, old)
-        except OSError:
-            continue
+    log.info("%s=%d: bench threads raised from niceness %d", key, nice, before)
+    # threads made since took `nice` from their creator: they go back with the rest
+    return lambda: set_niceness(before)

@@ -23,16 +23,12 @@ def _no_disk_tables_in_process(monkeypatch):
 def _priority_as_started():
     """A rig built in this process raises its priority until it disconnects (hardware.priority);
     one built and dropped by a test must not leave the rest of the suite raised."""
-    from hardware.priority import _threads
+    from hardware.priority import set_niceness
 
     before = os.getpriority(os.PRIO_PROCESS, 0)
     yield
-    for tid in _threads():
-        try:
-            if os.getpriority(os.PRIO_PROCESS, tid) != before:
-                os.setpriority(os.PRIO_PROCESS, tid, before)
-        except OSError:
-            continue
+    if os.getpriority(os.PRIO_PROCESS, 0) != before:
+        set_niceness(before)
 
 
 @pytest.fixture

@@ -62,7 +62,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hardware.emulation import SERIAL_LINKS, DeviceProcess, Emulator, Pty, TcpSerialLink, serial_link
+from hardware.emulation import (
+    DeviceProcess,
+    Emulator,
+    Pty,
+    TcpSerialLink,
+    check_serial_link,
+    serial_link,
+)
 from hardware.interfaces import DeviceError
 from hardware.platform import gcode, wire
 
@@ -691,8 +698,7 @@ class GrblEmulator(Emulator):
                  tick_s: float = 0.001, link: str = "pty", stall_after_s: float | None = None,
                  disconnect_after_s: float | None = None) -> None:
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
-        if link not in SERIAL_LINKS:  # refused here, not in the device process
-            raise ValueError(f"GRBL emulator: link {link!r}: choose one of {SERIAL_LINKS} (see hardware.emulation.serial_link)")
+        check_serial_link(link, "GRBL")
         self._options = {"start_in_alarm": bool(start_in_alarm), "planner_blocks": int(planner_blocks),
                          "rx_buffer_bytes": int(rx_buffer_bytes), "tick_s": float(tick_s), "link": link}
         self.tick_s = float(tick_s)

@@ -34,7 +34,7 @@ import logging
 import time
 from collections import Counter, deque
 
-from hardware.emulation import SERIAL_LINKS, DeviceProcess, Emulator
+from hardware.emulation import DeviceProcess, Emulator, check_serial_link
 from hardware.interfaces import DeviceError
 from hardware.skin_board.board import CORRUPTIONS
 from layerskin_exp.types import TwoLayerFrame
@@ -70,9 +70,7 @@ class SkinBoardEmulator(Emulator):
                  stall_after_s: float | None = None, disconnect_after_s: float | None = None,
                  link: str = "pty") -> None:
         super().__init__(rt, stall_after_s=stall_after_s, disconnect_after_s=disconnect_after_s)
-        if link not in SERIAL_LINKS:  # refused here, not in the board's process
-            raise ValueError(f"skin board emulator: link {link!r}: choose one of {SERIAL_LINKS} "
-                             "(see hardware.emulation.serial_link)")
+        check_serial_link(link, "skin board")
         self.link = link
         for name, p in (("p_bit_flip", p_bit_flip), ("p_drop_byte", p_drop_byte),
                         ("p_insert_garbage", p_insert_garbage), ("p_drop_frame", p_drop_frame)):
