@@ -117,7 +117,7 @@ def grip_trial(path, depth_mm, motion, trial, rng, n=1700):
         w.close("complete")
 
 
-def write_campaign(root, n_positions=6, grip_depths=(6, 12), trials=3, seed=0) -> Path:
+def write_campaign(root, n_positions=6, grip_depths=(6, 12), trials=3, seed=0, h_mm=2.0) -> Path:
     root = Path(root)
     rng = np.random.default_rng(seed)
     (root / "force_calibration").mkdir(parents=True, exist_ok=True)
@@ -126,7 +126,8 @@ def write_campaign(root, n_positions=6, grip_depths=(6, 12), trials=3, seed=0) -
         gain = rng.normal(1.0, 0.1)
         for kind, reps in (("press", 3), ("slide", 2)):
             for r in range(reps):
-                calibration_trial(root / "force_calibration" / f"pos{p:03d}_{kind}{r}.mcap", p, kind, r, rng, gain=gain)
+                calibration_trial(root / "force_calibration" / f"pos{p:03d}_{kind}{r}.mcap", p, kind, r, rng,
+                                  h_mm=h_mm, gain=gain)
     for g in grip_depths:
         for motion in ("translation", "torsion"):
             for t in range(trials):
