@@ -131,9 +131,12 @@ def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, 
 ALIGNED_INJECTIONS = {
     "flank pressure lost": ("superficial_asymmetry_counts",),
     "cover rigid in shear": ("deep_cop_counts_mm", "superficial_asymmetry_counts"),
-    "lattice 10x too stiff in shear": ("interlayer_shift_counts_mm", "deep_cop_counts_mm"),
-    "sheet 100x too stiff in bending": ("interlayer_shift_counts_mm", "effective_height_counts", "deep_cop_counts_mm",
-                                        "effective_height_rise"),
+    # A lattice 10x too stiff in shear is seen by the tangential stiffness (fem_injections), not by
+    # a count row: with the deep pattern where the columns under the cap stand (their feet, the
+    # cap's point in the sheet's frame), the count CoPs travel with the cap relative to the sheet,
+    # which the cover's shear sets, whatever the lattice's. The inter-layer shift does not follow
+    # the sheet's rigidity either (fem_injections' note).
+    "sheet 100x too stiff in bending": ("deep_cop_counts_mm", "effective_height_rise"),
 }
 
 
