@@ -12,9 +12,11 @@ per design, as tables over the indentation depth delta:
 
 Per row: the normal force (or line load); the pressure the superficial layer feels (contact
 pressure under the cover) and the deep layer feels (the lattice's pressure); their first-order
-change per unit couple of the shear about the deep plane (`laminate.CoupleResponse`: the sheet
-tilts, the lattice takes most of the moment and the indenter the rest, so the moment balance
-F_t H = F_z shift holds for the whole deep pressure but not for what the sensor reads); the
+change per unit couple of the shear about the deep plane (`laminate.CoupleResponse`: the
+cover's part of the lever acts under the contact, where the indenter takes a share; the
+lattice's part, handed over the whole pad by the sheet, loads it at the pad's edge and tilts it,
+so the moment balance F_t H = F_z shift holds for the whole deep pressure but not for what the
+sensor reads); the
 lattice's extra tangential and torsional stiffness under the contact; the friction radius; the
 height of the cover above the deep sensing plane. Lengths mm, pressures kPa, forces N.
 """
@@ -160,6 +162,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     contact_f = np.zeros((n_delta, n_x))
     found_f = np.zeros((n_delta, n_x))
     w = eta = None
+    centre = int(np.argmin(np.abs(x)))
     cover_e, cover_t = sim.cover.modulus_kpa, sim.cover.thickness_mm
     reach_mm = None
     for k, dl in enumerate(delta):
@@ -173,7 +176,10 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         contact[k], found[k], comp[k] = sol.contact_kpa, sol.foundation_kpa, np.maximum(w, 0.0)
         reach_mm = max(contact_confinement_mm(kind, x, plate.area, sol.contact_kpa), 0.5 * plate.step)
         load[k] = plate.load(sol)
-        resp = plate.couple(sol)
+        # the couple's levers: the cover and sheet above the lattice, the lattice's own height
+        # under the contact; their sum is the row's height H (below)
+        lattice_mm = h - comp[k, centre]
+        resp = plate.couple(sol, lattice_mm / (sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + lattice_mm))
         contact1[k], found1[k] = resp.contact_kpa, resp.foundation_kpa
         flank, k_cv = plate.flank(sol)
         if k_cv > 0.0:
@@ -204,7 +210,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     deep = found @ blur_d.T  # signed: where the sheet lifts, the bonded lattice pulls (the FSR reads 0)
     # the flank's response joins the couple's: both are proportional to the tangential load, the
     # couple's tables are per unit couple F_t H (H the row's height), so the flank's per N is / H
-    h_row = np.maximum(sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, int(np.argmin(np.abs(x)))], 1e-6)
+    h_row = np.maximum(sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre], 1e-6)
     superficial1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
     deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
@@ -215,7 +221,6 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         fr = (contact * np.abs(x)[None, :]) @ weight / (contact @ weight)
     fr = np.nan_to_num(fr)
     halfwidth = np.array([np.abs(x[row > 0]).max() if (row > 0).any() else 0.0 for row in contact])
-    centre = int(np.argmin(np.abs(x)))
     height = sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
                          halfwidth, superficial1, deep1, height, comp[:, centre].copy(), cover_shear, cover_torsion,

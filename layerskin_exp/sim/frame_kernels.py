@@ -176,7 +176,12 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     delta = st[S_DELTA]
     fx, fy = st[S_FX], st[S_FY]
     ax, ay = st[S_AX], st[S_AY]
-    cdx, cdy = ax + st[S_UX], ay + st[S_UY]  # contact in the deep frame
+    # the deep layer's profile: where the normal load lands, at the foot of the lattice columns
+    # under the cap. The sheet drags the columns' tops along (by S_UX, S_UY) and each column's
+    # load lands at its own foot, so the deep pattern sits at the cap's position in the sheet's
+    # frame, read on the deep grid (the reference section's lattice pressure under the contact
+    # moves with that point, not with the cap)
+    cdx, cdy = ax, ay
     i, t = _delta_row(delta, prm)
     h_eff = rows[i, 0] * (1 - t) + rows[i + 1, 0] * t
     t32 = np.float32(t)
@@ -268,7 +273,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     store = f_sup.shape[0] > 0
     yaw = st[S_YAW]
     fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
-    cdx, cdy = st[S_AX] + st[S_UX], st[S_AY] + st[S_UY]
+    cdx, cdy = st[S_AX], st[S_AY]  # the columns' feet under the line (as frame_fields)
     s1, s2 = _chord(cdx, cdy, yaw, prm.half_pad_mm)
     length = max(s2 - s1, 1e-9)
     line_q = fz / length  # N/mm

@@ -123,7 +123,8 @@ class CoupleResponse:
 
     The traction on the cover (resultant F_t, taken proportional to the contact pressure, as
     when the contact slides) acts at height H above the deep sensing plane: about that plane it
-    is a couple F_t H, which the sheet hands to the lattice. The sheet's antisymmetric
+    is a couple F_t H, which the cover hands to the sheet under the contact and the sheet to the
+    lattice over the whole pad (`PlateOnFoundation.couple`). The sheet's antisymmetric
     deflection w1 cos(phi) (hemisphere; odd across the rod) changes the lattice pressure by
     k_f(r) w1 (k_f its tangent stiffness at the loaded state) and the contact pressure by
     -k_c w1 where the cover touches the indenter (the indenter is held by the stage and takes
@@ -166,7 +167,7 @@ class PlateOnFoundation:
             self.x = (np.arange(2 * half + 1) - half) * step_mm
             self.area = np.full(self.x.shape, step_mm)  # per mm of rod length
         on_pad = np.abs(self.x) <= pad_radius_mm
-        self.on_pad = on_pad
+        self.on_pad, self.pad_radius = on_pad, pad_radius_mm
         self._lap = laplacian(kind, len(self.x), step_mm)
         self._lap1 = laplacian_m1(len(self.x), step_mm) if kind == "hemisphere" else self._lap
         self.z_ind = self.indenter_height(self.x)
@@ -283,12 +284,21 @@ class PlateOnFoundation:
         pc = kc * np.maximum(delta_mm - self.z_ind - w, 0.0)
         return LaminateSolution(delta_mm, w, pc / KPA, pf / KPA, it, rigidity, None)
 
-    def couple(self, sol: LaminateSolution) -> CoupleResponse:
+    def couple(self, sol: LaminateSolution, lattice_share: float) -> CoupleResponse:
         """Response to a unit couple of the shear about the deep plane (see CoupleResponse).
 
-        A couple density m = H tau(x) along the shear direction loads the sheet like a pressure
-        dm/dx; with tau = F_t p_c / F_z and F_t H = 1 that is p_c'(r) / F_z times cos(phi)
-        (hemisphere) or p_c'(d) / F_z (rod, per unit length)."""
+        The traction takes two levers down to the deep plane. The cover carries it from the cap
+        to the sheet under the contact (tau_c = F_t p_c / F_z, lever t_c + the sheet: a moment
+        density local to the contact). The sheet, stiff in its plane, hands it to the lattice as
+        a uniform traction over the pad (tau_L = F_t / A_pad, as the lattice's stiffness G A / h
+        assumes), whose moment about the deep plane (lever: the lattice's height) has no
+        divergence inside the pad and loads the sheet only where the traction ends, at the pad's
+        edge. `lattice_share` is the lattice's lever over H. A couple density m along the shear
+        loads the sheet like a pressure dm/dx; with F_t H = 1, m = (1 - s) p_c / F_z + s / A_pad
+        on the pad (s the lattice share), times cos(phi) (hemisphere) or across the rod (per unit
+        length)."""
+        if not 0.0 <= lattice_share <= 1.0:
+            raise ValueError(f"lattice_share={lattice_share!r}: the lattice's part of the lever, in [0, 1]")
         pc = sol.contact_kpa * KPA
         fz = float(pc @ self.area)
         n = len(self.x)
@@ -298,7 +308,14 @@ class PlateOnFoundation:
         _, slope = self.foundation(sol.w_mm)
         touching = pc > 0.0
         stiff = slope + self.k_cover * touching
-        load = -np.gradient(pc, self.step) / fz  # sign: the deep pressure moves along the shear
+        # the cover's part: -d/dx of (1 - s) p_c / F_z (sign: the deep pressure moves along the shear)
+        load = -np.gradient((1.0 - lattice_share) * pc / fz, self.step)
+        # the lattice's part: the step of s / A_pad at the pad's edge. The traction fades over
+        # about the lattice's height inside the free edge, so its load lies on that band of the
+        # pad (a load on the plate's last node is lost to the free margin beyond); its moment is s
+        band = self.on_pad & (np.abs(self.x) >= self.pad_radius - self.law.h_mm)
+        edge = np.where(band, np.sign(self.x), 0.0)
+        load += lattice_share * edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
         # a fixed sheet reuses its operator; a friction-held one has its own field per state
         lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
         jac = lin1 + sp.diags(stiff)
@@ -311,7 +328,7 @@ class PlateOnFoundation:
         w1 = spla.spsolve(jac.tocsc(), load)
         if self.kind == "hemisphere":
             w1[0] = 0.0
-        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, slope * w1 / KPA)
+        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA)
 
     def flank(self, sol: LaminateSolution) -> tuple[CoupleResponse, float]:
         """Response to the cap moving tangentially by a unit distance v relative to the sheet
@@ -353,7 +370,13 @@ class PlateOnFoundation:
         second = half * float((self.x**2 * touching) @ self.area)
         area = float(touching @ self.area)
         stiffness = self.cover_shear_n_per_mm3 * area + kc * second / self.radius**2
-        return CoupleResponse(w1, (dp - kc * touching * w1) / KPA, slope * w1 / KPA), stiffness
+        return CoupleResponse(w1, (dp - kc * touching * w1) / KPA, self._lattice_m1(w1, slope) / KPA), stiffness
+
+    def _lattice_m1(self, w1: np.ndarray, slope: np.ndarray) -> np.ndarray:
+        """What the lattice hands the deep sheet (N/mm^2) for a first-mode deflection w1: its
+        compression (slope w1) and what its walls carry in shear (-G_p lap w1, the Pasternak
+        part of the operator), which is where the pad's edge takes a load near it."""
+        return slope * w1 - self._gp * (self._lap1 @ w1)
 
     def first_moment(self, amplitude_kpa: np.ndarray) -> float:
         """Moment (N mm, about the axis through the contact, per unit couple) of an amplitude:

@@ -174,7 +174,8 @@ def moment_equilibrium(sim: SimConfig, model_sim: SimConfig | None = None) -> Ch
     ms = model_sim or sim
     plate = _solver(ms, "hemisphere")
     sol = plate.solve(_depth_for(_model(ms), 3.0))
-    resp = plate.couple(sol)
+    lattice_mm = ms.spacer.thickness_mm - float(np.maximum(sol.w_mm, 0.0)[0])
+    resp = plate.couple(sol, lattice_mm / (ms.cover.thickness_mm + ms.fsr.layer_thickness_mm + lattice_mm))
     total = plate.first_moment(resp.foundation_kpa) - plate.first_moment(resp.contact_kpa)
     return Check("moment of lattice + indenter pressure per unit couple",
                  "static equilibrium: the two pressure moments add up to F_t H exactly", total, 0.98, 1.02, "",

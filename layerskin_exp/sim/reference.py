@@ -64,7 +64,7 @@ class ReferenceSkin:
         h = tab.height_mm[i] * (1 - t) + tab.height_mm[i + 1] * t
         fx, fy, fz = rec[mk.S_FX], rec[mk.S_FY], rec[mk.S_FZ]
         ax, ay = rec[mk.S_CX], rec[mk.S_CY]
-        dxd, dyd = ax + rec[mk.S_UX], ay + rec[mk.S_UY]
+        dxd, dyd = ax, ay  # the columns' feet under the cap (frame_kernels.frame_fields)
         dist = tab.dist_mm
         if self.tab.kind == "hemisphere":
             def layer(profile, couple, cx, cy):

@@ -52,8 +52,8 @@ def test_moment_equilibrium_catches_the_indenters_share_lost(monkeypatch):
     assert v.moment_equilibrium(SIM).passed
     couple = laminate.PlateOnFoundation.couple
 
-    def without_indenter(self, sol):
-        r = couple(self, sol)
+    def without_indenter(self, sol, lattice_share):
+        r = couple(self, sol, lattice_share)
         return laminate.CoupleResponse(r.w_mm, 0.0 * r.contact_kpa, r.foundation_kpa)
 
     monkeypatch.setattr(laminate.PlateOnFoundation, "couple", without_indenter)
