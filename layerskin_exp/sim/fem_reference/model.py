@@ -65,6 +65,8 @@ KPA = 1e-3  # MPa per kPa
 # third lies along it (the walls parallel to the section, which carry shear along x by their
 # in-plane stiffness and which a plane-strain section can only smear over the voids).
 BAND_SHARE = 2.0 / 3.0
+FILM_NU = 0.34  # polyimide (and the films' homogenised copper strips)
+CORE_NU = 0.4  # Velostat (carbon-loaded polyolefin)
 
 
 @dataclass(frozen=True)
@@ -385,9 +387,9 @@ def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
                    (is_("lattice") & ~mesh.wall, fem.NeoHookeCompressible(mu=mu_fill, lmbda=0.0))]
     out = [
         *lattice,
-        (is_("film_across", "deep_film_across"), _neo_hooke(sec.film_across_e_mpa, 0.34)),
-        (is_("film_along", "deep_film_along"), _neo_hooke(sec.film_along_e_mpa, 0.34)),
-        (is_("core", "deep_core"), _neo_hooke(sec.core_e_mpa, 0.4)),
+        (is_("film_across", "deep_film_across"), _neo_hooke(sec.film_across_e_mpa, FILM_NU)),
+        (is_("film_along", "deep_film_along"), _neo_hooke(sec.film_along_e_mpa, FILM_NU)),
+        (is_("core", "deep_core"), _neo_hooke(sec.core_e_mpa, CORE_NU)),
         (is_("cover"), _neo_hooke(sec.cover_e_mpa, sec.cover_poisson())),
     ]
     return [(m, u) for m, u in out if m.any()]
