@@ -5,7 +5,9 @@
    camera; its console output goes to <out>/grip_depth.log),
 2. the analysis report on the session files both wrote,
 then prints where everything is. Each stage is the same command a user would type, so the demo
-also shows how to run them. Re-running resumes: complete trials are not simulated again.
+also shows how to run them. Re-running resumes: complete trials are not simulated again (the
+sessions go under <out>/sessions/simulator-<code>, one folder per version of the simulator, so a
+changed simulator simulates afresh and the report reads only its own sessions).
 Both simulations run one process each (a campaign is one process; the grip multirun runs its jobs
 one after the other, so the contact tables and kernels load once), so on two cores they take the
 time of the longer, not the sum.
@@ -22,6 +24,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from layerskin_exp.sim.table_cache import simulator_version
 
 
 def _announce(title: str, args: list[str], where: str = "") -> None:
@@ -120,7 +124,9 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
 
     out = Path(a.out).resolve()
-    data = out / "sessions"
+    # one data root per simulator version: a rerun resumes its own sessions, and the report never
+    # mixes sessions that another version of the simulator made (those stay where they are)
+    data = out / "sessions" / f"simulator-{simulator_version()}"
     report = out / "report"
     timings = {}
     launcher = ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={a.jobs}"] if a.jobs > 1 else []

@@ -12,10 +12,12 @@ the data, protocol or simulator, is either in the design folder's name or in the
 
     <data_root>/<protocol>/<design>/<trial name>.mcap
 
-and two configs that differ in any such key never share a file. A sweep over any key writes one
-design folder per value; rerunning it finds every trial where the first run put it. Each design
-folder holds `design.yaml`, the configuration it stands for (`python -m protocols.sessions`
-lists the designs under a data_root and what tells them apart).
+and two configs that differ in any such key never share a file. Simulated data also records
+the simulator's code (`simulator_code`, its modules' hash): a changed simulator writes a new
+design folder. A sweep over any key writes one design folder per value; rerunning it finds every
+trial where the first run put it. Each design folder holds `design.yaml`, the configuration it
+stands for (`python -m protocols.sessions` lists the designs under a data_root and what tells
+them apart).
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ import tempfile
 from pathlib import Path
 
 import yaml
+
+from layerskin_exp.sim.table_cache import simulator_version
 
 # Keys that never shape the data (dotted paths into the resolved config).
 RUN_ONLY_KEYS = ("data_root", "progress", "trial_timeout_s", "hydra", "live", "live_port", "live_hold",
@@ -64,6 +68,11 @@ def shaping_config(config: dict) -> dict:
         cfg["hardware"] = {k: hw[k] for k in HARDWARE_SHAPING_KEYS if hw.get(k)}
         if hw.get("backend") == "lab":
             cfg.pop("sim", None)  # the simulator's parameters play no part on the real bench
+    if not (isinstance(hw, dict) and hw.get("backend") == "lab"):
+        # simulated data (sim, and loopback's emulators over the simulated world) is shaped by the
+        # simulator's code too: a change to it is a new design, so a rerun simulates it afresh
+        # beside the old sessions instead of resuming from data the old code made
+        cfg["simulator_code"] = simulator_version()
     positions = cfg.get("positions")
     if isinstance(positions, dict) and positions.get("layout") == "random":
         positions.pop("count", None)  # each random position has its own generator: a longer campaign extends it

@@ -65,6 +65,12 @@ def code_hash() -> str:
     return _CODE_HASH
 
 
+def simulator_version() -> str:
+    """Short form of code_hash: what simulated sessions record of the simulator that made them
+    (protocols.identity puts it in the design, the demo in its data root)."""
+    return code_hash()[:12]
+
+
 def _file(folder: Path, design_key: str) -> tuple[Path, str]:
     full = f"{code_hash()}\n{design_key}"
     return folder / (hashlib.sha256(full.encode()).hexdigest()[:32] + ".npz"), full

@@ -62,6 +62,22 @@ def test_fault_injection_is_part_of_the_design():
     assert design_id(faulty) != design_id(clean) and design_id(other_port) == design_id(clean)
 
 
+def test_a_changed_simulator_is_a_new_design_but_not_on_the_real_bench(monkeypatch):
+    """Simulated sessions are shaped by the simulator's code: a rerun after it changes simulates
+    into a new design folder (the old sessions stay) instead of resuming from the old code's data;
+    on the real bench the simulator plays no part."""
+    from layerskin_exp.sim import table_cache
+
+    _, sim = _grip("grip_depth=9")
+    _, loop = _grip("grip_depth=9", "hardware=loopback")
+    _, lab = _grip("grip_depth=9", "hardware=lab")
+    before = {k: design_id(c) for k, c in (("sim", sim), ("loopback", loop), ("lab", lab))}
+    monkeypatch.setattr(table_cache, "_CODE_HASH", "0" * 64)  # as if the simulator's code had changed
+    after = {k: design_id(c) for k, c in (("sim", sim), ("loopback", loop), ("lab", lab))}
+    assert after["sim"] != before["sim"] and after["loopback"] != before["loopback"]
+    assert after["lab"] == before["lab"]
+
+
 def test_trial_names_keep_every_digit_of_the_grip_depth():
     names = {trial_name({"grip_depth_mm": d, "motion": "translation", "trial": 5}) for d in (9.0, 9.0000001, 9.5)}
     assert names == {"g9_translation_t5", "g9.0000001_translation_t5", "g9.5_translation_t5"}
