@@ -207,3 +207,33 @@ def section_stack(sim) -> Stack:
                   iso("deep_film_across", sec.film_mm, sec.film_across_e_mpa, FILM_NU),
                   iso("deep_core", sec.core_mm, sec.core_e_mpa, CORE_NU),
                   iso("deep_film_along", sec.film_mm, sec.film_along_e_mpa, FILM_NU)))
+
+
+def compare_with_section(state: int = 0, dx: float = 0.01) -> dict:
+    """The linearised section under the reference section's own contact pressure (its homogenised
+    press `state`), beside the section's superficial-core and lattice-interface profiles (kPa)."""
+    from layerskin_exp.sim.config import SimConfig
+    from layerskin_exp.sim.fem_reference.compare import DATA
+
+    ref = np.load(DATA / "homogenised.npz", allow_pickle=True)
+    st = section_stack(SimConfig())
+    cx, cp, cw = ref["contact_x_mm"][state], ref["contact_kpa"][state], ref["contact_w_mm"]
+    on = np.isfinite(cx)
+    x = np.arange(-150.0, 150.0, dx)
+    load = np.zeros_like(x)  # the section's nodal contact forces, each in its grid cell
+    np.add.at(load, np.round((cx[on] - x[0]) / dx).astype(int), cp[on] * cw[on] / dx)
+    lay = line_load_response(st, x, load, None, [st.depth_of("core"), st.depth_of("lattice", 1.0)])
+    at = np.array([0.0, 0.4, 1.0, 1.4, 2.0, 3.0, 6.0])
+    return {"x_mm": at, "fz_n_per_mm": float(ref["fz_n_per_mm"][state]),
+            "superficial_section": np.interp(at, ref["superficial_x_mm"], ref["superficial_kpa"][state]),
+            "superficial_layered": np.interp(at, x, lay[0]),
+            "interface_section": np.interp(at, ref["interface_x_mm"], ref["interface_kpa"][state]),
+            "interface_layered": np.interp(at, x, lay[1])}
+
+
+if __name__ == "__main__":
+    for s in (0, 1):
+        r = compare_with_section(s)
+        print(f"section press {s} ({r['fz_n_per_mm']:.4f} N/mm), kPa at x = {', '.join(f'{v:g}' for v in r['x_mm'])} mm")
+        for k in ("superficial_section", "superficial_layered", "interface_section", "interface_layered"):
+            print(f"  {k:22s}" + "".join(f"{v:8.2f}" for v in r[k]))
