@@ -17,7 +17,8 @@ def build_rig(cfg, setup: str) -> Rig:
     with those attributes already typed. Config errors raise ConfigError naming the key. On
     `loopback` this powers on the emulators (they stop when the rig disconnects); on `lab` it only
     builds the drivers (nothing is opened before `rig.connect()`). On both, this process runs at
-    `hardware.nice` from here until the rig disconnects (hardware.priority).
+    `hardware.nice` from here until the rig disconnects, its heap held out of the cycle collector's
+    scans (hardware.priority).
     """
     from omegaconf import DictConfig
 
@@ -34,11 +35,11 @@ def build_rig(cfg, setup: str) -> Rig:
 
         return build_sim_rig(typed("sim"), typed("skin"), setup)
     if backend in ("lab", "loopback"):
-        from hardware.priority import raise_priority
+        from hardware.priority import hold_heap, raise_priority
 
         # Raised before anything starts, so every driver thread (and on loopback every emulator
         # process) takes the bench's priority from this thread; put back when the rig disconnects.
-        restore = raise_priority(hw.nice)
+        undo = [u for u in (raise_priority(hw.nice),) if u is not None]
         try:
             if backend == "lab":
                 from hardware.lab import build_lab_rig
@@ -48,10 +49,17 @@ def build_rig(cfg, setup: str) -> Rig:
                 from hardware.loopback import build_loopback_rig
 
                 rig = build_loopback_rig(hw, typed("sim"), typed("skin"), setup)
+            # what the process holds now stays out of the collector's scans during the trial
+            undo.extend(u for u in (hold_heap(),) if u is not None)
         except BaseException:
-            if restore is not None:
-                restore()
+            for u in reversed(undo):
+                u()
             raise
-        rig.restore_priority = restore
+
+        def release() -> None:
+            for u in reversed(undo):
+                u()
+
+        rig.release = release if undo else None
         return rig
     raise DeviceError(f"hardware.backend={backend!r}: unknown backend; choose sim, lab or loopback")

@@ -9,10 +9,19 @@ root, CAP_SYS_NICE, or an RLIMIT_NICE allowance (`nice` in /etc/security/limits.
 `@robotics - nice -10`). Without it the bench runs at normal priority and says so once; its
 watchdogs still judge the devices, not the scheduler (hardware.watchdog), but a genuine stall is
 then caught later on a heavily loaded host.
+
+The same stop path waits for Python's cycle collector: a full collection holds the interpreter
+lock while it scans every tracked object, about 155 ms in a process that has imported the
+framework (torch, numba, hydra, the simulator, the drivers), longer on a busy host, and a trial
+that allocates can set one off at any moment. `hold_heap` therefore moves what the process holds
+when the rig starts into the collector's permanent generation (gc.freeze, as long-running servers
+do after start-up), so a collection during the trial scans only what the trial itself made; the
+rig hands it back when it disconnects.
 """
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
 import sys
@@ -69,3 +78,16 @@ def raise_priority(nice: int | None, key: str = "hardware.nice") -> Callable[[],
     log.info("%s=%d: bench threads raised from niceness %d", key, nice, before)
     # threads made since took `nice` from their creator: they go back with the rest
     return lambda: set_niceness(before)
+
+
+def hold_heap() -> Callable[[], None] | None:
+    """Collect once, then freeze every object this process holds (gc.freeze): a full collection
+    during the trial no longer scans them. Returns the function that hands them back to the
+    collector (gc.unfreeze; call it when the rig disconnects), or None where a freeze is already
+    in effect (whoever made it undoes it)."""
+    if gc.get_freeze_count():
+        return None
+    gc.collect()
+    gc.freeze()
+    log.debug("bench heap held: %d objects outside the collector's scans", gc.get_freeze_count())
+    return gc.unfreeze

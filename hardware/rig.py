@@ -53,7 +53,8 @@ class Rig:
     # How often the watchdog asks every device for a fault on a real-time rig.
     watchdog_period_s: float = field(default=0.005, init=False, repr=False)
     # Puts the process's priority back when the rig disconnects (hardware.priority), if raised.
-    restore_priority: Callable[[], None] | None = field(default=None, repr=False)
+    # undoes what build_rig set up for the trial (priority, held heap); called on disconnect
+    release: Callable[[], None] | None = field(default=None, repr=False)
 
     # ---- trials --------------------------------------------------------------------------------
     def begin_trial(self, labels: dict, slot_s: float = 0.0) -> None:
@@ -212,9 +213,9 @@ class Rig:
                 d.disconnect()
             except Exception:  # noqa: BLE001 - disconnect the rest
                 pass
-        restore, self.restore_priority = self.restore_priority, None
-        if restore is not None:
-            restore()
+        release, self.release = self.release, None
+        if release is not None:
+            release()
 
     def __enter__(self) -> Rig:
         self.connect()

@@ -21,14 +21,19 @@ def _no_disk_tables_in_process(monkeypatch):
 
 @pytest.fixture(autouse=True)
 def _priority_as_started():
-    """A rig built in this process raises its priority until it disconnects (hardware.priority);
-    one built and dropped by a test must not leave the rest of the suite raised."""
+    """A rig built in this process raises its priority and holds its heap until it disconnects
+    (hardware.priority); one built and dropped by a test must not leave the rest of the suite so."""
+    import gc
+
     from hardware.priority import set_niceness
 
     before = os.getpriority(os.PRIO_PROCESS, 0)
+    frozen = gc.get_freeze_count()
     yield
     if os.getpriority(os.PRIO_PROCESS, 0) != before:
         set_niceness(before)
+    if gc.get_freeze_count() and not frozen:  # its held heap, too (hardware.priority.hold_heap)
+        gc.unfreeze()
 
 
 @pytest.fixture
