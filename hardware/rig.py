@@ -52,8 +52,8 @@ class Rig:
     _watchdog_stop: threading.Event = field(default_factory=threading.Event, init=False, repr=False)
     # How often the watchdog asks every device for a fault on a real-time rig.
     watchdog_period_s: float = field(default=0.005, init=False, repr=False)
-    # Puts the process's priority back when the rig disconnects (hardware.priority), if raised.
-    # undoes what build_rig set up for the trial (priority, held heap); called on disconnect
+    # Undoes what build_rig set up for the trial (the raised priority, the held heap:
+    # hardware.priority); called when the rig disconnects.
     release: Callable[[], None] | None = field(default=None, repr=False)
 
     # ---- trials --------------------------------------------------------------------------------
