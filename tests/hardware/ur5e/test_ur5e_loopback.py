@@ -64,6 +64,16 @@ def twin_pose(rt):
         return np.asarray(rt.rig.arm.tcp_pose6(), float)
 
 
+def twin_speed(rt):
+    with rt.lock:
+        return np.asarray(rt.rig.arm.tcp_speed6(), float)
+
+
+def world_time(rt) -> float:
+    with rt.lock:
+        return float(rt.world.t_s)
+
+
 def test_connect_streams_poses_and_moves_the_world(bench):
     rt, emu, arm = bench("127.0.0.21")
     info = emu.wait_info(lambda i: i["scripts_received"] == 1 and i["runtime_state"] == 2)
@@ -162,9 +172,13 @@ def test_protective_stop_is_a_fault_and_nothing_resumes(bench):
     arm.stop()  # refused by the controller, but never raises
     emu.unlock_protective_stop()
     assert wait_for(lambda: "not running" in (arm.fault(time.monotonic_ns()) or ""))
-    held = twin_pose(rt)
-    time.sleep(0.2)
-    np.testing.assert_allclose(twin_pose(rt), held, atol=1e-9)  # no motion resumed
+    # No motion resumed, judged on the world's own clock: once the stop's deceleration has run
+    # out there (on a busy host the world may still be stepping through it when the fault is
+    # seen), the arm stays where it is for 0.2 s of world time.
+    assert wait_for(lambda: not np.any(twin_speed(rt)))
+    held, t_held = twin_pose(rt), world_time(rt)
+    assert wait_for(lambda: world_time(rt) >= t_held + 0.2)
+    np.testing.assert_allclose(twin_pose(rt), held, atol=1e-9)
     arm.restart_program()
     assert wait_for(lambda: arm.fault(time.monotonic_ns()) is None)
     # A new script starts from the installation's tool: the driver set its own again.
