@@ -183,8 +183,7 @@ def line_load_response(stack: Stack, x_mm: np.ndarray, pressure: np.ndarray, she
     tr = stack.transfer(xi[keep], depths)
     gn[:, keep], gt[:, keep] = tr["normal"], tr["shear"]
     f = np.fft.rfft(load, axis=1)
-    # a shear traction sin(xi x) gives a stress gt cos(xi x): e^{i xi x} in gives i gt e^{i xi x} out
-    # (x to the right); here x grows to the right and xi >= 0
+    # a shear traction sin(xi x) gives a stress gt cos(xi x), so e^{i xi x} in gives i gt e^{i xi x} out
     resp = gn * f[0] + 1j * gt * f[1]
     return np.fft.irfft(resp, n, axis=1)[:, : len(x_mm)]
 
