@@ -10,8 +10,8 @@ per design, as tables over the indentation depth delta:
 - hemisphere: axisymmetric radial profiles p(delta, r);
 - rod: line-contact profiles p(delta, d) across the axis, per unit length along it.
 
-Per row: the normal force (or line load); the pressure the superficial layer feels (contact
-pressure under the cover) and the deep layer feels (the lattice's pressure); their first-order
+Per row: the normal force (or line load); the pressure the superficial layer feels and the
+deep layer feels (the lattice's pressure); their first-order
 change per unit couple of the shear about the deep plane (`laminate.CoupleResponse`: the
 cover's part of the lever acts under the contact, where the indenter takes a share; the
 lattice's part, handed over the whole pad by the sheet, loads it at the pad's edge and tilts it,
@@ -19,6 +19,17 @@ so the moment balance F_t H = F_z shift holds for the whole deep pressure but no
 sensor reads); the
 lattice's extra tangential and torsional stiffness under the contact; the friction radius; the
 height of the cover above the deep sensing plane. Lengths mm, pressures kPa, forces N.
+
+What the superficial layer feels. Its Velostat core lies between the sheet's two electrode films,
+which carry the sheet's bending (the core is soft). The sheet is loaded on its top by the contact
+(through the cover) and on its bottom by the lattice's reaction; the difference is what the
+films' bending shear hands along. Across the core that shear is uniform in depth (the films carry
+the membrane forces), so the core's normal stress runs linearly from the top load to the bottom
+one, and its mean, what the FSR reads, is half of each. With two films alike (crossed strips, the
+sheet taken as isotropic, see `laminate.sheet_rigidity_n_mm`) the same half holds where the
+films slip and bend on their own: each carries half the bending, the core passes the rest. So
+the superficial layer reads the mean of the contact pressure and the lattice's pressure.
+Reading the contact alone misses the lattice's load outside the contact and its shift under shear.
 """
 
 from __future__ import annotations
@@ -57,13 +68,13 @@ class ContactTables:
     delta_mm: np.ndarray  # (n_delta,)
     load: np.ndarray  # (n_delta,) N or N/mm
     dist_mm: np.ndarray  # (n_dist,)
-    superficial_kpa: np.ndarray  # (n_delta, n_dist) after cover/Pasternak smoothing
+    superficial_kpa: np.ndarray  # (n_delta, n_dist) the mean of the contact's and the lattice's (see above)
     deep_kpa: np.ndarray  # (n_delta, n_dist) after spreading through the spacer
     shear_extra: np.ndarray  # (n_delta,) contact's extra tangential stiffness, N/mm (rod: per mm)
     torsion_extra: np.ndarray  # (n_delta,) hemisphere: extra torsional stiffness N mm/rad
     friction_radius_mm: np.ndarray  # (n_delta,) int p r dA / int p dA (hemisphere)
     contact_halfwidth_mm: np.ndarray  # (n_delta,) contact radius / half-width of the Winkler zone
-    superficial_couple_kpa: np.ndarray  # (n_delta, n_dist) contact-pressure change per unit couple
+    superficial_couple_kpa: np.ndarray  # (n_delta, n_dist) its change per unit couple
     deep_couple_kpa: np.ndarray  # (n_delta, n_dist) lattice-pressure change per unit couple
     height_mm: np.ndarray  # (n_delta,) height of the cover surface above the deep sensing plane
     lattice_compression_mm: np.ndarray  # (n_delta,) the lattice's compression under the contact
@@ -74,6 +85,11 @@ class ContactTables:
     cover_shear: np.ndarray  # (n_delta,)
     cover_torsion: np.ndarray  # (n_delta,)
     cover_n_per_mm3: np.ndarray  # (n_delta,) the cover's compression stiffness each row was solved with
+    # the sheet's top load, the contact pressure spread through the cover, and its change per unit
+    # couple: the superficial core's other half (the frame pipeline adds half the lattice's
+    # pressure with its cell pattern; `superficial_kpa` is that mean with the smooth lattice)
+    cover_kpa: np.ndarray  # (n_delta, n_dist)
+    cover_couple_kpa: np.ndarray  # (n_delta, n_dist)
 
     @property
     def d_delta(self) -> float:
@@ -190,8 +206,9 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         g_c = plate.cover_shear_n_per_mm3
         cover_torsion[k] = g_c * float((x**2 * touching) @ plate.area) if kind == "hemisphere" \
             else g_c * float(touching @ plate.area)
-    # what each layer's Velostat feels: the contact pressure under the cover, the lattice's
-    # (compressive) pressure under the deep sheet's top film; each spread over its layer's thickness
+    # what each layer's Velostat feels: the superficial core the mean of the contact pressure,
+    # spread over the cover's thickness, and the lattice's (see the module's docstring); the deep
+    # core the lattice's pressure on its sheet; the lattice's spread over half a sheet's thickness
     sigma_s = sim.cover.thickness_mm
     sigma_d = 0.5 * sim.fsr.layer_thickness_mm
     # tabulated to just beyond the plate's edge (the equal-area disc), where the lattice ends
@@ -206,13 +223,15 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         blur_s = _line_gauss_matrix(dist, x, plate.step, sigma_s)
         blur_d = _line_gauss_matrix(dist, x, plate.step, sigma_d)
         weight = plate.area
-    superficial = contact @ blur_s.T
     deep = found @ blur_d.T  # signed: where the sheet lifts, the bonded lattice pulls (the FSR reads 0)
+    cover = contact @ blur_s.T
+    superficial = 0.5 * (cover + deep)
     # the flank's response joins the couple's: both are proportional to the tangential load, the
     # couple's tables are per unit couple F_t H (H the row's height), so the flank's per N is / H
     h_row = np.maximum(sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre], 1e-6)
-    superficial1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
     deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
+    cover1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
+    superficial1 = 0.5 * (cover1 + deep1)
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
     k_extra = np.where(comp > 0, k_extra, 0.0)
     shear_extra = k_extra @ weight * KPA_MM2_TO_N
@@ -224,4 +243,4 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     height = sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
                          halfwidth, superficial1, deep1, height, comp[:, centre].copy(), cover_shear, cover_torsion,
-                         cover_kc)
+                         cover_kc, cover, cover1)

@@ -14,7 +14,8 @@ Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
 - `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
 - `prm`: the parameter record (`PARAMS`, `new_params`): geometry, table grids, FSR and readout
   constants, each by its name;
-- `lk` (2, n_pairs, n_fine, 4) float32: per layer (superficial, deep) the profile and its
+- `lk` (2, n_pairs, n_fine, 4) float32: per table (the cover's, the superficial core's contact
+  half; the lattice's, deep) the profile and its
   change per unit couple of the shear (hemisphere: divided by r, so that times the offset along
   the shear it gives the cos(phi) mode), resampled for nearest-bin lookups, as (profile at row
   k, row k+1 - row k, couple response at row k, row k+1 - row k), last column zero (guard);
@@ -165,8 +166,10 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     the taxel means are written (the frame pipeline's path).
 
     Each layer reads the axisymmetric profile of the loaded laminate plus, along the shear, its
-    first-order change under the shear's couple F_t H about the deep plane; the sheet's FSR
-    reads no tension (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
+    first-order change under the shear's couple F_t H about the deep plane: the deep layer the
+    lattice's pressure times the cell pattern, the superficial core the mean of the cover's
+    (the contact's, lk[0]) and that lattice pressure (see contact.py). Neither FSR reads tension
+    (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
     n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
@@ -195,30 +198,11 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     win = np.empty(4, np.int64)
     # couple of the shear about the deep plane along each axis (N mm)
     mx32, my32 = np.float32(fx * h_eff), np.float32(fy * h_eff)
-    # superficial: around the contact, in the superficial frame
-    _window(ax, ay, bounds[i, 0], prm, win, 0)
-    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
-    ax32, ay32 = np.float32(ax), np.float32(ay)
     dx2 = np.empty(m, np.float32)
     mdx = np.empty(m, np.float32)
-    for c in range(c0, c1):
-        dx = q[c] - ax32
-        dx2[c] = dx * dx
-        mdx[c] = mx32 * dx
-    for r in range(r0, r1):
-        dy = q[r] - ay32
-        dy2 = dy * dy
-        mdy = my32 * dy
-        wa = np.float64(quad[m + r % nq])
-        for c in range(c0, c1):
-            rr = dx2[c] + dy2
-            v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
-            v = v0 + (mdx[c] + mdy) * v1
-            v = max(v, _F0)
-            if store:
-                f_sup[r, c] = v
-            colsum[c] += wa * np.float64(v)
-        _row_done(colsum, r, c0, c1, quad, n, nq, tax[0])
+    # the lattice's pressure (signed, with its cell pattern) at each point: the deep layer reads it
+    # (clipped: no tension), the superficial core half of it (contact.py's docstring)
+    under = np.zeros((m, m), np.float32)
     # deep: the lattice's pressure around the contact's deep-frame position, times the cell pattern
     _window(cdx, cdy, bounds[i, 1], prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
@@ -235,13 +219,35 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
         for c in range(c0, c1):
             rr = dx2[c] + dy2
             v0, v1 = _lookup(lk_deep, t32, rr, origin_d32, scale_d32)
-            v = v0 + (mdx[c] + mdy) * v1
+            v = (v0 + (mdx[c] + mdy) * v1) * lattice[r, c]
+            under[r, c] = v
             v = max(v, _F0)
-            v = v * lattice[r, c]
             if store:
                 f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[1])
+    # superficial: around the contact, in the superficial frame; its window reaches the lattice's
+    _window(ax, ay, bounds[i, 0], prm, win, 0)
+    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
+    ax32, ay32 = np.float32(ax), np.float32(ay)
+    for c in range(c0, c1):
+        dx = q[c] - ax32
+        dx2[c] = dx * dx
+        mdx[c] = mx32 * dx
+    for r in range(r0, r1):
+        dy = q[r] - ay32
+        dy2 = dy * dy
+        mdy = my32 * dy
+        wa = np.float64(quad[m + r % nq])
+        for c in range(c0, c1):
+            rr = dx2[c] + dy2
+            v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
+            v = _FHALF * (v0 + (mdx[c] + mdy) * v1 + under[r, c])
+            v = max(v, _F0)
+            if store:
+                f_sup[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        _row_done(colsum, r, c0, c1, quad, n, nq, tax[0])
 
 
 @_jit
@@ -283,22 +289,6 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     f_perp_s = -fx * math.sin(yaw_s) + fy * math.cos(yaw_s)
     m_s = np.float32(f_perp_s * h_eff / length)
     ax32, ay32 = np.float32(st[S_AX]), np.float32(st[S_AY])
-    col = np.empty(m, np.float32)
-    for c in range(m):
-        col[c] = sx * (q[c] - ax32)
-    for r in range(m):
-        row = cy * (q[r] - ay32)
-        wa = np.float64(quad[m + r % nq])
-        b0, b1 = _band(np.float64(sx), np.float64(row), reach_sup, q, np.float64(ax32))
-        for c in range(b0, b1):
-            d = col[c] + row
-            v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
-            v = v0 + m_s * v1
-            v = max(v, _F0)
-            if store:
-                f_sup[r, c] = v
-            colsum[c] += wa * np.float64(v)
-        _row_done(colsum, r, 0, m, quad, n, nq, tax[0])
     i_s = (s2**3 - s1**3) / 3.0
     # torsion: traction T s / I_s along the line; its moment shifts the deep line by T H s / (I_s q)
     twist = math.atan(st[S_TORQUE] * h_eff / (i_s * line_q))
@@ -317,6 +307,9 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
         dx = q[c] - cdx32
         px[c] = -ey * dx
         ramp_x[c] = _F1 + beta * (ex * dx - mid32)
+    # the lattice's pressure (signed, with its cell pattern): the deep layer reads it clipped, the
+    # superficial core half of it (as frame_fields)
+    under = np.zeros((m, m), np.float32)
     for r in range(m):
         dy = q[r] - cdy32
         py = ex * dy
@@ -330,13 +323,33 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
             ramp = ramp_x[c] + ramp_y
             if ramp < _F0:
                 ramp = _F0
-            v = v * ramp
+            v = v * ramp * lattice[r, c]
+            under[r, c] = v
             v = max(v, _F0)
-            v = v * lattice[r, c]
             if store:
                 f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[1])
+    col = np.empty(m, np.float32)
+    for c in range(m):
+        col[c] = sx * (q[c] - ax32)
+    for r in range(m):
+        row = cy * (q[r] - ay32)
+        wa = np.float64(quad[m + r % nq])
+        # the cover's band about the superficial line and the lattice's about the deep one
+        b0, b1 = _band(np.float64(sx), np.float64(row), reach_sup, q, np.float64(ax32))
+        d0, d1 = _band(-np.float64(ey), np.float64(ex * (q[r] - cdy32)), reach_deep, q, np.float64(cdx32))
+        if d1 > d0:
+            b0, b1 = (min(b0, d0), max(b1, d1)) if b1 > b0 else (d0, d1)
+        for c in range(b0, b1):
+            d = col[c] + row
+            v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
+            v = _FHALF * (v0 + m_s * v1 + under[r, c])
+            v = max(v, _F0)
+            if store:
+                f_sup[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        _row_done(colsum, r, 0, m, quad, n, nq, tax[0])
 
 
 @_jit

@@ -73,11 +73,12 @@ class ReferenceSkin:
                 p0 = _row_interp(profile, i, t, r, dist)
                 p1 = _row_interp(couple, i, t, r, dist)
                 cos_term = np.where(r > 0, (fx * h * dx + fy * h * dy) / np.maximum(r, 1e-12), 0.0)
-                return np.maximum(p0 + cos_term * p1, 0.0)
+                return p0 + cos_term * p1  # signed
 
-            sup = layer(tab.superficial_kpa, tab.superficial_couple_kpa, ax, ay)
-            deep = layer(tab.deep_kpa, tab.deep_couple_kpa, dxd, dyd) * self.lattice
-            return sup, deep
+            under = layer(tab.deep_kpa, tab.deep_couple_kpa, dxd, dyd) * self.lattice
+            cover = layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay)
+            # the superficial core: half the cover's, half the lattice's (contact.py); no tension read
+            return np.maximum(0.5 * (cover + under), 0.0), np.maximum(under, 0.0)
         # rod: line load across the axis, per unit length
         yaw = rec[mk.S_YAW]
         s1, s2 = chord(dxd, dyd, yaw, self.model._half)
@@ -86,8 +87,7 @@ class ReferenceSkin:
         n_s = np.array([-math.sin(yaw_s), math.cos(yaw_s)])
         d_s = n_s[0] * (self.x - ax) + n_s[1] * (self.y - ay)
         m_s = (fx * n_s[0] + fy * n_s[1]) * h / length
-        sup = np.maximum(_row_interp(tab.superficial_kpa, i, t, d_s, dist)
-                         + m_s * _row_interp(tab.superficial_couple_kpa, i, t, d_s, dist), 0.0)
+        cover = _row_interp(tab.cover_kpa, i, t, d_s, dist) + m_s * _row_interp(tab.cover_couple_kpa, i, t, d_s, dist)
         line_q = fz / length
         i_s = (s2**3 - s1**3) / 3.0
         yaw_d = yaw + math.atan(rec[mk.S_TORQUE] * h / (i_s * line_q))
@@ -98,9 +98,9 @@ class ReferenceSkin:
         m_d = (fx * n_d[0] + fy * n_d[1]) * h / length
         beta = (fx * e[0] + fy * e[1]) * h / (line_q * length**3 / 12.0)
         ramp = np.maximum(1.0 + beta * (e[0] * dx + e[1] * dy - 0.5 * (s1 + s2)), 0.0)
-        deep = np.maximum((_row_interp(tab.deep_kpa, i, t, d_d, dist)
-                           + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)) * ramp, 0.0)
-        return sup, deep * self.lattice
+        under = (_row_interp(tab.deep_kpa, i, t, d_d, dist)
+                 + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)) * ramp * self.lattice
+        return np.maximum(0.5 * (cover + under), 0.0), np.maximum(under, 0.0)
 
     def maps(self, recs: np.ndarray) -> np.ndarray:
         """(N, 2, n, n) Gauss means of both layers' pressure over each taxel's electrode (kPa)."""

@@ -11,9 +11,10 @@ the series support compliance; the spacer's shear stiffness (rising with compres
 the stick-slip friction at the cover, which gives the tangential force and torque.
 
 Pressure maps (`pressure_maps`, vectorised). Both come from the laminate-on-lattice solution
-(`contact`, `laminate`). Superficial: the contact pressure under the cover around the contact
-point, in the superficial frame. Deep: the lattice's pressure around the contact's deep-frame
-position, times the lattice's cell pattern. The shear's couple F_t H about the deep plane (H
+(`contact`, `laminate`). Deep: the lattice's pressure around the contact's deep-frame
+position, times the lattice's cell pattern. Superficial, in the superficial frame: the mean of the
+contact pressure under the cover around the contact point and that lattice pressure (its core
+lies between the sheet's films, loaded by the contact above and the lattice below; `contact`). The shear's couple F_t H about the deep plane (H
 the height of the cover above it) adds the laminate's first-order response to both: the sheet
 tilts, the lattice takes most of the moment and the indenter the rest. Neither FSR reads
 tension. For the rod, torsion loads the line with traction proportional to the distance along
@@ -249,13 +250,14 @@ class SkinModel:
         point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
         far below the profile's own scale. Stored as (value, next row - value) float32 pairs per
         pair of indentation rows, with one guard column of zeros, profile and couple response
-        side by side: `_lk` (2, n_delta - 1, n_fine, 4) [superficial, deep]. Also
-        the window reach of each pair of rows (`_bounds`) and the stack height per row (`_rows`),
-        see frame_kernels."""
+        side by side: `_lk` (2, n_delta - 1, n_fine, 4) [the cover's (the superficial core's
+        contact half), deep]. Also the window reach of each pair of rows (`_bounds`: the
+        superficial one covers the lattice's too) and the stack height per row (`_rows`), see
+        frame_kernels."""
         tab = self.tab
         if self.kind == "hemisphere":
-            # the deep profile is broad and smooth, the superficial one narrow (the contact and
-            # the cover's spread) with steep edges: the same bins, 16 times finer in r^2 for it
+            # the deep profile is broad and smooth, the cover's narrow (the contact and the
+            # cover's spread) with steep edges: the same bins, 16 times finer in r^2 for it
             r2_max = float(tab.dist_mm[-1]) ** 2
             step_deep = 0.02  # mm^2
             grid = np.arange(0.0, r2_max, step_deep)
@@ -289,7 +291,7 @@ class SkinModel:
 
         hemi = self.kind == "hemisphere"
         self._lk = np.ascontiguousarray(np.stack([
-            quads(tab.superficial_kpa, tab.superficial_couple_kpa, at_layer[0], hemi),
+            quads(tab.cover_kpa, tab.cover_couple_kpa, at_layer[0], hemi),
             quads(tab.deep_kpa, tab.deep_couple_kpa, at_layer[1], hemi)]))
         # Per pair of rows (k, k+1): how far from the contact either the profile or its couple
         # response exceeds WINDOW_EPS of its own peak, for each layer.
@@ -302,7 +304,8 @@ class SkinModel:
             return out
 
         self._bounds = np.ascontiguousarray(np.column_stack([
-            reach(tab.superficial_kpa, tab.superficial_couple_kpa), reach(tab.deep_kpa, tab.deep_couple_kpa)]))
+            reach(tab.cover_kpa, tab.cover_couple_kpa, tab.deep_kpa, tab.deep_couple_kpa),
+            reach(tab.deep_kpa, tab.deep_couple_kpa)]))
         self._dist = np.ascontiguousarray(tab.dist_mm, dtype=float)
         self._rows = np.ascontiguousarray(tab.height_mm.reshape(-1, 1), dtype=float)
 

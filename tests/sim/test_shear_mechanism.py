@@ -86,3 +86,30 @@ def test_the_deep_pattern_stays_at_the_columns_feet_whatever_the_sheets_travel(k
     np.testing.assert_allclose(moved, still, rtol=1e-6, atol=1e-6 * still.max())
 
 
+
+
+@pytest.mark.parametrize("kind", ["rod", "hemisphere"])
+def test_the_superficial_core_reads_the_mean_of_the_contact_and_the_lattice(kind):
+    """The superficial FSR's core lies between the sheet's films: it reads half the load on the
+    sheet's top (the contact) and half the lattice's reaction on its bottom, so its profile carries
+    the whole load, as the deep layer's does (each equals the row's load by the laminate's own
+    equilibrium). Reading either side alone, or both in full, breaks the balance by a factor."""
+    from layerskin_exp import rig
+    from layerskin_exp.config import SkinConfig
+    from layerskin_exp.sim.skin import SkinModel
+
+    radius = rig.INDENTER_RADIUS_MM if kind == "rod" else None
+    tab = SkinModel(SIM, SkinConfig(), kind, np.random.default_rng(0), contact_radius_mm=radius).tab
+    d = tab.dist_mm
+    weight = np.gradient(d) if kind == "rod" else 2.0 * np.pi * d * np.gradient(d)  # mm or mm^2 per sample
+    rows = [k for k in (10, 40, 80) if tab.load[k] > 0]
+    assert len(rows) == 3
+    for k in rows:
+        assert tab.superficial_kpa[k] @ weight * 1e-3 == pytest.approx(tab.load[k], rel=1e-2)
+        assert tab.deep_kpa[k] @ weight * 1e-3 == pytest.approx(tab.load[k], rel=1e-2)
+        # where the cover's spread of the contact has died out (beyond the contact by five cover
+        # thicknesses) the superficial core reads half the lattice's pressure (blurred alike)
+        outside = np.abs(d) > tab.contact_halfwidth_mm[k] + 5.0 * SIM.cover.thickness_mm
+        lattice_there = tab.deep_kpa[k][outside] @ weight[outside]
+        assert lattice_there > 0.05 * (tab.deep_kpa[k] @ weight)  # a part worth checking
+        assert tab.superficial_kpa[k][outside] @ weight[outside] == pytest.approx(0.5 * lattice_there, rel=1e-2)
