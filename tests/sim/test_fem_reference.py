@@ -130,9 +130,7 @@ def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, 
 # walls and taxels (fem_reference.alignment.gate): which of those rows see each error
 ALIGNED_INJECTIONS = {
     "flank pressure lost": ("superficial_asymmetry_counts",),
-    # the superficial asymmetry no longer sees it (moves 0.016 / 0.054, bands 0.056 / 0.063) since
-    # the superficial core reads half the contact and half the lattice: the cover's part is halved
-    "cover rigid in shear": ("deep_cop_counts_mm",),
+    "cover rigid in shear": ("deep_cop_counts_mm", "superficial_asymmetry_counts"),
     # A lattice 10x too stiff in shear is seen by the tangential stiffness (fem_injections), not by
     # a count row: with the deep pattern where the columns under the cap stand (their feet, the
     # cap's point in the sheet's frame), the count CoPs travel with the cap relative to the sheet,
@@ -176,16 +174,7 @@ def test_the_gate_judges_every_count_row_on_the_alignment_means(gate_base):
     assert others == [(r.metric, r.load, r.fem, r.fast, r.lo, r.hi) for r in rows if r.metric not in aligned]
 
 
-# Known blind spot of the gate: with the superficial core reading half the contact (the rest is the
-# lattice's), a lost flank pressure moves the aligned superficial asymmetry by 0.051 / 0.052 (bands
-# 0.056 / 0.063) and the superficial offset by 0.09 / 0.16 (band 0.28): no aligned row sees it. The
-# single-alignment asymmetry still does (fem_injections). Strict: it fails once a row sees it again.
-_BLIND = {"flank pressure lost": "the gate's aligned rows no longer see a lost flank (the superficial "
-                                 "core reads half the contact); see the note above"}
-
-
-@pytest.mark.parametrize("error", [pytest.param(e, marks=pytest.mark.xfail(strict=True, reason=_BLIND[e]))
-                                   if e in _BLIND else e for e in ALIGNED_INJECTIONS])
+@pytest.mark.parametrize("error", list(ALIGNED_INJECTIONS))
 def test_each_aligned_count_row_sees_the_error_it_names(error, gate_base, monkeypatch, fresh_tables):
     from layerskin_exp.sim.fem_reference import alignment as al
 
