@@ -20,8 +20,9 @@ Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
   the shear it gives the cos(phi) mode), resampled for nearest-bin lookups, as (profile at row
   k, row k+1 - row k, couple response at row k, row k+1 - row k), last column zero (guard);
 - `rows` (n_delta, 1) float64: the height of the cover above the deep sensing plane (mm);
-  `bounds` (n_pairs, 2): the superficial and deep reach (mm) beyond which both the profile and
-  its couple response stay below WINDOW_EPS of their peaks;
+  `bounds` (n_pairs, 2): the cover's and the lattice's reach (mm) beyond which both the profile
+  and its couple response stay below WINDOW_EPS of their peaks (the superficial core reads the
+  cover's within the first and half the lattice's within the second);
 - `dist` (n_dist,) float64 (the tables' grid); `quad` (n*q + q,) float32: quadrature
   coordinates then weights;
   `lattice` (n*q, n*q) float32.
@@ -226,24 +227,39 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
                 f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[1])
-    # superficial: around the contact, in the superficial frame; its window reaches the lattice's
+    # superficial: around the contact, in the superficial frame, over the lattice's window and
+    # the cover's (its half of the lattice's pressure reaches as far as that does); the cover's
+    # profile is looked up only in its own, much smaller, window (bounds[i, 0])
     _window(ax, ay, bounds[i, 0], prm, win, 0)
+    cr0, cr1, cc0, cc1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
+    _window(ax, ay, max(bounds[i, 0], bounds[i, 1]), prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
     ax32, ay32 = np.float32(ax), np.float32(ay)
-    for c in range(c0, c1):
+    for c in range(cc0, cc1):
         dx = q[c] - ax32
         dx2[c] = dx * dx
         mdx[c] = mx32 * dx
     for r in range(r0, r1):
-        dy = q[r] - ay32
-        dy2 = dy * dy
-        mdy = my32 * dy
         wa = np.float64(quad[m + r % nq])
-        for c in range(c0, c1):
-            rr = dx2[c] + dy2
-            v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
-            v = _FHALF * (v0 + (mdx[c] + mdy) * v1 + under[r, c])
-            v = max(v, _F0)
+        b0, b1 = (cc0, cc1) if cr0 <= r < cr1 and cc1 > cc0 else (c0, c0)
+        for c in range(c0, b0):  # the lattice's half alone
+            v = max(_FHALF * under[r, c], _F0)
+            if store:
+                f_sup[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        if b1 > b0:
+            dy = q[r] - ay32
+            dy2 = dy * dy
+            mdy = my32 * dy
+            for c in range(b0, b1):
+                rr = dx2[c] + dy2
+                v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
+                v = max(_FHALF * (v0 + (mdx[c] + mdy) * v1 + under[r, c]), _F0)
+                if store:
+                    f_sup[r, c] = v
+                colsum[c] += wa * np.float64(v)
+        for c in range(max(b1, c0), c1):
+            v = max(_FHALF * under[r, c], _F0)
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
@@ -265,11 +281,11 @@ def _band(a, b, reach, q, x0):
 
 @_jit
 def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
-                origin32, scale32, origin_d32, scale_d32, colsum, tax, reach_sup, reach_deep):
+                origin32, scale32, origin_d32, scale_d32, colsum, tax, reach_cover, reach_deep):
     """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
-    quadrature row is evaluated on the band of columns within reach_sup / reach_deep (mm) of the
-    line (beyond, the profile is below WINDOW_EPS of its peak); f_sup, f_deep are left as they
-    were outside the bands. Shear across the rod adds the couple response per unit length;
+    quadrature row is evaluated on the band of columns within reach_cover (the cover's profile)
+    or reach_deep (the lattice's) of the line (beyond, the profile is below WINDOW_EPS of its
+    peak); f_sup, f_deep are left as they were outside the bands. Shear across the rod adds the couple response per unit length;
     along it, its moment is balanced by a linear load gradient along the line; torsion loads
     the line with traction proportional to the distance along it, whose moments turn the deep
     line."""
@@ -336,16 +352,27 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     for r in range(m):
         row = cy * (q[r] - ay32)
         wa = np.float64(quad[m + r % nq])
-        # the cover's band about the superficial line and the lattice's about the deep one
-        b0, b1 = _band(np.float64(sx), np.float64(row), reach_sup, q, np.float64(ax32))
+        # the cover's band about the superficial line (its profile looked up there only) and the
+        # lattice's about the deep one (where the superficial core reads half the lattice's too)
+        b0, b1 = _band(np.float64(sx), np.float64(row), reach_cover, q, np.float64(ax32))
         d0, d1 = _band(-np.float64(ey), np.float64(ex * (q[r] - cdy32)), reach_deep, q, np.float64(cdx32))
-        if d1 > d0:
-            b0, b1 = (min(b0, d0), max(b1, d1)) if b1 > b0 else (d0, d1)
+        if b1 <= b0:
+            b0, b1 = d0, d0
+        lo, hi = (min(b0, d0), max(b1, d1)) if d1 > d0 else (b0, b1)
+        for c in range(lo, b0):
+            v = max(_FHALF * under[r, c], _F0)
+            if store:
+                f_sup[r, c] = v
+            colsum[c] += wa * np.float64(v)
         for c in range(b0, b1):
             d = col[c] + row
             v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
-            v = _FHALF * (v0 + m_s * v1 + under[r, c])
-            v = max(v, _F0)
+            v = max(_FHALF * (v0 + m_s * v1 + under[r, c]), _F0)
+            if store:
+                f_sup[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        for c in range(max(b1, lo), hi):
+            v = max(_FHALF * under[r, c], _F0)
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)

@@ -252,7 +252,7 @@ class SkinModel:
         pair of indentation rows, with one guard column of zeros, profile and couple response
         side by side: `_lk` (2, n_delta - 1, n_fine, 4) [the cover's (the superficial core's
         contact half), deep]. Also the window reach of each pair of rows (`_bounds`: the
-        superficial one covers the lattice's too) and the stack height per row (`_rows`), see
+        cover's and the lattice's; the superficial core spans both) and the stack height per row (`_rows`), see
         frame_kernels."""
         tab = self.tab
         if self.kind == "hemisphere":
@@ -304,8 +304,7 @@ class SkinModel:
             return out
 
         self._bounds = np.ascontiguousarray(np.column_stack([
-            reach(tab.cover_kpa, tab.cover_couple_kpa, tab.deep_kpa, tab.deep_couple_kpa),
-            reach(tab.deep_kpa, tab.deep_couple_kpa)]))
+            reach(tab.cover_kpa, tab.cover_couple_kpa), reach(tab.deep_kpa, tab.deep_couple_kpa)]))
         self._dist = np.ascontiguousarray(tab.dist_mm, dtype=float)
         self._rows = np.ascontiguousarray(tab.height_mm.reshape(-1, 1), dtype=float)
 
