@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.mechanics import chord
 from layerskin_exp.sim.spacer import hex_cell_pattern
 
@@ -53,54 +54,62 @@ class ReferenceSkin:
 
     def fields(self, rec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pressure (kPa) of both layers on the quadrature grid (n*q, n*q) [y, x] for one state
-        (a row of SkinModel.step_many's records)."""
-        from layerskin_exp.sim import mechanics as mk
-
-        tab = self.tab
-        m = len(self.q)
+        (a row of SkinModel.step_many's records): the superficial core half the contact's and
+        half the lattice's (contact.py), the deep layer the lattice's; neither FSR reads tension."""
         if rec[mk.S_FZ] <= 0.0:
+            m = len(self.q)
             return np.zeros((m, m)), np.zeros((m, m))
+        contact, lattice = self.signed_fields(rec, self.x, self.y, self.lattice)
+        return np.maximum(0.5 * (contact + lattice), 0.0), np.maximum(lattice, 0.0)
+
+    def signed_fields(self, rec: np.ndarray, x: np.ndarray, y: np.ndarray,
+                      cells: np.ndarray | float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """The contact's pressure on the sheet (kPa, in the sheet's frame, where the superficial
+        taxels are) and the lattice's pressure on the deep plane (kPa, signed: the bonded lattice
+        pulls where the sheet lifts; times `cells`, its cell pattern) at points x, y (mm) for one
+        loaded state."""
+        tab = self.tab
         i, t = self._row(rec[mk.S_DELTA])
         h = tab.height_mm[i] * (1 - t) + tab.height_mm[i + 1] * t
-        fx, fy, fz = rec[mk.S_FX], rec[mk.S_FY], rec[mk.S_FZ]
+        fz = rec[mk.S_FZ]
+        # the couple of the shear about the deep plane (frame_kernels.frame_fields)
+        mx, my = rec[mk.S_FX] * h, rec[mk.S_FY] * h
         ax, ay = rec[mk.S_CX], rec[mk.S_CY]
         dxd, dyd = ax, ay  # the columns' feet under the cap (frame_kernels.frame_fields)
         dist = tab.dist_mm
         if self.tab.kind == "hemisphere":
             def layer(profile, couple, cx, cy):
-                dx, dy = self.x - cx, self.y - cy
+                dx, dy = x - cx, y - cy
                 r = np.hypot(dx, dy)
                 p0 = _row_interp(profile, i, t, r, dist)
                 p1 = _row_interp(couple, i, t, r, dist)
-                cos_term = np.where(r > 0, (fx * h * dx + fy * h * dy) / np.maximum(r, 1e-12), 0.0)
-                return p0 + cos_term * p1  # signed
+                cos_term = np.where(r > 0, (mx * dx + my * dy) / np.maximum(r, 1e-12), 0.0)
+                return p0 + cos_term * p1
 
-            under = layer(tab.deep_kpa, tab.deep_couple_kpa, dxd, dyd) * self.lattice
-            cover = layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay)
-            # the superficial core: half the cover's, half the lattice's (contact.py); no tension read
-            return np.maximum(0.5 * (cover + under), 0.0), np.maximum(under, 0.0)
+            return (layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay),
+                    layer(tab.deep_kpa, tab.deep_couple_kpa, dxd, dyd) * cells)
         # rod: line load across the axis, per unit length
         yaw = rec[mk.S_YAW]
         s1, s2 = chord(dxd, dyd, yaw, self.model._half)
         length = max(s2 - s1, 1e-9)
         yaw_s = yaw - rec[mk.S_THETA]
         n_s = np.array([-math.sin(yaw_s), math.cos(yaw_s)])
-        d_s = n_s[0] * (self.x - ax) + n_s[1] * (self.y - ay)
-        m_s = (fx * n_s[0] + fy * n_s[1]) * h / length
-        cover = _row_interp(tab.cover_kpa, i, t, d_s, dist) + m_s * _row_interp(tab.cover_couple_kpa, i, t, d_s, dist)
+        d_s = n_s[0] * (x - ax) + n_s[1] * (y - ay)
+        m_s = (mx * n_s[0] + my * n_s[1]) / length
+        contact = _row_interp(tab.cover_kpa, i, t, d_s, dist) + m_s * _row_interp(tab.cover_couple_kpa, i, t, d_s, dist)
         line_q = fz / length
         i_s = (s2**3 - s1**3) / 3.0
         yaw_d = yaw + math.atan(rec[mk.S_TORQUE] * h / (i_s * line_q))
         e = np.array([math.cos(yaw_d), math.sin(yaw_d)])
         n_d = np.array([-e[1], e[0]])
-        dx, dy = self.x - dxd, self.y - dyd
+        dx, dy = x - dxd, y - dyd
         d_d = n_d[0] * dx + n_d[1] * dy
-        m_d = (fx * n_d[0] + fy * n_d[1]) * h / length
-        beta = (fx * e[0] + fy * e[1]) * h / (line_q * length**3 / 12.0)
+        m_d = (mx * n_d[0] + my * n_d[1]) / length
+        beta = (mx * e[0] + my * e[1]) / (line_q * length**3 / 12.0)
         ramp = np.maximum(1.0 + beta * (e[0] * dx + e[1] * dy - 0.5 * (s1 + s2)), 0.0)
-        under = (_row_interp(tab.deep_kpa, i, t, d_d, dist)
-                 + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)) * ramp * self.lattice
-        return np.maximum(0.5 * (cover + under), 0.0), np.maximum(under, 0.0)
+        lattice = (_row_interp(tab.deep_kpa, i, t, d_d, dist)
+                   + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)) * ramp * cells
+        return contact, lattice
 
     def maps(self, recs: np.ndarray) -> np.ndarray:
         """(N, 2, n, n) Gauss means of both layers' pressure over each taxel's electrode (kPa)."""

@@ -220,6 +220,22 @@ def test_every_layer_of_the_committed_data_carries_the_load(committed):
         assert np.all(np.abs(b - 1.0) < 0.02), (line, b)
 
 
+def test_the_deep_line_of_the_committed_data_carries_the_moment_of_the_load(committed):
+    """Statics of the sheared section as it stands: the deep line's pressure balances the cap's
+    load where it now acts (load_x_mm) and the shear at its height above the deep plane
+    (load_height_mm), sum p x w = F_z x_load + F_x H, within 3 % in every sheared state (measured
+    1.4-2.3 %). Taking the load at the cap's first contact (x = 0), it misses by far more."""
+    x, w = committed["deep_x_mm"], committed["deep_w_mm"]
+    sheared = np.flatnonzero(committed["phase"] == 1)
+    assert len(sheared) >= 6
+    moment = committed["deep_kpa"][sheared] @ (x * w) * 1e-3
+    fz, fx = committed["fz_n_per_mm"][sheared], committed["fx_n_per_mm"][sheared]
+    at_load = fz * committed["load_x_mm"][sheared] + fx * committed["load_height_mm"][sheared]
+    np.testing.assert_allclose(moment, at_load, rtol=0.03)
+    at_first_contact = fx * committed["load_height_mm"][sheared]
+    assert np.abs(moment / at_first_contact - 1.0).max() > 0.2
+
+
 def test_the_balance_check_sees_an_extraction_error(committed):
     """Reading a profile at the wrong quadrature (every node the same share of its element, as a
     trapezoid over the nodes' own spacing would) breaks the balance of the wall-banded interface."""
