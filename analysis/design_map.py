@@ -100,15 +100,24 @@ def _extras(path: Path, kind: str) -> TrialExtras:
     stage, w = s.streams.get("stage"), s.streams.get("wrench")
     if kind != "press" or stage is None or w is None or len(stage["t_ns"]) < 2:
         return out
-    fz = w["force_n"][:, 2]
     z = np.interp(w["t_ns"], stage["t_ns"], stage["position_mm"][:, 2])
-    k = int(np.argmax(fz))
-    touch = np.flatnonzero(fz[: k + 1] >= 0.05)
-    if touch.size == 0:
-        return out
-    i0 = int(touch[0])
-    out.travel_mm, out.fz_n = z[i0] - z[i0:k + 1], fz[i0:k + 1]
+    ramp = loading_ramp(z, w["force_n"][:, 2])
+    if ramp is not None:
+        out.travel_mm, out.fz_n = ramp
     return out
+
+
+def loading_ramp(z_mm: np.ndarray, fz_n: np.ndarray, touch_n: float = 0.05):
+    """(travel from first contact (mm), F_z (N)) of a press's loading ramp up to its peak, or None.
+    First contact is where F_z rises through touch_n for the last time before the peak: the
+    reading before the trial's tare (taken at the clearance height, in the air) carries the
+    sensor's offset and may sit above touch_n."""
+    k = int(np.argmax(fz_n))
+    if fz_n[k] < touch_n:
+        return None
+    below = np.flatnonzero(fz_n[: k + 1] < touch_n)
+    i0 = int(below[-1]) + 1 if below.size else 0
+    return z_mm[i0] - z_mm[i0:k + 1], fz_n[i0:k + 1]
 
 
 def _patches(maps_s: np.ndarray, cop_mm: np.ndarray, pitch_mm: float, half: int = 3) -> np.ndarray:

@@ -201,3 +201,17 @@ def test_ts5_per_design_on_a_synthetic_campaign_is_flagged_when_unconverged(tmp_
     assert "†" not in _ts5_cell(build_map([o])["designs"]["study"])
     cfg.ts5 = False
     assert "ts5_r2" not in campaign_outcomes(root / "force_calibration", cfg)
+
+
+def test_the_loading_ramp_starts_at_contact_not_at_a_pre_tare_offset():
+    """A press's wrench reads the sensor's offset until the trial's tare at the clearance height
+    (0.15 N here, in the air): first contact is where F_z rises through the touch level for the
+    last time before the peak, not the first sample above it."""
+    from analysis.design_map import loading_ramp
+
+    z = np.concatenate([np.full(50, 5.0), np.linspace(5.0, 0.0, 100), np.linspace(0.0, -2.0, 100)])
+    fz = np.concatenate([np.full(50, 0.15), np.full(40, 0.15), np.zeros(60), np.linspace(0.0, 4.0, 100)])
+    travel, f = loading_ramp(z, fz)
+    assert f[0] >= 0.05 and travel[0] == 0.0
+    assert travel[-1] == pytest.approx(2.0 - 2.0 / 99, abs=0.03)  # the contact's travel, not the approach's
+    assert loading_ramp(z, np.zeros_like(z)) is None
