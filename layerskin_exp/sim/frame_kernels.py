@@ -144,6 +144,17 @@ def _window(cx, cy, reach, prm, win, at):
 
 # ---------------------------------------------------------------------------------- fields
 @_jit
+def _lattice_half(under, r, c0, c1, wa, store, f_sup, colsum):
+    """Superficial quadrature row r, columns [c0, c1) beyond the cover's reach: the core reads
+    half the lattice's pressure there (no tension), added to the Gauss-weighted column sums."""
+    for c in range(c0, c1):
+        v = max(_FHALF * under[r, c], _F0)
+        if store:
+            f_sup[r, c] = v
+        colsum[c] += wa * np.float64(v)
+
+
+@_jit
 def _row_done(colsum, r, c0, c1, quad, n, nq, tax):
     """After quadrature row r: when it closes a taxel row, the Gauss-weighted column sums
     colsum (already weighted by the row weights) become that row's taxel means in tax."""
@@ -242,11 +253,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     for r in range(r0, r1):
         wa = np.float64(quad[m + r % nq])
         b0, b1 = (cc0, cc1) if cr0 <= r < cr1 and cc1 > cc0 else (c0, c0)
-        for c in range(c0, b0):  # the lattice's half alone
-            v = max(_FHALF * under[r, c], _F0)
-            if store:
-                f_sup[r, c] = v
-            colsum[c] += wa * np.float64(v)
+        _lattice_half(under, r, c0, b0, wa, store, f_sup, colsum)
         if b1 > b0:
             dy = q[r] - ay32
             dy2 = dy * dy
@@ -258,11 +265,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
                 if store:
                     f_sup[r, c] = v
                 colsum[c] += wa * np.float64(v)
-        for c in range(max(b1, c0), c1):
-            v = max(_FHALF * under[r, c], _F0)
-            if store:
-                f_sup[r, c] = v
-            colsum[c] += wa * np.float64(v)
+        _lattice_half(under, r, max(b1, c0), c1, wa, store, f_sup, colsum)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[0])
 
 
@@ -285,8 +288,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
     quadrature row is evaluated on the band of columns within reach_cover (the cover's profile)
     or reach_deep (the lattice's) of the line (beyond, the profile is below WINDOW_EPS of its
-    peak); f_sup, f_deep are left as they were outside the bands. Shear across the rod adds the couple response per unit length;
-    along it, its moment is balanced by a linear load gradient along the line; torsion loads
+    peak); f_sup, f_deep are left as they were outside the bands. Shear across the rod adds the
+    couple response per unit length; along it, its moment is balanced by a linear load gradient along the line; torsion loads
     the line with traction proportional to the distance along it, whose moments turn the deep
     line."""
     n, nq = int(prm.n_taxels), int(prm.quad_points)
@@ -359,11 +362,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
         if b1 <= b0:
             b0, b1 = d0, d0
         lo, hi = (min(b0, d0), max(b1, d1)) if d1 > d0 else (b0, b1)
-        for c in range(lo, b0):
-            v = max(_FHALF * under[r, c], _F0)
-            if store:
-                f_sup[r, c] = v
-            colsum[c] += wa * np.float64(v)
+        _lattice_half(under, r, lo, b0, wa, store, f_sup, colsum)
         for c in range(b0, b1):
             d = col[c] + row
             v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
@@ -371,11 +370,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
-        for c in range(max(b1, lo), hi):
-            v = max(_FHALF * under[r, c], _F0)
-            if store:
-                f_sup[r, c] = v
-            colsum[c] += wa * np.float64(v)
+        _lattice_half(under, r, max(b1, lo), hi, wa, store, f_sup, colsum)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[0])
 
 

@@ -16,7 +16,6 @@ import math
 import numpy as np
 
 from layerskin_exp.sim import mechanics as mk
-from layerskin_exp.sim.mechanics import chord
 from layerskin_exp.sim.spacer import hex_cell_pattern
 
 
@@ -90,7 +89,7 @@ class ReferenceSkin:
                     layer(tab.deep_kpa, tab.deep_couple_kpa, dxd, dyd) * cells)
         # rod: line load across the axis, per unit length
         yaw = rec[mk.S_YAW]
-        s1, s2 = chord(dxd, dyd, yaw, self.model._half)
+        s1, s2 = mk.chord(dxd, dyd, yaw, self.model._half)
         length = max(s2 - s1, 1e-9)
         yaw_s = yaw - rec[mk.S_THETA]
         n_s = np.array([-math.sin(yaw_s), math.cos(yaw_s)])

@@ -252,8 +252,8 @@ class SkinModel:
         pair of indentation rows, with one guard column of zeros, profile and couple response
         side by side: `_lk` (2, n_delta - 1, n_fine, 4) [the cover's (the superficial core's
         contact half), deep]. Also the window reach of each pair of rows (`_bounds`: the
-        cover's and the lattice's; the superficial core spans both) and the stack height per row (`_rows`), see
-        frame_kernels."""
+        cover's and the lattice's; the superficial core spans both) and the stack height per row
+        (`_rows`), see frame_kernels."""
         tab = self.tab
         if self.kind == "hemisphere":
             # the deep profile is broad and smooth, the cover's narrow (the contact and the
