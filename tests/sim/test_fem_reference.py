@@ -143,10 +143,12 @@ ALIGNED_INJECTIONS = {
 }
 
 
-def _aligned(rows) -> dict:
+def _aligned(rows, bound: str = "bonded") -> dict:
+    """The gate's count rows judged on alignment means against one section (the cells', or the
+    homogenised one's)."""
     out: dict = {}
     for r in rows:
-        if r.load.endswith("aligned mean") or r.load.endswith("aligned means"):
+        if r.bound == bound and (r.load.endswith("aligned mean") or r.load.endswith("aligned means")):
             out.setdefault(r.metric, []).append(r)
     return out
 
@@ -165,12 +167,22 @@ def test_the_gate_judges_every_count_row_on_the_alignment_means(gate_base):
     rows, record = gate_base
     aligned = _aligned(rows)
     assert set(aligned) == {*al.SIGNALS, "effective_height_rise"}
-    single = [r for r in rows if r.metric in aligned and r not in sum(aligned.values(), [])]
+    single = [r for r in rows if r.metric in aligned and r not in sum(aligned.values(), []) + sum(
+        _aligned(rows, "homogenised").values(), [])]
     assert single == []  # no count row at the committed section's one alignment is left
     table = record["alignments"]
+    homogenised = _aligned(rows, "homogenised")
+    assert set(homogenised) == set(aligned)
     for name in al.SIGNALS:
         assert [(r.fem, r.fast) for r in aligned[name]] == [
             (row[name]["fem"]["mean"], row[name]["fast"]["mean"]) for row in table.values()]
+        # the same signal against the homogenised section, in the same band as against the cells'
+        assert [(r.fem, r.fast) for r in homogenised[name]] == [
+            (row[name]["homogenised"]["mean"], row[name]["fast"]["mean"]) for row in table.values()]
+        for r_cells, r_hom in zip(aligned[name], homogenised[name], strict=True):
+            kind, lo, hi = fc.band(fc.load_tolerances(), name, r_hom.fem)
+            assert (r_hom.kind, r_hom.lo, r_hom.hi) == (kind, lo, hi)
+            assert r_cells.kind == r_hom.kind
     # the same rows and bands as compare's, where compare's are not count rows
     plain, _ = fc.compare(SIM, bounds=("bonded",))
     others = [(r.metric, r.load, r.fem, r.fast, r.lo, r.hi) for r in plain if r.metric not in aligned]
