@@ -14,9 +14,11 @@ Per row: the normal force (or line load); the pressure the superficial layer fee
 deep layer feels (the lattice's pressure); their first-order
 change per unit couple of the shear about the deep plane (`laminate.CoupleResponse`: the
 cover's part of the lever acts under the contact, where the indenter takes a share; the
-lattice's part, handed over the whole pad by the sheet, loads it at the pad's edge and tilts it,
-so the moment balance F_t H = F_z shift holds for the whole deep pressure but not for what the
-sensor reads); the
+lattice's part, handed over the whole pad by the sheet, ends at the pad's edge, half of it on
+the sheet, which tilts, half straight on the deep sheet, so the moment balance holds for the
+whole deep pressure but not for what the sensor reads) and per unit couple of the normal load's
+lean (F_z u: the columns under the contact lean by the sheet's travel, their thrust joins the
+lattice's shear and takes its route); the
 lattice's extra tangential and torsional stiffness under the contact; the friction radius; the
 height of the cover above the deep sensing plane. Lengths mm, pressures kPa, forces N.
 
@@ -90,6 +92,12 @@ class ContactTables:
     # pressure with its cell pattern; `superficial_kpa` is that mean with the smooth lattice)
     cover_kpa: np.ndarray  # (n_delta, n_dist)
     cover_couple_kpa: np.ndarray  # (n_delta, n_dist)
+    # per unit couple F_z u of the normal load's lean (the sheet's travel u leans the lattice's
+    # columns under the contact; their thrust F_z u / h joins the lattice's shear, so its moment
+    # takes the lattice's route only, `laminate.PlateOnFoundation.couple` with s = 1): the cover's
+    # and the deep sheet's pressure change
+    cover_lean_kpa: np.ndarray  # (n_delta, n_dist)
+    deep_lean_kpa: np.ndarray  # (n_delta, n_dist)
 
     @property
     def d_delta(self) -> float:
@@ -170,6 +178,9 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     found = np.zeros((n_delta, n_x))
     contact1 = np.zeros((n_delta, n_x))
     found1 = np.zeros((n_delta, n_x))
+    direct1 = np.zeros((n_delta, n_x))
+    contact_lean = np.zeros((n_delta, n_x))
+    found_lean = np.zeros((n_delta, n_x))
     comp = np.zeros((n_delta, n_x))
     load = np.zeros(n_delta)
     cover_shear = np.zeros(n_delta)
@@ -196,7 +207,9 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         # under the contact; their sum is the row's height H (below)
         lattice_mm = h - comp[k, centre]
         resp = plate.couple(sol, lattice_mm / (sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + lattice_mm))
-        contact1[k], found1[k] = resp.contact_kpa, resp.foundation_kpa
+        contact1[k], found1[k], direct1[k] = resp.contact_kpa, resp.foundation_kpa, resp.direct_kpa
+        lean = plate.couple(sol, 1.0)
+        contact_lean[k], found_lean[k] = lean.contact_kpa, lean.foundation_kpa
         flank, k_cv = plate.flank(sol)
         if k_cv > 0.0:
             # per N of tangential load the cap moves 1 / k_cv relative to the sheet
@@ -231,7 +244,8 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     h_row = np.maximum(sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre], 1e-6)
     deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
     cover1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
-    superficial1 = 0.5 * (cover1 + deep1)
+    # the lattice presses the sheet with all but what it hands straight to the deep sheet
+    superficial1 = 0.5 * (cover1 + deep1 - direct1 @ blur_d.T)
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
     k_extra = np.where(comp > 0, k_extra, 0.0)
     shear_extra = k_extra @ weight * KPA_MM2_TO_N
@@ -243,4 +257,4 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     height = sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
                          halfwidth, superficial1, deep1, height, comp[:, centre].copy(), cover_shear, cover_torsion,
-                         cover_kc, cover, cover1)
+                         cover_kc, cover, cover1, contact_lean @ blur_s.T, found_lean @ blur_d.T)

@@ -14,11 +14,12 @@ Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
 - `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
 - `prm`: the parameter record (`PARAMS`, `new_params`): geometry, table grids, FSR and readout
   constants, each by its name;
-- `lk` (2, n_pairs, n_fine, 4) float32: per table (the cover's, the superficial core's contact
-  half; the lattice's, deep) the profile and its
-  change per unit couple of the shear (hemisphere: divided by r, so that times the offset along
-  the shear it gives the cos(phi) mode), resampled for nearest-bin lookups, as (profile at row
-  k, row k+1 - row k, couple response at row k, row k+1 - row k), last column zero (guard);
+- `lk` (2, n_pairs, n_fine, 6) float32: per table (the cover's, the superficial core's contact
+  half; the lattice's, deep) the profile, its change per unit couple of the shear and its
+  change per unit couple of the normal load's lean F_z u (both per r for the hemisphere, so that
+  times the offset along the couple they give the cos(phi) mode), resampled for nearest-bin
+  lookups, as (profile at row k, row k+1 - row k, couple response at row k, its row difference,
+  lean response at row k, its row difference), last column zero (guard);
 - `rows` (n_delta, 1) float64: the height of the cover above the deep sensing plane (mm);
   `bounds` (n_pairs, 2): the cover's and the lattice's reach (mm) beyond which both the profile
   and its couple response stay below WINDOW_EPS of their peaks (the superficial core reads the
@@ -117,12 +118,13 @@ def _delta_row(delta, prm):
 
 @_jit
 def _lookup(lk_row, t32, coord, origin32, scale32):
-    """Profile and couple response (float32) at coord (r^2 or signed distance, float32) for
-    indentation row i + t (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table,
-    linear between the two rows; zero beyond the table (guard column)."""
+    """Profile, couple response and lean response (float32) at coord (r^2 or signed distance,
+    float32) for indentation row i + t (lk_row = lk[layer, i], t32 = t): nearest bin of the fine
+    table, linear between the two rows; zero beyond the table (guard column)."""
     c = (coord - origin32) * scale32 + _FHALF
     j = min(max(int(c), 0), lk_row.shape[0] - 1)  # branch-free clamp (the guard column is zero)
-    return lk_row[j, 1] * t32 + lk_row[j, 0], lk_row[j, 3] * t32 + lk_row[j, 2]
+    return (lk_row[j, 1] * t32 + lk_row[j, 0], lk_row[j, 3] * t32 + lk_row[j, 2],
+            lk_row[j, 5] * t32 + lk_row[j, 4])
 
 
 @_jit
@@ -178,7 +180,8 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     the taxel means are written (the frame pipeline's path).
 
     Each layer reads the axisymmetric profile of the loaded laminate plus, along the shear, its
-    first-order change under the shear's couple F_t H about the deep plane: the deep layer the
+    first-order change under the shear's couple F_t H about the deep plane and under the normal
+    load's lean F_z u (the lattice's route only, `contact.ContactTables`): the deep layer the
     lattice's pressure times the cell pattern, the superficial core the mean of the cover's
     (the contact's, lk[0]) and that lattice pressure (see contact.py). Neither FSR reads tension
     (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
@@ -208,10 +211,13 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
                     origin32, scale32, origin_d32, scale_d32, colsum, tax, bounds[i, 0], bounds[i, 1])
         return
     win = np.empty(4, np.int64)
-    # couple of the shear about the deep plane along each axis (N mm)
+    # couple of the shear about the deep plane along each axis (N mm), and the normal load's lean
+    # F_z u about the columns' feet (the lattice's route only: contact.ContactTables.deep_lean_kpa)
     mx32, my32 = np.float32(fx * h_eff), np.float32(fy * h_eff)
+    lx32, ly32 = np.float32(st[S_FZ] * st[S_UX]), np.float32(st[S_FZ] * st[S_UY])
     dx2 = np.empty(m, np.float32)
     mdx = np.empty(m, np.float32)
+    ldx = np.empty(m, np.float32)
     # the lattice's pressure (signed, with its cell pattern) at each point: the deep layer reads it
     # (clipped: no tension), the superficial core half of it (contact.py's docstring)
     under = np.zeros((m, m), np.float32)
@@ -223,15 +229,17 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
         dx = q[c] - cdx32
         dx2[c] = dx * dx
         mdx[c] = mx32 * dx
+        ldx[c] = lx32 * dx
     for r in range(r0, r1):
         dy = q[r] - cdy32
         dy2 = dy * dy
         mdy = my32 * dy
+        ldy = ly32 * dy
         wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
             rr = dx2[c] + dy2
-            v0, v1 = _lookup(lk_deep, t32, rr, origin_d32, scale_d32)
-            v = (v0 + (mdx[c] + mdy) * v1) * lattice[r, c]
+            v0, v1, v2 = _lookup(lk_deep, t32, rr, origin_d32, scale_d32)
+            v = (v0 + (mdx[c] + mdy) * v1 + (ldx[c] + ldy) * v2) * lattice[r, c]
             under[r, c] = v
             v = max(v, _F0)
             if store:
@@ -250,6 +258,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
         dx = q[c] - ax32
         dx2[c] = dx * dx
         mdx[c] = mx32 * dx
+        ldx[c] = lx32 * dx
     for r in range(r0, r1):
         wa = np.float64(quad[m + r % nq])
         b0, b1 = (cc0, cc1) if cr0 <= r < cr1 and cc1 > cc0 else (c0, c0)
@@ -258,10 +267,11 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
             dy = q[r] - ay32
             dy2 = dy * dy
             mdy = my32 * dy
+            ldy = ly32 * dy
             for c in range(b0, b1):
                 rr = dx2[c] + dy2
-                v0, v1 = _lookup(lk_sup, t32, rr, origin32, scale32)
-                v = max(_FHALF * (v0 + (mdx[c] + mdy) * v1 + under[r, c]), _F0)
+                v0, v1, v2 = _lookup(lk_sup, t32, rr, origin32, scale32)
+                v = max(_FHALF * (v0 + (mdx[c] + mdy) * v1 + (ldx[c] + ldy) * v2 + under[r, c]), _F0)
                 if store:
                     f_sup[r, c] = v
                 colsum[c] += wa * np.float64(v)
@@ -304,9 +314,12 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     line_q = fz / length  # N/mm
     yaw_s = yaw - st[S_ROT]  # rod axis in the superficial frame
     sx, cy = np.float32(-math.sin(yaw_s)), np.float32(math.cos(yaw_s))
-    # couple per unit length of the shear across the rod (along the normal (-sin, cos))
+    # couple per unit length of the shear across the rod (along the normal (-sin, cos)), and of
+    # the normal load's lean F_z u (as frame_fields)
+    lx, ly = fz * st[S_UX], fz * st[S_UY]
     f_perp_s = -fx * math.sin(yaw_s) + fy * math.cos(yaw_s)
     m_s = np.float32(f_perp_s * h_eff / length)
+    l_s = np.float32((-lx * math.sin(yaw_s) + ly * math.cos(yaw_s)) / length)
     ax32, ay32 = np.float32(st[S_AX]), np.float32(st[S_AY])
     i_s = (s2**3 - s1**3) / 3.0
     # torsion: traction T s / I_s along the line; its moment shifts the deep line by T H s / (I_s q)
@@ -316,9 +329,10 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     f_perp = -fx * np.float64(ey) + fy * np.float64(ex)
     f_along = fx * np.float64(ex) + fy * np.float64(ey)
     m_d = np.float32(f_perp * h_eff / length)
-    # along-axis shear: its moment is balanced by a linear load gradient along the line
+    l_d = np.float32((-lx * np.float64(ey) + ly * np.float64(ex)) / length)
+    # along-axis shear and lean: their moment is balanced by a linear load gradient along the line
     mid32 = np.float32(0.5 * (s1 + s2))
-    beta = np.float32(f_along * h_eff / (line_q * length**3 / 12.0))
+    beta = np.float32((f_along * h_eff + lx * np.float64(ex) + ly * np.float64(ey)) / (line_q * length**3 / 12.0))
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
     px = np.empty(m, np.float32)
     ramp_x = np.empty(m, np.float32)
@@ -337,8 +351,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
         b0, b1 = _band(-np.float64(ey), np.float64(py), reach_deep, q, np.float64(cdx32))
         for c in range(b0, b1):
             d = px[c] + py
-            v0, v1 = _lookup(lk_deep, t32, d, origin_d32, scale_d32)
-            v = v0 + m_d * v1
+            v0, v1, v2 = _lookup(lk_deep, t32, d, origin_d32, scale_d32)
+            v = v0 + m_d * v1 + l_d * v2
             ramp = ramp_x[c] + ramp_y
             if ramp < _F0:
                 ramp = _F0
@@ -365,8 +379,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
         _lattice_half(under, r, lo, b0, wa, store, f_sup, colsum)
         for c in range(b0, b1):
             d = col[c] + row
-            v0, v1 = _lookup(lk_sup, t32, d, origin32, scale32)
-            v = max(_FHALF * (v0 + m_s * v1 + under[r, c]), _F0)
+            v0, v1, v2 = _lookup(lk_sup, t32, d, origin32, scale32)
+            v = max(_FHALF * (v0 + m_s * v1 + l_s * v2 + under[r, c]), _F0)
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)

@@ -133,7 +133,11 @@ class CoupleResponse:
 
     w_mm: np.ndarray  # (n,) deflection amplitude, mm per N mm
     contact_kpa: np.ndarray  # (n,) contact pressure amplitude
-    foundation_kpa: np.ndarray  # (n,) lattice pressure amplitude
+    foundation_kpa: np.ndarray  # (n,) lattice pressure amplitude on the deep sheet
+    # the part of foundation_kpa the lattice hands straight to the deep sheet (its own moment's
+    # half, at the pad's edge, see `PlateOnFoundation.couple`): its top, under the sheet, does not
+    # carry it, so the lattice presses the sheet with foundation_kpa - direct_kpa
+    direct_kpa: np.ndarray | None = None
 
 
 class PlateOnFoundation:
@@ -291,12 +295,20 @@ class PlateOnFoundation:
         to the sheet under the contact (tau_c = F_t p_c / F_z, lever t_c + the sheet: a moment
         density local to the contact). The sheet, stiff in its plane, hands it to the lattice as
         a uniform traction over the pad (tau_L = F_t / A_pad, as the lattice's stiffness G A / h
-        assumes), whose moment about the deep plane (lever: the lattice's height) has no
-        divergence inside the pad and loads the sheet only where the traction ends, at the pad's
-        edge. `lattice_share` is the lattice's lever over H. A couple density m along the shear
-        loads the sheet like a pressure dm/dx; with F_t H = 1, m = (1 - s) p_c / F_z + s / A_pad
-        on the pad (s the lattice share), times cos(phi) (hemisphere) or across the rod (per unit
-        length)."""
+        assumes). `lattice_share` s is the lattice's lever over H.
+
+        The lattice is a thin layer in shear. Across its height h the shear stress is uniform, so
+        vertical equilibrium makes its normal stress change by h dtau/dx from its top to its base:
+        nothing inside the pad, where tau is uniform, and a band at the pad's edge, where tau
+        falls to zero (the lattice's side is free). Its compression follows the mean of the two,
+        so with the top at p_top = k w - h tau'/2 and the base at p_base = k w + h tau'/2 the
+        edge term splits in halves: one loads the sheet (D lap^2 w + k w = q + h tau'/2), whose
+        bending spreads it, the other the lattice hands straight to the deep sheet
+        (`CoupleResponse.direct_kpa`). Both halves together carry the lattice's moment s.
+
+        A couple density m along the shear loads the sheet like a pressure dm/dx: the cover's
+        (1 - s) p_c / F_z under the contact and half the lattice's s / A_pad at the pad's edge,
+        times cos(phi) (hemisphere) or across the rod (per unit length), for F_t H = 1."""
         if not 0.0 <= lattice_share <= 1.0:
             raise ValueError(f"lattice_share={lattice_share!r}: the lattice's part of the lever, in [0, 1]")
         pc = sol.contact_kpa * KPA
@@ -311,11 +323,13 @@ class PlateOnFoundation:
         # the cover's part: -d/dx of (1 - s) p_c / F_z (sign: the deep pressure moves along the shear)
         load = -np.gradient((1.0 - lattice_share) * pc / fz, self.step)
         # the lattice's part: the step of s / A_pad at the pad's edge. The traction fades over
-        # about the lattice's height inside the free edge, so its load lies on that band of the
-        # pad (a load on the plate's last node is lost to the free margin beyond); its moment is s
+        # about the lattice's height inside the free edge, so its term lies on that band of the
+        # pad (a load on the plate's last node is lost to the free margin beyond); its moment is
+        # s, half on the sheet, half straight onto the deep sheet
         band = self.on_pad & (np.abs(self.x) >= self.pad_radius - self.law.h_mm)
         edge = np.where(band, np.sign(self.x), 0.0)
-        load += lattice_share * edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
+        edge_term = lattice_share * edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
+        load += 0.5 * edge_term
         # a fixed sheet reuses its operator; a friction-held one has its own field per state
         lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
         jac = lin1 + sp.diags(stiff)
@@ -328,7 +342,9 @@ class PlateOnFoundation:
         w1 = spla.spsolve(jac.tocsc(), load)
         if self.kind == "hemisphere":
             w1[0] = 0.0
-        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA)
+        direct = 0.5 * edge_term / KPA
+        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA + direct,
+                              direct)
 
     def flank(self, sol: LaminateSolution) -> tuple[CoupleResponse, float]:
         """Response to the cap moving tangentially by a unit distance v relative to the sheet

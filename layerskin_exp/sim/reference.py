@@ -71,22 +71,27 @@ class ReferenceSkin:
         i, t = self._row(rec[mk.S_DELTA])
         h = tab.height_mm[i] * (1 - t) + tab.height_mm[i + 1] * t
         fz = rec[mk.S_FZ]
-        # the couple of the shear about the deep plane (frame_kernels.frame_fields)
+        # the couple of the shear about the deep plane and the normal load's lean F_z u about the
+        # columns' feet (frame_kernels.frame_fields)
         mx, my = rec[mk.S_FX] * h, rec[mk.S_FY] * h
+        lx, ly = fz * rec[mk.S_UX], fz * rec[mk.S_UY]
         ax, ay = rec[mk.S_CX], rec[mk.S_CY]
         dxd, dyd = ax, ay  # the columns' feet under the cap (frame_kernels.frame_fields)
         dist = tab.dist_mm
         if self.tab.kind == "hemisphere":
-            def layer(profile, couple, cx, cy):
+            def layer(profile, couple, lean, cx, cy):
                 dx, dy = x - cx, y - cy
                 r = np.hypot(dx, dy)
                 p0 = _row_interp(profile, i, t, r, dist)
                 p1 = _row_interp(couple, i, t, r, dist)
-                cos_term = np.where(r > 0, (mx * dx + my * dy) / np.maximum(r, 1e-12), 0.0)
-                return p0 + cos_term * p1
+                p2 = _row_interp(lean, i, t, r, dist)
+                safe = np.maximum(r, 1e-12)
+                cos_m = np.where(r > 0, (mx * dx + my * dy) / safe, 0.0)
+                cos_l = np.where(r > 0, (lx * dx + ly * dy) / safe, 0.0)
+                return p0 + cos_m * p1 + cos_l * p2
 
-            return (layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay),
-                    layer(tab.deep_kpa, tab.deep_couple_kpa, dxd, dyd) * cells)
+            return (layer(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa, ax, ay),
+                    layer(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa, dxd, dyd) * cells)
         # rod: line load across the axis, per unit length
         yaw = rec[mk.S_YAW]
         s1, s2 = mk.chord(dxd, dyd, yaw, self.model._half)
@@ -95,7 +100,9 @@ class ReferenceSkin:
         n_s = np.array([-math.sin(yaw_s), math.cos(yaw_s)])
         d_s = n_s[0] * (x - ax) + n_s[1] * (y - ay)
         m_s = (mx * n_s[0] + my * n_s[1]) / length
-        contact = _row_interp(tab.cover_kpa, i, t, d_s, dist) + m_s * _row_interp(tab.cover_couple_kpa, i, t, d_s, dist)
+        l_s = (lx * n_s[0] + ly * n_s[1]) / length
+        contact = (_row_interp(tab.cover_kpa, i, t, d_s, dist) + m_s * _row_interp(tab.cover_couple_kpa, i, t, d_s, dist)
+                   + l_s * _row_interp(tab.cover_lean_kpa, i, t, d_s, dist))
         line_q = fz / length
         i_s = (s2**3 - s1**3) / 3.0
         yaw_d = yaw + math.atan(rec[mk.S_TORQUE] * h / (i_s * line_q))
@@ -104,10 +111,12 @@ class ReferenceSkin:
         dx, dy = x - dxd, y - dyd
         d_d = n_d[0] * dx + n_d[1] * dy
         m_d = (mx * n_d[0] + my * n_d[1]) / length
-        beta = (mx * e[0] + my * e[1]) / (line_q * length**3 / 12.0)
+        l_d = (lx * n_d[0] + ly * n_d[1]) / length
+        beta = (mx * e[0] + my * e[1] + lx * e[0] + ly * e[1]) / (line_q * length**3 / 12.0)
         ramp = np.maximum(1.0 + beta * (e[0] * dx + e[1] * dy - 0.5 * (s1 + s2)), 0.0)
         lattice = (_row_interp(tab.deep_kpa, i, t, d_d, dist)
-                   + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)) * ramp * cells
+                   + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)
+                   + l_d * _row_interp(tab.deep_lean_kpa, i, t, d_d, dist)) * ramp * cells
         return contact, lattice
 
     def maps(self, recs: np.ndarray) -> np.ndarray:

@@ -14,9 +14,13 @@ Pressure maps (`pressure_maps`, vectorised). Both come from the laminate-on-latt
 (`contact`, `laminate`). Deep: the lattice's pressure around the contact's deep-frame
 position, times the lattice's cell pattern. Superficial, in the superficial frame: the mean of the
 contact pressure under the cover around the contact point and that lattice pressure (its core
-lies between the sheet's films, loaded by the contact above and the lattice below; `contact`). The shear's couple F_t H about the deep plane (H
-the height of the cover above it) adds the laminate's first-order response to both: the sheet
-tilts, the lattice takes most of the moment and the indenter the rest. Neither FSR reads
+lies between the sheet's films, loaded by the contact above and the lattice below; `contact`). The
+shear's couple F_t H about the deep plane (H the height of the cover above it) adds the
+laminate's first-order response to both: the cover's lever under the contact, the lattice's at the
+pad's edge, half through the sheet (which tilts) and half straight onto the deep sheet; the
+indenter takes a share. The sheet's travel u leans the lattice's columns under the contact: their
+thrust adds the couple F_z u, which takes the lattice's route (`contact.ContactTables.deep_lean_kpa`),
+so the deep plane's moment is the load's where the sheared stack holds it. Neither FSR reads
 tension. For the rod, torsion loads the line with traction proportional to the distance along
 it, whose local moments rotate the deep line.
 Each taxel integrates its electrode footprint with Gauss points.
@@ -250,7 +254,7 @@ class SkinModel:
         point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
         far below the profile's own scale. Stored as (value, next row - value) float32 pairs per
         pair of indentation rows, with one guard column of zeros, profile and couple response
-        side by side: `_lk` (2, n_delta - 1, n_fine, 4) [the cover's (the superficial core's
+        and lean response side by side: `_lk` (2, n_delta - 1, n_fine, 6) [the cover's (the superficial core's
         contact half), deep]. Also the window reach of each pair of rows (`_bounds`: the
         cover's and the lattice's; the superficial core spans both) and the stack height per row
         (`_rows`), see frame_kernels."""
@@ -282,17 +286,16 @@ class SkinModel:
                 fine[k, :-1] = v
             return fine
 
-        def quads(profile, couple, at, per_r):
-            a, b = resample(profile, at), resample(couple, at, per_r)
-            out = np.empty((a.shape[0] - 1, n_fine, 4), dtype=np.float32)
-            out[..., 0], out[..., 1] = a[:-1], a[1:] - a[:-1]
-            out[..., 2], out[..., 3] = b[:-1], b[1:] - b[:-1]
+        def quads(profile, couple, lean, at, per_r):
+            out = np.empty((profile.shape[0] - 1, n_fine, 6), dtype=np.float32)
+            for j, a in enumerate((resample(profile, at), resample(couple, at, per_r), resample(lean, at, per_r))):
+                out[..., 2 * j], out[..., 2 * j + 1] = a[:-1], a[1:] - a[:-1]
             return out
 
         hemi = self.kind == "hemisphere"
         self._lk = np.ascontiguousarray(np.stack([
-            quads(tab.cover_kpa, tab.cover_couple_kpa, at_layer[0], hemi),
-            quads(tab.deep_kpa, tab.deep_couple_kpa, at_layer[1], hemi)]))
+            quads(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa, at_layer[0], hemi),
+            quads(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa, at_layer[1], hemi)]))
         # Per pair of rows (k, k+1): how far from the contact either the profile or its couple
         # response exceeds WINDOW_EPS of its own peak, for each layer.
 
@@ -304,7 +307,8 @@ class SkinModel:
             return out
 
         self._bounds = np.ascontiguousarray(np.column_stack([
-            reach(tab.cover_kpa, tab.cover_couple_kpa), reach(tab.deep_kpa, tab.deep_couple_kpa)]))
+            reach(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa),
+            reach(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa)]))
         self._dist = np.ascontiguousarray(tab.dist_mm, dtype=float)
         self._rows = np.ascontiguousarray(tab.height_mm.reshape(-1, 1), dtype=float)
 
