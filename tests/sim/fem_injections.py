@@ -59,7 +59,8 @@ INJECTIONS = {
     # Not the inter-layer count shift: where the sheet hands the shear's couple to the lattice over
     # the whole pad (laminate.PlateOnFoundation.couple), the couple's pressure lies spread over the
     # pad, where the counts hardly see it, so the count shift does not follow the sheet's
-    # rigidity (nor, below, the lattice's shear stiffness); the rows listed do.
-    "sheet 100x too stiff in bending": (None, _stiff_sheet, ("peak_deep_taxel_kpa", "effective_height_rise",
-                                                             "deep_cop_counts_mm")),
+    # rigidity (nor, below, the lattice's shear stiffness); the rows listed do. Not the deep count
+    # CoP since 170b76d: half of the lattice's moment goes straight onto the deep sheet, bypassing
+    # the sheet's bending, and the deep CoP moves 0.19 / 0.10 mm under this error (band 0.2).
+    "sheet 100x too stiff in bending": (None, _stiff_sheet, ("peak_deep_taxel_kpa", "effective_height_rise")),
 }
