@@ -298,47 +298,47 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
     quadrature row is evaluated on the band of columns within reach_cover (the cover's profile)
     or reach_deep (the lattice's) of the line (beyond, the profile is below WINDOW_EPS of its
-    peak); f_sup, f_deep are left as they were outside the bands. Shear across the rod adds the
-    couple response per unit length; along it, its moment is balanced by a linear load gradient along the line; torsion loads
-    the line with traction proportional to the distance along it, whose moments turn the deep
-    line."""
+    peak); f_sup, f_deep are left as they were outside the bands.
+
+    Both layers' patterns lie about the cap's line in the sheet's frame (the columns' feet under
+    it, as frame_fields). Across the line, per unit length, the shear's couple F_perp H and the
+    normal load's lean q u_perp add the couple and lean responses (contact.ContactTables). The
+    twist enters the same way, strip by strip along the line: torsion loads the line with the
+    traction T s / I_s (s along the line from the contact point, I_s = int s^2 ds), a couple
+    T H s / I_s per unit length, and the sheet's turn theta leans the columns under the line by
+    theta s, a lean q theta s. Along the line, the shear's and the lean's moment is balanced by a
+    linear load gradient along it."""
     n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
     store = f_sup.shape[0] > 0
-    yaw = st[S_YAW]
     fz, fx, fy = st[S_FZ], st[S_FX], st[S_FY]
-    cdx, cdy = st[S_AX], st[S_AY]  # the columns' feet under the line (as frame_fields)
-    s1, s2 = _chord(cdx, cdy, yaw, prm.half_pad_mm)
+    yaw_s = st[S_YAW] - st[S_ROT]  # the rod's axis in the sheet's frame
+    cdx, cdy = st[S_AX], st[S_AY]  # the cap's point in the sheet's frame
+    s1, s2 = _chord(cdx, cdy, yaw_s, prm.half_pad_mm)
     length = max(s2 - s1, 1e-9)
     line_q = fz / length  # N/mm
-    yaw_s = yaw - st[S_ROT]  # rod axis in the superficial frame
-    sx, cy = np.float32(-math.sin(yaw_s)), np.float32(math.cos(yaw_s))
-    # couple per unit length of the shear across the rod (along the normal (-sin, cos)), and of
-    # the normal load's lean F_z u (as frame_fields)
+    ex, ey = np.float32(math.cos(yaw_s)), np.float32(math.sin(yaw_s))
+    ex64, ey64 = np.float64(ex), np.float64(ey)
     lx, ly = fz * st[S_UX], fz * st[S_UY]
-    f_perp_s = -fx * math.sin(yaw_s) + fy * math.cos(yaw_s)
-    m_s = np.float32(f_perp_s * h_eff / length)
-    l_s = np.float32((-lx * math.sin(yaw_s) + ly * math.cos(yaw_s)) / length)
-    ax32, ay32 = np.float32(st[S_AX]), np.float32(st[S_AY])
+    # per unit length across the line (its normal (-ey, ex)): at the contact point, and the
+    # growth per mm along the line (torsion's couple, the turn's lean)
+    m0 = np.float32((-fx * ey64 + fy * ex64) * h_eff / length)
+    l0 = np.float32((-lx * ey64 + ly * ex64) / length)
     i_s = (s2**3 - s1**3) / 3.0
-    # torsion: traction T s / I_s along the line; its moment shifts the deep line by T H s / (I_s q)
-    twist = math.atan(st[S_TORQUE] * h_eff / (i_s * line_q))
-    yaw_d = yaw + twist
-    ex, ey = np.float32(math.cos(yaw_d)), np.float32(math.sin(yaw_d))
-    f_perp = -fx * np.float64(ey) + fy * np.float64(ex)
-    f_along = fx * np.float64(ex) + fy * np.float64(ey)
-    m_d = np.float32(f_perp * h_eff / length)
-    l_d = np.float32((-lx * np.float64(ey) + ly * np.float64(ex)) / length)
-    # along-axis shear and lean: their moment is balanced by a linear load gradient along the line
+    kt = np.float32(st[S_TORQUE] * h_eff / i_s)
+    kl = np.float32(line_q * st[S_ROT])
+    # along the line: the shear's and the lean's moment, balanced by a linear load gradient
     mid32 = np.float32(0.5 * (s1 + s2))
-    beta = np.float32((f_along * h_eff + lx * np.float64(ex) + ly * np.float64(ey)) / (line_q * length**3 / 12.0))
+    beta = np.float32(((fx * ex64 + fy * ey64) * h_eff + lx * ex64 + ly * ey64) / (line_q * length**3 / 12.0))
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
-    px = np.empty(m, np.float32)
+    px = np.empty(m, np.float32)  # across-line coordinate, column part
+    sx = np.empty(m, np.float32)  # along-line coordinate, column part
     ramp_x = np.empty(m, np.float32)
     for c in range(m):
         dx = q[c] - cdx32
         px[c] = -ey * dx
+        sx[c] = ex * dx
         ramp_x[c] = _F1 + beta * (ex * dx - mid32)
     # the lattice's pressure (signed, with its cell pattern): the deep layer reads it clipped, the
     # superficial core half of it (as frame_fields)
@@ -346,13 +346,15 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     for r in range(m):
         dy = q[r] - cdy32
         py = ex * dy
-        ramp_y = beta * (ey * dy)
+        sy = ey * dy
+        ramp_y = beta * sy
         wa = np.float64(quad[m + r % nq])
-        b0, b1 = _band(-np.float64(ey), np.float64(py), reach_deep, q, np.float64(cdx32))
+        b0, b1 = _band(-ey64, np.float64(py), reach_deep, q, np.float64(cdx32))
         for c in range(b0, b1):
             d = px[c] + py
+            along = sx[c] + sy
             v0, v1, v2 = _lookup(lk_deep, t32, d, origin_d32, scale_d32)
-            v = v0 + m_d * v1 + l_d * v2
+            v = v0 + (m0 + kt * along) * v1 + (l0 + kl * along) * v2
             ramp = ramp_x[c] + ramp_y
             if ramp < _F0:
                 ramp = _F0
@@ -363,24 +365,24 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
                 f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[1])
-    col = np.empty(m, np.float32)
-    for c in range(m):
-        col[c] = sx * (q[c] - ax32)
     for r in range(m):
-        row = cy * (q[r] - ay32)
+        dy = q[r] - cdy32
+        py = ex * dy
+        sy = ey * dy
         wa = np.float64(quad[m + r % nq])
-        # the cover's band about the superficial line (its profile looked up there only) and the
-        # lattice's about the deep one (where the superficial core reads half the lattice's too)
-        b0, b1 = _band(np.float64(sx), np.float64(row), reach_cover, q, np.float64(ax32))
-        d0, d1 = _band(-np.float64(ey), np.float64(ex * (q[r] - cdy32)), reach_deep, q, np.float64(cdx32))
+        # the cover's band about the line (its profile looked up there only) and the lattice's
+        # (where the superficial core reads half the lattice's too)
+        b0, b1 = _band(-ey64, np.float64(py), reach_cover, q, np.float64(cdx32))
+        d0, d1 = _band(-ey64, np.float64(py), reach_deep, q, np.float64(cdx32))
         if b1 <= b0:
             b0, b1 = d0, d0
         lo, hi = (min(b0, d0), max(b1, d1)) if d1 > d0 else (b0, b1)
         _lattice_half(under, r, lo, b0, wa, store, f_sup, colsum)
         for c in range(b0, b1):
-            d = col[c] + row
+            d = px[c] + py
+            along = sx[c] + sy
             v0, v1, v2 = _lookup(lk_sup, t32, d, origin32, scale32)
-            v = max(_FHALF * (v0 + m_s * v1 + l_s * v2 + under[r, c]), _F0)
+            v = max(_FHALF * (v0 + (m0 + kt * along) * v1 + (l0 + kl * along) * v2 + under[r, c]), _F0)
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)

@@ -92,31 +92,30 @@ class ReferenceSkin:
 
             return (layer(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa, ax, ay),
                     layer(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa, dxd, dyd) * cells)
-        # rod: line load across the axis, per unit length
-        yaw = rec[mk.S_YAW]
-        s1, s2 = mk.chord(dxd, dyd, yaw, self.model._half)
+        # rod: line load across the axis, per unit length, about the cap's line in the sheet's
+        # frame (frame_kernels._rod_fields): the couple and the lean grow along the line with the
+        # torque and the sheet's turn
+        yaw_s = rec[mk.S_YAW] - rec[mk.S_THETA]
+        s1, s2 = mk.chord(ax, ay, yaw_s, self.model._half)
         length = max(s2 - s1, 1e-9)
-        yaw_s = yaw - rec[mk.S_THETA]
-        n_s = np.array([-math.sin(yaw_s), math.cos(yaw_s)])
-        d_s = n_s[0] * (x - ax) + n_s[1] * (y - ay)
-        m_s = (mx * n_s[0] + my * n_s[1]) / length
-        l_s = (lx * n_s[0] + ly * n_s[1]) / length
-        contact = (_row_interp(tab.cover_kpa, i, t, d_s, dist) + m_s * _row_interp(tab.cover_couple_kpa, i, t, d_s, dist)
-                   + l_s * _row_interp(tab.cover_lean_kpa, i, t, d_s, dist))
         line_q = fz / length
+        e = np.array([math.cos(yaw_s), math.sin(yaw_s)])
+        nrm = np.array([-e[1], e[0]])
+        dx, dy = x - ax, y - ay
+        d = nrm[0] * dx + nrm[1] * dy
+        along = e[0] * dx + e[1] * dy
         i_s = (s2**3 - s1**3) / 3.0
-        yaw_d = yaw + math.atan(rec[mk.S_TORQUE] * h / (i_s * line_q))
-        e = np.array([math.cos(yaw_d), math.sin(yaw_d)])
-        n_d = np.array([-e[1], e[0]])
-        dx, dy = x - dxd, y - dyd
-        d_d = n_d[0] * dx + n_d[1] * dy
-        m_d = (mx * n_d[0] + my * n_d[1]) / length
-        l_d = (lx * n_d[0] + ly * n_d[1]) / length
+        couple = (mx * nrm[0] + my * nrm[1]) / length + rec[mk.S_TORQUE] * h / i_s * along
+        lean = (lx * nrm[0] + ly * nrm[1]) / length + line_q * rec[mk.S_THETA] * along
         beta = (mx * e[0] + my * e[1] + lx * e[0] + ly * e[1]) / (line_q * length**3 / 12.0)
-        ramp = np.maximum(1.0 + beta * (e[0] * dx + e[1] * dy - 0.5 * (s1 + s2)), 0.0)
-        lattice = (_row_interp(tab.deep_kpa, i, t, d_d, dist)
-                   + m_d * _row_interp(tab.deep_couple_kpa, i, t, d_d, dist)
-                   + l_d * _row_interp(tab.deep_lean_kpa, i, t, d_d, dist)) * ramp * cells
+        ramp = np.maximum(1.0 + beta * (along - 0.5 * (s1 + s2)), 0.0)
+
+        def layer(profile, couple_resp, lean_resp):
+            return (_row_interp(profile, i, t, d, dist) + couple * _row_interp(couple_resp, i, t, d, dist)
+                    + lean * _row_interp(lean_resp, i, t, d, dist))
+
+        contact = layer(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa)
+        lattice = layer(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa) * ramp * cells
         return contact, lattice
 
     def maps(self, recs: np.ndarray) -> np.ndarray:
