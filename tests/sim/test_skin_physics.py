@@ -40,23 +40,29 @@ def press(m, z, xy=(0.0, 0.0), yaw=0.0):
     return m.step(0.0, np.array([xy[0], xy[1], z]), yaw)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 21 — fails since the cover/lattice physics change 1ccfa6c; the tables solve each row with the cover squeezed over the contact's own width, the plate here with the cap's radius")
 def test_normal_force_is_what_the_lattice_carries_under_the_laminate():
     """Equilibrium of the laminate: the force on the indenter equals the integral of the
     lattice's pressure under the sheet (the sheet only redistributes it), and the lattice
-    carries the pressure of its own compression (SpacerLaw) everywhere."""
+    carries the pressure of its own compression (SpacerLaw) everywhere. Solved as the tables
+    solve each row (the cover squeezed over the contact's own width, `cover_n_per_mm3`), at
+    table rows, and the skin model pressed there reads the same force."""
     from layerskin_exp.sim.contact import _solver
 
     m = model()
+    tab = m.tab
     plate = _solver(m.sim, "hemisphere")
     law = SpacerLaw(m.sim.spacer)
     w = None
-    for delta in (0.5, 1.5, 2.0, 2.2):
+    for target in (0.5, 1.5, 2.0, 2.2):
+        k = int(np.argmin(np.abs(tab.delta_mm - target)))
+        delta = float(tab.delta_mm[k])
+        plate.k_cover = float(tab.cover_n_per_mm3[k])
         sol = plate.solve(delta, w)
         w = sol.w_mm
         f_contact = plate.load(sol)
         f_lattice = float(sol.foundation_kpa @ plate.area) * 1e-3
         assert f_contact == pytest.approx(f_lattice, rel=0.01)
+        assert f_contact == pytest.approx(tab.load[k], rel=0.01)
         pressed = (sol.w_mm > 0) & plate.on_pad
         np.testing.assert_allclose(sol.foundation_kpa[pressed], law.pressure_kpa(sol.w_mm[pressed]), rtol=1e-9)
         st = press(model(), -delta)
@@ -101,43 +107,49 @@ def test_force_balance_superficial_and_deep(kind, z):
     assert f_deep == pytest.approx(f_sup, rel=0.08)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 21 — fails since the cover/lattice physics change 1ccfa6c; 0.6 mm of travel now gives 0.28 N (< 0.3 N) and the flank's moment is not in this balance")
-def test_moment_balance_of_the_shear_is_shared_by_lattice_and_indenter():
-    """The shear's couple F_t H about the deep plane is balanced by the lattice's pressure (the
-    deep CoP moves along the shear) and by the contact pressure on the stage-held indenter (the
-    superficial CoP moves against it): the two moments add up to F_t H exactly. What the deep
-    layer reads is the first-order moment balance F_t H = F_z shift less the indenter's share."""
-    from layerskin_exp.sim.contact import _solver
+@pytest.mark.parametrize("lean", [True, False])
+def test_moment_balance_of_the_sheared_hemisphere_stack(lean):
+    """Statics of the sheared stack under the hemisphere (the rod's: test_shear_mechanism): stuck
+    after a 0.8 mm diagonal slide at 2 mm, the lattice's signed pressure on the deep plane, over
+    the model's pad (the disc of the pad's area), balances the contact's load where it now sits
+    and the shear at the cover's height, int p (x - x_feet) dA = F_z (x_load - x_feet) + F_t H
+    along both axes, within 3 % (measured 0.6 %). Without the columns' lean (its response
+    zeroed) the deep plane misses F_z u (measured: 56 % of the moment carried)."""
+    from dataclasses import replace
 
-    m = model(lattice_contrast=0.0)
-    plate = _solver(m.sim, "hemisphere")
-    sol = plate.solve(2.0)
-    resp = plate.couple(sol)
-    lattice_share = plate.first_moment(resp.foundation_kpa)
-    indenter_share = -plate.first_moment(resp.contact_kpa)
-    assert lattice_share + indenter_share == pytest.approx(1.0, abs=0.01)
-    assert 0.2 < lattice_share < 1.0 and indenter_share > 0
-    states = [m.step(k * 1e-3, np.array([0.0, 0.0, -2.0])) for k in range(20)]
-    for k in range(60):  # slide 0.6 mm diagonally, stays stuck
-        states.append(m.step(0.02 + k * 1e-3, np.array([0.01 * (k + 1), 0.005 * (k + 1), -2.0])))
-    st = states[-1]
-    fz, ft = st.force_n[2], st.force_n[:2]
-    assert not st.slipping and np.hypot(*ft) > 0.3
-    sup, deep = m.pressure_maps([st])
-    h = float(m.stack_height_mm(st.indentation_mm))
-    shift_deep = cop(deep[0]) - (st.contact_xy_mm + st.surface_shift_mm)
-    shift_sup = cop(sup[0]) - st.contact_xy_mm
-    unit = ft / np.hypot(*ft)
-    # along the shear and not beyond the whole moment; against it on the superficial layer
-    assert 0.3 * lattice_share < (shift_deep @ unit) * fz / (np.hypot(*ft) * h) < 1.05
-    assert (shift_sup @ unit) < 0
-    # the inter-layer shift opposes the shear: spacer shear plus both layers' moment shifts
-    dc = cop(sup[0]) - cop(deep[0])
-    assert (dc @ unit) < -(st.surface_shift_mm @ unit)
-    # and the lattice pattern only perturbs it
-    m2 = model()
-    _, deep2 = m2.pressure_maps([st])
-    assert np.linalg.norm(cop(deep2[0]) - cop(deep[0])) < 0.3
+    from layerskin_exp.sim import mechanics as mk
+    from layerskin_exp.sim.laminate import pad_radius_mm
+    from layerskin_exp.sim.reference import ReferenceSkin
+
+    sim = SimConfig(spacer=SpacerConfig(lattice_contrast=0.0))
+    sim = replace(sim, readout=replace(sim.readout, noise_counts=0.0, scan_jitter_ms=0.0))
+    m = SkinModel(sim, SKIN, "hemisphere", np.random.default_rng(0))
+    n = 80
+    xyz = np.zeros((20 + n, 3))
+    xyz[:, 2] = -2.0
+    xyz[20:, 0], xyz[20:, 1] = 0.01 * np.arange(1, n + 1), 0.005 * np.arange(1, n + 1)
+    rec = m.step_many(1e-3 * np.arange(20 + n), xyz, np.zeros(20 + n))[-1]
+    fz, ft, u = rec[mk.S_FZ], rec[[mk.S_FX, mk.S_FY]], rec[[mk.S_UX, mk.S_UY]]
+    assert rec[mk.S_SLIPPING] == 0.0 and np.hypot(*ft) > 0.1 and np.hypot(*u) > 0.1
+    if not lean:
+        m.tab = replace(m.tab, cover_lean_kpa=0.0 * m.tab.cover_lean_kpa, deep_lean_kpa=0.0 * m.tab.deep_lean_kpa)
+    feet = rec[[mk.S_CX, mk.S_CY]]  # the cap's point in the sheet's frame, the columns' feet under it
+    reach = pad_radius_mm("hemisphere", sim.spacer.width_mm) + 1.0
+    step = 0.04
+    g = np.arange(-reach, reach, step)
+    x, y = np.meshgrid(g + feet[0], g + feet[1])
+    contact, lattice = ReferenceSkin(m).signed_fields(rec, x, y)
+    area = step * step * 1e-3  # mm^2, kPa -> N
+    assert contact.sum() * area == pytest.approx(fz, rel=0.01)
+    assert lattice.sum() * area == pytest.approx(fz, rel=0.01)
+    x_load = u + np.array([(contact * x).sum(), (contact * y).sum()]) / contact.sum()
+    h = float(m.stack_height_mm(rec[mk.S_DELTA]))
+    moment = np.array([(lattice * (x - feet[0])).sum(), (lattice * (y - feet[1])).sum()]) * area
+    statics = fz * (x_load - feet) + ft * h
+    if lean:
+        np.testing.assert_allclose(moment, statics, rtol=0.03)
+    else:
+        assert np.all(moment < 0.85 * statics)
 
 
 def test_shear_stiffness_rises_with_compression():
@@ -168,12 +180,32 @@ def test_slide_friction_bound_and_stick_slip_events():
     assert slip[0] < -1.0 and abs(slip[1]) < 1e-9  # the cover slid back relative to the indenter
 
 
-@pytest.mark.xfail(strict=True, reason="issue 21 — fails since the cover/lattice physics change 1ccfa6c; 25 deg of twist no longer reaches rotational slip with the cover's torsional compliance in series")
+def _without_couple_responses(m):
+    """The skin model m with its shear-couple and lean responses zeroed (the patterns then lie
+    about the cap's line in the sheet's frame and nothing else)."""
+    from dataclasses import replace
+
+    t = m.tab
+    m.tab = replace(t, cover_couple_kpa=0.0 * t.cover_couple_kpa, deep_couple_kpa=0.0 * t.deep_couple_kpa,
+                    cover_lean_kpa=0.0 * t.cover_lean_kpa, deep_lean_kpa=0.0 * t.deep_lean_kpa)
+    m._build_lookups()
+    m._tables = (m._params, m._lk, m._rows, m._bounds, m._dist, m._quad32, m._lattice32)
+    return m
+
+
 def test_rod_torsion_friction_torque_bound_and_rotational_slip():
+    """The rod pressed 2.3 mm and turned to 90 deg: the torque never exceeds the friction bound
+    mu F_z |s|-mean, the contact slips in rotation (more than once: stick-slip), and while it
+    sticks the deep pattern turns further with the torque than the superficial one. That turn
+    comes from the mechanism, not a placement: both patterns lie about the cap's line in the
+    sheet's frame, and the torque's couple per unit length T H s / I_s and the columns' lean
+    q theta s take the same couple and lean responses as a shear does, strip by strip (measured:
+    first slip at 39 deg; 0.012-0.041 rad at 5-20 deg). With those responses zeroed the two
+    patterns turn alike."""
     m = model("rod", k=20.0)
     states = [m.step(k * 1e-3, np.array([0.0, 0.0, -2.3])) for k in range(50)]
-    for k in range(3000):
-        yaw = math.radians(25.0) * min(k / 2000.0, 1.0)
+    for k in range(6000):
+        yaw = math.radians(90.0) * min(k / 4000.0, 1.0)
         states.append(m.step(0.05 + k * 1e-3, np.array([0.0, 0.0, -2.3]), yaw))
     st = states[-1]
     half = m.sim.spacer.width_mm / 2
@@ -185,13 +217,12 @@ def test_rod_torsion_friction_torque_bound_and_rotational_slip():
     assert st.slip_rad < -0.05
     slipping = np.array([s.slipping for s in states])
     assert np.count_nonzero(slipping[1:] & ~slipping[:-1]) >= 2
-    # mid-rotation, while sticking: the deep line turns with the gripper beyond the superficial
-    # one by more than the spacer's twist (the traction's local moments add to it)
-    mid = next(s for s in states[1000:] if not s.slipping and abs(s.surface_rotation_rad) > 0.02)
+    mid = next(s for s in states[50:] if not s.slipping and abs(s.surface_rotation_rad) > 0.1)
     sup, deep = m.pressure_maps([mid])
     diff = pca_angle(deep[0]) - pca_angle(sup[0])
-    assert np.sign(diff) == np.sign(mid.torque_z_nmm)
-    assert abs(diff) > abs(mid.surface_rotation_rad)
+    assert np.sign(diff) == np.sign(mid.torque_z_nmm) and abs(diff) > 0.005
+    sup0, deep0 = _without_couple_responses(model("rod", k=20.0)).pressure_maps([mid])
+    assert abs(pca_angle(deep0[0]) - pca_angle(sup0[0])) < 0.2 * abs(diff)
 
 
 def test_series_support_compliance():
