@@ -47,6 +47,9 @@ class Rig:
     tripped: str | None = None
     _guards: dict[str, list[Guard]] = field(default_factory=dict, init=False, repr=False)
     _faults: list[tuple[str, int]] = field(default_factory=list, init=False, repr=False)
+    # how late (ns) the watchdog's check that latched the first fault ran behind its period (the
+    # host's scheduling, not the device: a stall is caught within a period of its rule firing plus this)
+    fault_check_late_ns: int | None = field(default=None, init=False, repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, init=False, repr=False)
     _watchdog: threading.Thread | None = field(default=None, init=False, repr=False)
     _watchdog_stop: threading.Event = field(default_factory=threading.Event, init=False, repr=False)
@@ -158,14 +161,21 @@ class Rig:
         """Real-time rigs: ask every device for a fault every few ms, whatever the protocol thread
         is doing (it may be blocked in a command to a hung device), and stop all motion on the
         first one. Faults are latched: the protocol loop raises the first on its next tick."""
+        period_ns = int(self.watchdog_period_s * 1e9)
+        prev_ns = self.clock.now_ns()
         while not self._watchdog_stop.wait(self.watchdog_period_s):
+            now_ns = self.clock.now_ns()
+            late_ns, prev_ns = max(0, now_ns - prev_ns - period_ns), now_ns
             with self._lock:
                 if self._faults:
                     continue
-            now_ns = self.clock.now_ns()
             for d in self.devices():
                 reason = d.fault(now_ns) if d.is_connected else None
                 if reason:
+                    with self._lock:
+                        first = not self._faults
+                    if first:
+                        self.fault_check_late_ns = late_ns
                     self.report_fault(reason)
                     break
 

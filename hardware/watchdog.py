@@ -98,6 +98,13 @@ class ReplyWatch:
         with self._lock:
             self._answer_ns, self._asked_ns = host_ns, None
 
+    def asked_after_answer_ns(self) -> int:
+        """How long after the last answer the waiting request went out (0 if none waits): beyond
+        one poll period, the poller ran late (the host's scheduling), and the silence rule can
+        fire only that much later."""
+        answer, asked = self._answer_ns, self._asked_ns
+        return 0 if answer is None or asked is None else max(0, asked - answer)
+
     def silent_ns(self, now_ns: int) -> int | None:
         """Time since the last answer while a request waits beyond the allowance; else None."""
         answer, asked = self._answer_ns, self._asked_ns

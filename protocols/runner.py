@@ -532,7 +532,11 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
             # A device fault the rig latched (its watchdog stopped motion then), whichever error
             # ended the trial: a command to a hung device may fail before the loop sees the fault.
             first = rig.first_fault()
-            trial.event("error", reason, **({} if first is None else {"fault": first[0], "detected_ns": int(first[1])}))
+            detail = {} if first is None else {"fault": first[0], "detected_ns": int(first[1])}
+            late = getattr(rig, "fault_check_late_ns", None)
+            if first is not None and late is not None:
+                detail["check_late_ns"] = int(late)  # the watchdog's check ran this late (host scheduling)
+            trial.event("error", reason, **detail)
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
         writer.close(f"aborted: {reason}", stream_health=trial_health(health0, device_health(rig)))

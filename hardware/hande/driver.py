@@ -203,8 +203,9 @@ class HandEGripper(Gripper):
             silent_ns = self._replies.silent_ns(now_ns)
             if (self._connected and silent_ns is not None and silent_ns > self.cfg.stall_timeout_s * 1e9
                     and not self._reply_waiting()):
+                sent = self._replies.asked_after_answer_ns()
                 return (f"gripper stalled: no reply from the URCap socket for {silent_ns / 1e6:.0f} ms (a request "
-                        f"unanswered) at {self.address}")
+                        f"unanswered, sent {sent / 1e6:.0f} ms after the last reply) at {self.address}")
         return None
 
     def _reply_waiting(self) -> bool:

@@ -6,6 +6,7 @@ checks as simulated ones; a stalled stream stops the trial safely; kill -9 keeps
 from __future__ import annotations
 
 import os
+import re
 import signal
 import time
 
@@ -118,14 +119,24 @@ def test_stalled_stream_on_loopback_stops_safely(tmp_path, hydra_dirs, app, devi
     name = RIG_NAME[device]
     assert error["fault"].startswith(f"{name} stalled") or (device == "ur5e" and "link lost" in error["fault"]), error
     # motion was stopped within 50 ms of the stream's last sample (host receive times in the file):
-    # the rig's watchdog asks every device every 5 ms, whatever the protocol thread is doing
+    # the rig's watchdog asks every device every 5 ms, whatever the protocol thread is doing. What
+    # the host's scheduler adds is measured, not guessed, and allowed for: how late the watchdog's
+    # latching check ran (check_late_ns) and, for a polled device, how late the poller sent the
+    # request that went unanswered (beyond its poll period; the fault says when it went out)
     t_ns = s.streams[stream]["host_t_ns"]
     last_ns = int(t_ns[-1])
+    late_ns = float(error.get("check_late_ns", 0))
     # the Hand-E's driver polls its registers one GET at a time and writes a sample per full round;
     # its stall clock starts at the last reply, which can be up to one round after the last sample
-    round_ns = float(np.median(np.diff(t_ns))) if device == "hande" else 0.0
-    print(f"{device} stall caught {(error['detected_ns'] - last_ns) / 1e6:.1f} ms after its last sample")  # -rP
-    assert error["detected_ns"] - last_ns <= 50e6 + 10e6 + round_ns, (error["detected_ns"] - last_ns) / 1e6
+    round_ns = 0.0
+    if device == "hande":
+        round_ns = float(np.median(np.diff(t_ns)))
+        sent = re.search(r"sent (\d+) ms after the last reply", error["fault"])
+        if sent:
+            late_ns += max(0.0, float(sent.group(1)) * 1e6 - round_ns)
+    caught = (error["detected_ns"] - last_ns) / 1e6
+    print(f"{device} stall caught {caught:.1f} ms after its last sample, host lateness {late_ns / 1e6:.1f} ms")  # -rP
+    assert error["detected_ns"] - last_ns <= 50e6 + 10e6 + round_ns + late_ns, (caught, late_ns / 1e6)
 
 
 def test_kill_9_during_a_loopback_trial_keeps_all_but_the_last_100_ms(tmp_path, hydra_dirs):
