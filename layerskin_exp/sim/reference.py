@@ -76,7 +76,6 @@ class ReferenceSkin:
         mx, my = rec[mk.S_FX] * h, rec[mk.S_FY] * h
         lx, ly = fz * rec[mk.S_UX], fz * rec[mk.S_UY]
         ax, ay = rec[mk.S_CX], rec[mk.S_CY]
-        dxd, dyd = ax, ay  # the columns' feet under the cap (frame_kernels.frame_fields)
         dist = tab.dist_mm
         if self.tab.kind == "hemisphere":
             def layer(profile, couple, lean, cx, cy):
@@ -91,7 +90,8 @@ class ReferenceSkin:
                 return p0 + cos_m * p1 + cos_l * p2
 
             return (layer(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa, ax, ay),
-                    layer(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa, dxd, dyd) * cells)
+                    # the deep pattern at the columns' feet under the cap (frame_kernels.frame_fields)
+                    layer(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa, ax, ay) * cells)
         # rod: line load across the axis, per unit length, about the cap's line in the sheet's
         # frame (frame_kernels._rod_fields): the couple and the lean grow along the line with the
         # torque and the sheet's turn

@@ -188,8 +188,7 @@ class SkinModel:
         self._last_maps = np.zeros((2, n, n))  # pressure at the last frame
         self._memory = np.zeros(2)  # [time of the last frame, whether there was one]
         self._params = self._kernel_params()
-        self._tables = (self._params, self._lk, self._rows, self._bounds, self._dist, self._quad32,
-                        self._lattice32)
+        self._tables = self._kernel_tables()
         self.maps_computed = 0  # states whose pressure maps were computed (not reused in a hold)
         # Idle sheet: no pressure at the last frame and both FSR memories exactly zero. Unloaded
         # frames then leave it so and read the floor conductance: constant counts plus noise.
@@ -311,6 +310,11 @@ class SkinModel:
             reach(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa)]))
         self._dist = np.ascontiguousarray(tab.dist_mm, dtype=float)
         self._rows = np.ascontiguousarray(tab.height_mm.reshape(-1, 1), dtype=float)
+
+    def _kernel_tables(self) -> tuple:
+        """The kernels' table arguments after the state (frame_kernels: prm, lk, rows, bounds,
+        dist, quad, lattice)."""
+        return (self._params, self._lk, self._rows, self._bounds, self._dist, self._quad32, self._lattice32)
 
     def _window_reach(self, pair_max: np.ndarray, factor: np.ndarray) -> np.ndarray:
         """Radius (mm) beyond which pair_max (M, n_dist) x factor (M or 1, n_dist) stays below

@@ -189,7 +189,7 @@ def _without_couple_responses(m):
     m.tab = replace(t, cover_couple_kpa=0.0 * t.cover_couple_kpa, deep_couple_kpa=0.0 * t.deep_couple_kpa,
                     cover_lean_kpa=0.0 * t.cover_lean_kpa, deep_lean_kpa=0.0 * t.deep_lean_kpa)
     m._build_lookups()
-    m._tables = (m._params, m._lk, m._rows, m._bounds, m._dist, m._quad32, m._lattice32)
+    m._tables = m._kernel_tables()
     return m
 
 

@@ -200,7 +200,7 @@ def gate(sim, data: Path = DATA, tolerances: dict | None = None, model_hook=None
         kind, lo, hi = band(tol, metric, fem_value)
         rows.append(Comparison(bound, metric, label, fem_value, fast_value, kind, lo, hi))
 
-    # the cells section, then the same section with its lattice homogenised (HOMOGENISED_ROWS)
+    # the cells section, then the same section with its lattice homogenised
     for bound, side in (("bonded", "fem"), ("homogenised", "homogenised")):
         for name in SIGNALS:
             for row in table.values():
