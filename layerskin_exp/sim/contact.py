@@ -11,16 +11,17 @@ per design, as tables over the indentation depth delta:
 - rod: line-contact profiles p(delta, d) across the axis, per unit length along it.
 
 Per row: the normal force (or line load); the pressure the superficial layer feels and the
-deep layer feels (the lattice's pressure); their first-order
-change per unit couple of the shear about the deep plane (`laminate.CoupleResponse`: the
-cover's part of the lever acts under the contact, where the indenter takes a share; the
-lattice's part, handed over the whole pad by the sheet, ends at the pad's edge, half of it on
-the sheet, which tilts, half straight on the deep sheet, so the moment balance holds for the
-whole deep pressure but not for what the sensor reads) and per unit couple of the normal load's
-lean (F_z u: the columns under the contact lean by the sheet's travel, their thrust joins the
-lattice's shear and takes its route); the
-lattice's extra tangential and torsional stiffness under the contact; the friction radius; the
-height of the cover above the deep sensing plane. Lengths mm, pressures kPa, forces N.
+deep layer feels (the lattice's pressure); their first-order change per unit couple of the shear
+about the deep plane through the cover's part of the lever, which acts under the contact and of
+which the indenter takes a share (`laminate.PlateOnFoundation.couple`); the lattice's extra
+tangential and torsional stiffness under the contact; the friction radius; the height of the
+cover above the deep sensing plane and the lattice's height under the contact. The lattice's part
+of the couple and the columns' lean (F_z u: the columns under the contact lean by the sheet's
+travel, their thrust joins the lattice's shear) are handed over the whole pad by the sheet and
+end at the pad's sides, half on the sheet, which tilts, half straight on the deep sheet
+(`laminate.PlateOnFoundation.edge_couple`): one table across a side, placed at the pad's four
+sides by the frame pipeline wherever the contact is. The moment balance holds for the whole deep
+pressure, not for what the sensor reads. Lengths mm, pressures kPa, forces N.
 
 What the superficial layer feels. Its Velostat core lies between the sheet's two electrode films,
 which carry the sheet's bending (the core is soft). The sheet is loaded on its top by the contact
@@ -92,12 +93,17 @@ class ContactTables:
     # pressure with its cell pattern; `superficial_kpa` is that mean with the smooth lattice)
     cover_kpa: np.ndarray  # (n_delta, n_dist)
     cover_couple_kpa: np.ndarray  # (n_delta, n_dist)
-    # per unit couple F_z u of the normal load's lean (the sheet's travel u leans the lattice's
-    # columns under the contact; their thrust F_z u / h joins the lattice's shear, so its moment
-    # takes the lattice's route only, `laminate.PlateOnFoundation.couple` with s = 1): the cover's
-    # and the deep sheet's pressure change
-    cover_lean_kpa: np.ndarray  # (n_delta, n_dist)
-    deep_lean_kpa: np.ndarray  # (n_delta, n_dist)
+    # the lattice's route (laminate.PlateOnFoundation.edge_couple): the couple it carries, the
+    # shear's F_t h_L and the columns' lean F_z u (the sheet's travel u leans the columns under the
+    # contact; their thrust F_z u / h joins the lattice's shear), is handed over the whole pad by
+    # the in-plane-stiff sheet and ends at the pad's sides, wherever the contact is. Per unit
+    # couple per mm along a side, across it on `edge_dist_mm` (the pad's centre at 0, its sides at
+    # +-half its width): the deep sheet's pressure (the lattice's base) and the lattice's top
+    # (what the superficial core reads half of), both odd; the same for every indentation
+    edge_dist_mm: np.ndarray  # (n_edge,)
+    edge_deep_kpa: np.ndarray  # (n_edge,)
+    edge_top_kpa: np.ndarray  # (n_edge,)
+    lattice_height_mm: np.ndarray  # (n_delta,) the lattice's height under the contact: its lever
 
     @property
     def d_delta(self) -> float:
@@ -178,9 +184,6 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     found = np.zeros((n_delta, n_x))
     contact1 = np.zeros((n_delta, n_x))
     found1 = np.zeros((n_delta, n_x))
-    direct1 = np.zeros((n_delta, n_x))
-    contact_lean = np.zeros((n_delta, n_x))
-    found_lean = np.zeros((n_delta, n_x))
     comp = np.zeros((n_delta, n_x))
     load = np.zeros(n_delta)
     cover_shear = np.zeros(n_delta)
@@ -204,12 +207,11 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         reach_mm = max(contact_confinement_mm(kind, x, plate.area, sol.contact_kpa), 0.5 * plate.step)
         load[k] = plate.load(sol)
         # the couple's levers: the cover and sheet above the lattice, the lattice's own height
-        # under the contact; their sum is the row's height H (below)
+        # under the contact; their sum is the row's height H (below). The cover's route here, the
+        # lattice's at the pad's sides (edge tables, below)
         lattice_mm = h - comp[k, centre]
         resp = plate.couple(sol, lattice_mm / (sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + lattice_mm))
-        contact1[k], found1[k], direct1[k] = resp.contact_kpa, resp.foundation_kpa, resp.direct_kpa
-        lean = plate.couple(sol, 1.0)
-        contact_lean[k], found_lean[k] = lean.contact_kpa, lean.foundation_kpa
+        contact1[k], found1[k] = resp.contact_kpa, resp.foundation_kpa
         flank, k_cv = plate.flank(sol)
         if k_cv > 0.0:
             # per N of tangential load the cap moves 1 / k_cv relative to the sheet
@@ -244,8 +246,8 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     h_row = np.maximum(sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre], 1e-6)
     deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
     cover1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
-    # the lattice presses the sheet with all but what it hands straight to the deep sheet
-    superficial1 = 0.5 * (cover1 + deep1 - direct1 @ blur_d.T)
+    superficial1 = 0.5 * (cover1 + deep1)
+    edge_dist, edge_deep, edge_top = _edge_tables(sim, sigma_d)
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
     k_extra = np.where(comp > 0, k_extra, 0.0)
     shear_extra = k_extra @ weight * KPA_MM2_TO_N
@@ -257,4 +259,16 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     height = sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
                          halfwidth, superficial1, deep1, height, comp[:, centre].copy(), cover_shear, cover_torsion,
-                         cover_kc, cover, cover1, contact_lean @ blur_s.T, found_lean @ blur_d.T)
+                         cover_kc, cover, cover1, edge_dist, edge_deep, edge_top, h - comp[:, centre])
+
+
+def _edge_tables(sim: SimConfig, sigma_d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lattice's route across the pad (`ContactTables.edge_deep_kpa`): a straight side, per
+    unit couple per mm along it, on the unloaded lattice (`PlateOnFoundation.edge_couple`);
+    blurred like the deep profiles (half a sheet's thickness)."""
+    plate = _solver(sim, "rod")
+    resp = plate.edge_couple()
+    reach = plate.pad_radius + 1.0
+    dist = np.linspace(-reach, reach, 961)
+    blur = _line_gauss_matrix(dist, plate.x, plate.step, sigma_d)
+    return dist, blur @ resp.foundation_kpa, blur @ (resp.foundation_kpa - 2.0 * resp.direct_kpa)

@@ -14,19 +14,21 @@ Argument conventions (fixed dtypes, C-contiguous, so each kernel compiles once):
 - `states` (N, N_STATE) float64, columns `S_*` (one row per mechanical state);
 - `prm`: the parameter record (`PARAMS`, `new_params`): geometry, table grids, FSR and readout
   constants, each by its name;
-- `lk` (2, n_pairs, n_fine, 6) float32: per table (the cover's, the superficial core's contact
-  half; the lattice's, deep) the profile, its change per unit couple of the shear and its
-  change per unit couple of the normal load's lean F_z u (both per r for the hemisphere, so that
-  times the offset along the couple they give the cos(phi) mode), resampled for nearest-bin
-  lookups, as (profile at row k, row k+1 - row k, couple response at row k, its row difference,
-  lean response at row k, its row difference), last column zero (guard);
-- `rows` (n_delta, 1) float64: the height of the cover above the deep sensing plane (mm);
+- `lk` (2, n_pairs, n_fine, 4) float32: per table (the cover's, the superficial core's contact
+  half; the lattice's, deep) the profile and its change per unit couple of the shear through the
+  cover's lever (per r for the hemisphere, so that times the offset along the couple it gives
+  the cos(phi) mode), resampled for nearest-bin lookups, as (profile at row k, row k+1 - row k,
+  couple response at row k, its row difference), last column zero (guard);
+- `rows` (n_delta, 2) float64: the height of the cover above the deep sensing plane and the
+  lattice's height under the contact (mm);
   `bounds` (n_pairs, 2): the cover's and the lattice's reach (mm) beyond which both the profile
   and its couple response stay below WINDOW_EPS of their peaks (the superficial core reads the
   cover's within the first and half the lattice's within the second);
 - `dist` (n_dist,) float64 (the tables' grid); `quad` (n*q + q,) float32: quadrature
   coordinates then weights;
-  `lattice` (n*q, n*q) float32.
+  `lattice` (n*q, n*q) float32; `edge` (2, n*q) float32: the lattice's route across a side of
+  the pad at the quadrature coordinates (per unit couple per mm along the side; the pad centred
+  on the array): the deep sheet's pressure and the lattice's top (`contact.ContactTables`).
 
 Floating point: field values are float32 (as in the numpy pipeline), taxel means, FSR and
 readout float64.
@@ -56,6 +58,8 @@ PARAMS = np.dtype([
     # first taxel centre, the pitch and half the electrode's side (mm), half the pad's side (mm)
     ("n_taxels", np.float64), ("quad_points", np.float64), ("rod", np.float64), ("first_centre_mm", np.float64),
     ("pitch_mm", np.float64), ("half_electrode_mm", np.float64), ("half_pad_mm", np.float64),
+    # the band inside the pad's sides over which the lattice's shear fades (its height, mm)
+    ("edge_band_mm", np.float64),
     # the contact tables: indentation step and last row index; the fine lookups' origin and scale
     # (superficial, deep: r^2 or signed distance to bin)
     ("delta_step_mm", np.float64), ("last_delta_row", np.float64), ("lk_origin", np.float64), ("lk_scale", np.float64),
@@ -118,13 +122,48 @@ def _delta_row(delta, prm):
 
 @_jit
 def _lookup(lk_row, t32, coord, origin32, scale32):
-    """Profile, couple response and lean response (float32) at coord (r^2 or signed distance,
-    float32) for indentation row i + t (lk_row = lk[layer, i], t32 = t): nearest bin of the fine
-    table, linear between the two rows; zero beyond the table (guard column)."""
+    """Profile and couple response (float32) at coord (r^2 or signed distance, float32) for
+    indentation row i + t (lk_row = lk[layer, i], t32 = t): nearest bin of the fine table, linear
+    between the two rows; zero beyond the table (guard column)."""
     c = (coord - origin32) * scale32 + _FHALF
     j = min(max(int(c), 0), lk_row.shape[0] - 1)  # branch-free clamp (the guard column is zero)
-    return (lk_row[j, 1] * t32 + lk_row[j, 0], lk_row[j, 3] * t32 + lk_row[j, 2],
-            lk_row[j, 5] * t32 + lk_row[j, 4])
+    return lk_row[j, 1] * t32 + lk_row[j, 0], lk_row[j, 3] * t32 + lk_row[j, 2]
+
+
+@_jit
+def _edge_loads(st, prm, h_lat, k_lean):
+    """The lattice's route of one state: the couple per mm along the pad's sides, as (cx, cy, kk)
+    (float32) with cx - kk y across the sides x = +-L at height y and cy + kk x across the sides
+    y = +-L at x (N mm / mm).
+
+    The in-plane-stiff sheet hands the lattice the shear as a uniform traction over the pad, plus
+    the rotation field (T / J)(-y, x) of a torque (J = (2L)^4 / 6, the square pad's polar
+    moment); the lattice's thin sheared layer puts h tau.n on the pad's sides. Its couple: the
+    shear's F_t h_L (h_L the lattice's lever), the columns' lean F_z u (contact.ContactTables),
+    the torque's T h_L and the turned sheet's lean k_lean (rod: q theta I_s)."""
+    two_l = 2.0 * prm.half_pad_mm
+    mlx = st[S_FX] * h_lat + st[S_FZ] * st[S_UX]
+    mly = st[S_FY] * h_lat + st[S_FZ] * st[S_UY]
+    k = st[S_TORQUE] * h_lat + k_lean
+    # the pair of sides is (2L - band) apart, the traction fading over the band inside each
+    kk = k * (two_l - prm.edge_band_mm) / (two_l**4 / 6.0)
+    return np.float32(mlx / two_l), np.float32(mly / two_l), np.float32(kk)
+
+
+@_jit
+def _fill_edges(edge, q, half_pad, cx, cy, kk, base, top):
+    """base, top (m, m) [y, x] = the lattice's route at every quadrature point (`_edge_loads`):
+    its pressure on the deep sheet and its top's on the sheet (signed, before the cell pattern).
+    Each pair of sides acts along its own length (|y| <= L for the sides x = +-L)."""
+    m = q.shape[0]
+    l32 = np.float32(half_pad)
+    for r in range(m):
+        across_x = cx - kk * q[r] if abs(q[r]) <= l32 else _F0
+        eb_r, et_r = edge[0, r], edge[1, r]
+        for c in range(m):
+            across_y = cy + kk * q[c] if abs(q[c]) <= l32 else _F0
+            base[r, c] = edge[0, c] * across_x + eb_r * across_y
+            top[r, c] = edge[1, c] * across_x + et_r * across_y
 
 
 @_jit
@@ -146,11 +185,11 @@ def _window(cx, cy, reach, prm, win, at):
 
 # ---------------------------------------------------------------------------------- fields
 @_jit
-def _lattice_half(under, r, c0, c1, wa, store, f_sup, colsum):
+def _lattice_half(top, r, c0, c1, wa, store, f_sup, colsum):
     """Superficial quadrature row r, columns [c0, c1) beyond the cover's reach: the core reads
-    half the lattice's pressure there (no tension), added to the Gauss-weighted column sums."""
+    half the lattice top's pressure there (no tension), added to the Gauss-weighted column sums."""
     for c in range(c0, c1):
-        v = max(_FHALF * under[r, c], _F0)
+        v = max(_FHALF * top[r, c], _F0)
         if store:
             f_sup[r, c] = v
         colsum[c] += wa * np.float64(v)
@@ -172,19 +211,37 @@ def _row_done(colsum, r, c0, c1, quad, n, nq, tax):
 
 
 @_jit
-def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, tax):
+def _deep_pass(base, top, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax):
+    """The lattice's signed pressure base, top (m, m) times the cell pattern over rows [r0, r1) x
+    columns [c0, c1): the deep layer reads the base (no tension) into f_deep and its taxel
+    means; top is left with the pattern for the superficial core."""
+    m = n * nq
+    for r in range(r0, r1):
+        wa = np.float64(quad[m + r % nq])
+        for c in range(c0, c1):
+            cell = lattice[r, c]
+            v = max(base[r, c] * cell, _F0)
+            top[r, c] *= cell
+            if store:
+                f_deep[r, c] = v
+            colsum[c] += wa * np.float64(v)
+        _row_done(colsum, r, c0, c1, quad, n, nq, tax)
+
+
+@_jit
+def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_deep, tax):
     """Pressure (kPa, float32) at the quadrature points of both layers for one loaded state
     st (N_STATE,), written into f_sup, f_deep (n*q, n*q) [y, x] inside each layer's taxel
-    window (hemisphere; the rod's is the whole grid), and the Gauss-weighted taxel means
-    (kPa) into tax (2, n, n), zero outside the windows. With empty (0, 0) f_sup, f_deep only
-    the taxel means are written (the frame pipeline's path).
+    window (hemisphere; the rod's, and with any couple the lattice's route, the whole grid),
+    and the Gauss-weighted taxel means (kPa) into tax (2, n, n), zero outside the windows. With
+    empty (0, 0) f_sup, f_deep only the taxel means are written (the frame pipeline's path).
 
     Each layer reads the axisymmetric profile of the loaded laminate plus, along the shear, its
-    first-order change under the shear's couple F_t H about the deep plane and under the normal
-    load's lean F_z u (the lattice's route only, `contact.ContactTables`): the deep layer the
-    lattice's pressure times the cell pattern, the superficial core the mean of the cover's
-    (the contact's, lk[0]) and that lattice pressure (see contact.py). Neither FSR reads tension
-    (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
+    first-order change under the shear's couple F_t H about the deep plane through the cover's
+    lever (lk), and the lattice's route at the pad's sides (`_edge_loads`): the deep layer the
+    lattice's pressure on the deep sheet times the cell pattern, the superficial core the mean
+    of the cover's (the contact's, lk[0]) and the lattice top's (see contact.py). Neither FSR
+    reads tension (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
     n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
@@ -202,26 +259,31 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
     cdx, cdy = ax, ay
     i, t = _delta_row(delta, prm)
     h_eff = rows[i, 0] * (1 - t) + rows[i + 1, 0] * t
+    h_lat = rows[i, 1] * (1 - t) + rows[i + 1, 1] * t
     t32 = np.float32(t)
     origin32, scale32 = np.float32(prm.lk_origin), np.float32(prm.lk_scale)
     scale_d32, origin_d32 = np.float32(prm.lk_scale_deep), np.float32(prm.lk_origin_deep)
     lk_sup, lk_deep = lk[0, i], lk[1, i]
+    # the lattice's pressure (signed, before its cell pattern): on the deep sheet (base) and on
+    # the sheet (top; they differ by the lattice's route at the pad's sides)
+    base = np.zeros((m, m), np.float32)
+    top = np.zeros((m, m), np.float32)
     if prm.rod != 0.0:
-        _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
-                    origin32, scale32, origin_d32, scale_d32, colsum, tax, bounds[i, 0], bounds[i, 1])
+        _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge, f_sup, f_deep,
+                    origin32, scale32, origin_d32, scale_d32, colsum, tax, bounds[i, 0], bounds[i, 1], base, top)
         return
     win = np.empty(4, np.int64)
-    # couple of the shear about the deep plane along each axis (N mm), and the normal load's lean
-    # F_z u about the columns' feet (the lattice's route only: contact.ContactTables.deep_lean_kpa)
+    # the lattice's route: at the pad's sides, wherever the contact is
+    cx, cy, kk = _edge_loads(st, prm, h_lat, 0.0)
+    edges = cx != _F0 or cy != _F0 or kk != _F0
+    if edges:
+        _fill_edges(edge, q, prm.half_pad_mm, cx, cy, kk, base, top)
+    # the cover's route: the couple of the shear about the deep plane along each axis (N mm), of
+    # which the tables' couple response carries the cover's lever
     mx32, my32 = np.float32(fx * h_eff), np.float32(fy * h_eff)
-    lx32, ly32 = np.float32(st[S_FZ] * st[S_UX]), np.float32(st[S_FZ] * st[S_UY])
     dx2 = np.empty(m, np.float32)
     mdx = np.empty(m, np.float32)
-    ldx = np.empty(m, np.float32)
-    # the lattice's pressure (signed, with its cell pattern) at each point: the deep layer reads it
-    # (clipped: no tension), the superficial core half of it (contact.py's docstring)
-    under = np.zeros((m, m), np.float32)
-    # deep: the lattice's pressure around the contact's deep-frame position, times the cell pattern
+    # deep: the lattice's pressure around the contact's deep-frame position
     _window(cdx, cdy, bounds[i, 1], prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
@@ -229,53 +291,48 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, 
         dx = q[c] - cdx32
         dx2[c] = dx * dx
         mdx[c] = mx32 * dx
-        ldx[c] = lx32 * dx
     for r in range(r0, r1):
         dy = q[r] - cdy32
         dy2 = dy * dy
         mdy = my32 * dy
-        ldy = ly32 * dy
-        wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
-            rr = dx2[c] + dy2
-            v0, v1, v2 = _lookup(lk_deep, t32, rr, origin_d32, scale_d32)
-            v = (v0 + (mdx[c] + mdy) * v1 + (ldx[c] + ldy) * v2) * lattice[r, c]
-            under[r, c] = v
-            v = max(v, _F0)
-            if store:
-                f_deep[r, c] = v
-            colsum[c] += wa * np.float64(v)
-        _row_done(colsum, r, c0, c1, quad, n, nq, tax[1])
+            v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
+            v = v0 + (mdx[c] + mdy) * v1
+            base[r, c] += v
+            top[r, c] += v
+    if edges:
+        r0, r1, c0, c1 = 0, m, 0, m
+    _deep_pass(base, top, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax[1])
     # superficial: around the contact, in the superficial frame, over the lattice's window and
-    # the cover's (its half of the lattice's pressure reaches as far as that does); the cover's
-    # profile is looked up only in its own, much smaller, window (bounds[i, 0])
+    # the cover's (its half of the lattice top's pressure reaches as far as that does); the
+    # cover's profile is looked up only in its own, much smaller, window (bounds[i, 0])
     _window(ax, ay, bounds[i, 0], prm, win, 0)
     cr0, cr1, cc0, cc1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
-    _window(ax, ay, max(bounds[i, 0], bounds[i, 1]), prm, win, 0)
-    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
+    if edges:
+        r0, r1, c0, c1 = 0, m, 0, m
+    else:
+        _window(ax, ay, max(bounds[i, 0], bounds[i, 1]), prm, win, 0)
+        r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
     ax32, ay32 = np.float32(ax), np.float32(ay)
     for c in range(cc0, cc1):
         dx = q[c] - ax32
         dx2[c] = dx * dx
         mdx[c] = mx32 * dx
-        ldx[c] = lx32 * dx
     for r in range(r0, r1):
         wa = np.float64(quad[m + r % nq])
         b0, b1 = (cc0, cc1) if cr0 <= r < cr1 and cc1 > cc0 else (c0, c0)
-        _lattice_half(under, r, c0, b0, wa, store, f_sup, colsum)
+        _lattice_half(top, r, c0, b0, wa, store, f_sup, colsum)
         if b1 > b0:
             dy = q[r] - ay32
             dy2 = dy * dy
             mdy = my32 * dy
-            ldy = ly32 * dy
             for c in range(b0, b1):
-                rr = dx2[c] + dy2
-                v0, v1, v2 = _lookup(lk_sup, t32, rr, origin32, scale32)
-                v = max(_FHALF * (v0 + (mdx[c] + mdy) * v1 + (ldx[c] + ldy) * v2 + under[r, c]), _F0)
+                v0, v1 = _lookup(lk_sup, t32, dx2[c] + dy2, origin32, scale32)
+                v = max(_FHALF * (v0 + (mdx[c] + mdy) * v1 + top[r, c]), _F0)
                 if store:
                     f_sup[r, c] = v
                 colsum[c] += wa * np.float64(v)
-        _lattice_half(under, r, max(b1, c0), c1, wa, store, f_sup, colsum)
+        _lattice_half(top, r, max(b1, c0), c1, wa, store, f_sup, colsum)
         _row_done(colsum, r, c0, c1, quad, n, nq, tax[0])
 
 
@@ -293,21 +350,22 @@ def _band(a, b, reach, q, x0):
 
 
 @_jit
-def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_deep,
-                origin32, scale32, origin_d32, scale_d32, colsum, tax, reach_cover, reach_deep):
+def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge, f_sup, f_deep,
+                origin32, scale32, origin_d32, scale_d32, colsum, tax, reach_cover, reach_deep, base, top):
     """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
-    quadrature row is evaluated on the band of columns within reach_cover (the cover's profile)
-    or reach_deep (the lattice's) of the line (beyond, the profile is below WINDOW_EPS of its
-    peak); f_sup, f_deep are left as they were outside the bands.
+    quadrature row looks the profiles up on the band of columns within reach_cover (the cover's
+    profile) or reach_deep (the lattice's) of the line (beyond, the profile is below WINDOW_EPS
+    of its peak); base, top (m, m) zero or holding nothing yet, scratch for the lattice's pressure.
 
     Both layers' patterns lie about the cap's line in the sheet's frame (the columns' feet under
-    it, as frame_fields). Across the line, per unit length, the shear's couple F_perp H and the
-    normal load's lean q u_perp add the couple and lean responses (contact.ContactTables). The
-    twist enters the same way, strip by strip along the line: torsion loads the line with the
-    traction T s / I_s (s along the line from the contact point, I_s = int s^2 ds), a couple
-    T H s / I_s per unit length, and the sheet's turn theta leans the columns under the line by
-    theta s, a lean q theta s. Along the line, the shear's and the lean's moment is balanced by a
-    linear load gradient along it."""
+    it, as frame_fields). Across the line, per unit length, the shear's couple F_perp H adds the
+    couple response (the cover's lever, contact.ContactTables). The twist enters the same way,
+    strip by strip along the line: torsion loads the line with the traction T s / I_s (s along
+    the line from the contact point, I_s = int s^2 ds), a couple T H s / I_s per unit length.
+    Along the line, the cover's lever of the shear is balanced by a linear load gradient along
+    it. The lattice's route (`_edge_loads`: the shear's F_t h_L, the columns' lean F_z u, the
+    torque's T h_L and the turned sheet's lean q theta I_s, the columns under the line leaning by
+    theta s) lies at the pad's sides."""
     n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
@@ -320,17 +378,17 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
     line_q = fz / length  # N/mm
     ex, ey = np.float32(math.cos(yaw_s)), np.float32(math.sin(yaw_s))
     ex64, ey64 = np.float64(ex), np.float64(ey)
-    lx, ly = fz * st[S_UX], fz * st[S_UY]
-    # per unit length across the line (its normal (-ey, ex)): at the contact point, and the
-    # growth per mm along the line (torsion's couple, the turn's lean)
-    m0 = np.float32((-fx * ey64 + fy * ex64) * h_eff / length)
-    l0 = np.float32((-lx * ey64 + ly * ex64) / length)
     i_s = (s2**3 - s1**3) / 3.0
+    cx, cy, kk = _edge_loads(st, prm, h_lat, line_q * st[S_ROT] * i_s)
+    if cx != _F0 or cy != _F0 or kk != _F0:
+        _fill_edges(edge, q, prm.half_pad_mm, cx, cy, kk, base, top)
+    # per unit length across the line (its normal (-ey, ex)): the shear's couple at the contact
+    # point, and the torque's growth per mm along the line
+    m0 = np.float32((-fx * ey64 + fy * ex64) * h_eff / length)
     kt = np.float32(st[S_TORQUE] * h_eff / i_s)
-    kl = np.float32(line_q * st[S_ROT])
-    # along the line: the shear's and the lean's moment, balanced by a linear load gradient
+    # along the line: the cover's lever of the shear, balanced by a linear load gradient
     mid32 = np.float32(0.5 * (s1 + s2))
-    beta = np.float32(((fx * ex64 + fy * ey64) * h_eff + lx * ex64 + ly * ey64) / (line_q * length**3 / 12.0))
+    beta = np.float32((fx * ex64 + fy * ey64) * (h_eff - h_lat) / (line_q * length**3 / 12.0))
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
     px = np.empty(m, np.float32)  # across-line coordinate, column part
     sx = np.empty(m, np.float32)  # along-line coordinate, column part
@@ -340,58 +398,44 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, t32, quad, lattice, f_sup, f_de
         px[c] = -ey * dx
         sx[c] = ex * dx
         ramp_x[c] = _F1 + beta * (ex * dx - mid32)
-    # the lattice's pressure (signed, with its cell pattern): the deep layer reads it clipped, the
-    # superficial core half of it (as frame_fields)
-    under = np.zeros((m, m), np.float32)
     for r in range(m):
         dy = q[r] - cdy32
         py = ex * dy
         sy = ey * dy
         ramp_y = beta * sy
-        wa = np.float64(quad[m + r % nq])
         b0, b1 = _band(-ey64, np.float64(py), reach_deep, q, np.float64(cdx32))
         for c in range(b0, b1):
-            d = px[c] + py
             along = sx[c] + sy
-            v0, v1, v2 = _lookup(lk_deep, t32, d, origin_d32, scale_d32)
-            v = v0 + (m0 + kt * along) * v1 + (l0 + kl * along) * v2
+            v0, v1 = _lookup(lk_deep, t32, px[c] + py, origin_d32, scale_d32)
             ramp = ramp_x[c] + ramp_y
             if ramp < _F0:
                 ramp = _F0
-            v = v * ramp * lattice[r, c]
-            under[r, c] = v
-            v = max(v, _F0)
-            if store:
-                f_deep[r, c] = v
-            colsum[c] += wa * np.float64(v)
-        _row_done(colsum, r, 0, m, quad, n, nq, tax[1])
+            v = (v0 + (m0 + kt * along) * v1) * ramp
+            base[r, c] += v
+            top[r, c] += v
+    _deep_pass(base, top, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
     for r in range(m):
         dy = q[r] - cdy32
         py = ex * dy
         sy = ey * dy
         wa = np.float64(quad[m + r % nq])
-        # the cover's band about the line (its profile looked up there only) and the lattice's
-        # (where the superficial core reads half the lattice's too)
+        # the cover's band about the line (its profile looked up there only); elsewhere the
+        # superficial core reads half the lattice top's pressure
         b0, b1 = _band(-ey64, np.float64(py), reach_cover, q, np.float64(cdx32))
-        d0, d1 = _band(-ey64, np.float64(py), reach_deep, q, np.float64(cdx32))
-        if b1 <= b0:
-            b0, b1 = d0, d0
-        lo, hi = (min(b0, d0), max(b1, d1)) if d1 > d0 else (b0, b1)
-        _lattice_half(under, r, lo, b0, wa, store, f_sup, colsum)
+        _lattice_half(top, r, 0, b0, wa, store, f_sup, colsum)
         for c in range(b0, b1):
-            d = px[c] + py
             along = sx[c] + sy
-            v0, v1, v2 = _lookup(lk_sup, t32, d, origin32, scale32)
-            v = max(_FHALF * (v0 + (m0 + kt * along) * v1 + (l0 + kl * along) * v2 + under[r, c]), _F0)
+            v0, v1 = _lookup(lk_sup, t32, px[c] + py, origin32, scale32)
+            v = max(_FHALF * (v0 + (m0 + kt * along) * v1 + top[r, c]), _F0)
             if store:
                 f_sup[r, c] = v
             colsum[c] += wa * np.float64(v)
-        _lattice_half(under, r, max(b1, lo), hi, wa, store, f_sup, colsum)
+        _lattice_half(top, r, max(b1, 0), m, wa, store, f_sup, colsum)
         _row_done(colsum, r, 0, m, quad, n, nq, tax[0])
 
 
 @_jit
-def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cache_serial, cache_maps, maps):
+def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, edge, cache_serial, cache_maps, maps):
     """Taxel-mean pressure maps (N, 2, n, n) of N states into maps (zero when unloaded). A
     state whose config serial (>= 0) equals the previous one's (or, for the first,
     cache_serial[0]) repeats its loading configuration and reuses its maps (holds), unless
@@ -411,7 +455,7 @@ def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cach
                 maps[k] = maps[k - 1]
         else:
             if states[k, S_FZ] > 0.0:
-                frame_fields(states[k], prm, lk, rows, bounds, dist, quad, lattice, f_sup, f_deep, maps[k])
+                frame_fields(states[k], prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_deep, maps[k])
             else:
                 maps[k] = 0.0
             computed += 1
@@ -424,14 +468,14 @@ def maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cach
 
 
 @_jit
-def fields_kernel(states, prm, lk, rows, bounds, dist, quad, lattice, out_sup, out_deep):
+def fields_kernel(states, prm, lk, rows, bounds, dist, quad, lattice, edge, out_sup, out_deep):
     """Pressure (kPa, float32) at the quadrature points of N states into out_sup, out_deep
     (N, n*q, n*q), zero-initialised by the caller; only each layer's window is written."""
     n = int(prm.n_taxels)
     tax = np.empty((2, n, n))
     for k in range(states.shape[0]):
         if states[k, S_FZ] > 0.0:
-            frame_fields(states[k], prm, lk, rows, bounds, dist, quad, lattice, out_sup[k], out_deep[k], tax)
+            frame_fields(states[k], prm, lk, rows, bounds, dist, quad, lattice, edge, out_sup[k], out_deep[k], tax)
 
 
 # ---------------------------------------------------------------------------------- transduction
@@ -581,7 +625,7 @@ def column_volts_batch(g, prm, out):
 
 # ---------------------------------------------------------------------------------- frames
 @_jit
-def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, lattice,
+def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, lattice, edge,
                   row_offsets, gains, baseline, play, lag, last_maps, memory, cache_serial, cache_maps,
                   maps, counts):
     """N frame pairs: counts (2, N, n, n) uint16 for states (N, N_STATE) completed at t_s (N,).
@@ -602,7 +646,7 @@ def frames_kernel(states, serial, t_s, rng, prm, lk, rows, bounds, dist, quad, l
     if n_all == 0:
         return True, 0
     n = int(prm.n_taxels)
-    computed = maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, cache_serial,
+    computed = maps_kernel(states, serial, prm, lk, rows, bounds, dist, quad, lattice, edge, cache_serial,
                            cache_maps, maps)
     sj = prm.jitter_s
     w_h, c_cr, creep_s = prm.hysteresis, prm.creep, prm.creep_s

@@ -123,8 +123,9 @@ class CoupleResponse:
 
     The traction on the cover (resultant F_t, taken proportional to the contact pressure, as
     when the contact slides) acts at height H above the deep sensing plane: about that plane it
-    is a couple F_t H, which the cover hands to the sheet under the contact and the sheet to the
-    lattice over the whole pad (`PlateOnFoundation.couple`). The sheet's antisymmetric
+    is a couple F_t H, which the cover hands to the sheet under the contact
+    (`PlateOnFoundation.couple`) and the sheet to the lattice over the whole pad, whose moment
+    ends at the pad's edge (`PlateOnFoundation.edge_couple`). The sheet's antisymmetric
     deflection w1 cos(phi) (hemisphere; odd across the rod) changes the lattice pressure by
     k_f(r) w1 (k_f its tangent stiffness at the loaded state) and the contact pressure by
     -k_c w1 where the cover touches the indenter (the indenter is held by the stage and takes
@@ -134,9 +135,9 @@ class CoupleResponse:
     w_mm: np.ndarray  # (n,) deflection amplitude, mm per N mm
     contact_kpa: np.ndarray  # (n,) contact pressure amplitude
     foundation_kpa: np.ndarray  # (n,) lattice pressure amplitude on the deep sheet
-    # the part of foundation_kpa the lattice hands straight to the deep sheet (its own moment's
-    # half, at the pad's edge, see `PlateOnFoundation.couple`): its top, under the sheet, does not
-    # carry it, so the lattice presses the sheet with foundation_kpa - direct_kpa
+    # the part of foundation_kpa the lattice hands straight to the deep sheet (half the edge
+    # term of its moment, `PlateOnFoundation.edge_couple`): its top, under the sheet, has it with
+    # the other sign, so the lattice presses the sheet with foundation_kpa - 2 direct_kpa
     direct_kpa: np.ndarray | None = None
 
 
@@ -289,26 +290,20 @@ class PlateOnFoundation:
         return LaminateSolution(delta_mm, w, pc / KPA, pf / KPA, it, rigidity, None)
 
     def couple(self, sol: LaminateSolution, lattice_share: float) -> CoupleResponse:
-        """Response to a unit couple of the shear about the deep plane (see CoupleResponse).
+        """Response to a unit couple of the shear about the deep plane, the cover's route only
+        (see CoupleResponse; the lattice's route is `edge_couple`).
 
         The traction takes two levers down to the deep plane. The cover carries it from the cap
         to the sheet under the contact (tau_c = F_t p_c / F_z, lever t_c + the sheet: a moment
         density local to the contact). The sheet, stiff in its plane, hands it to the lattice as
         a uniform traction over the pad (tau_L = F_t / A_pad, as the lattice's stiffness G A / h
-        assumes). `lattice_share` s is the lattice's lever over H.
-
-        The lattice is a thin layer in shear. Across its height h the shear stress is uniform, so
-        vertical equilibrium makes its normal stress change by h dtau/dx from its top to its base:
-        nothing inside the pad, where tau is uniform, and a band at the pad's edge, where tau
-        falls to zero (the lattice's side is free). Its compression follows the mean of the two,
-        so with the top at p_top = k w - h tau'/2 and the base at p_base = k w + h tau'/2 the
-        edge term splits in halves: one loads the sheet (D lap^2 w + k w = q + h tau'/2), whose
-        bending spreads it, the other the lattice hands straight to the deep sheet
-        (`CoupleResponse.direct_kpa`). Both halves together carry the lattice's moment s.
+        assumes), whose moment ends at the pad's edge, wherever the contact is (`edge_couple`).
+        `lattice_share` s is the lattice's lever over H: this response carries 1 - s.
 
         A couple density m along the shear loads the sheet like a pressure dm/dx: the cover's
-        (1 - s) p_c / F_z under the contact and half the lattice's s / A_pad at the pad's edge,
-        times cos(phi) (hemisphere) or across the rod (per unit length), for F_t H = 1."""
+        (1 - s) p_c / F_z under the contact, times cos(phi) (hemisphere) or across the rod (per
+        unit length), for F_t H = 1. The sheet's bending hands it to the lattice and, where the
+        cover touches the cap, partly to the cap (the stage holds it)."""
         if not 0.0 <= lattice_share <= 1.0:
             raise ValueError(f"lattice_share={lattice_share!r}: the lattice's part of the lever, in [0, 1]")
         pc = sol.contact_kpa * KPA
@@ -319,32 +314,65 @@ class PlateOnFoundation:
             return CoupleResponse(zero, zero.copy(), zero.copy())
         _, slope = self.foundation(sol.w_mm)
         touching = pc > 0.0
-        stiff = slope + self.k_cover * touching
         # the cover's part: -d/dx of (1 - s) p_c / F_z (sign: the deep pressure moves along the shear)
         load = -np.gradient((1.0 - lattice_share) * pc / fz, self.step)
-        # the lattice's part: the step of s / A_pad at the pad's edge. The traction fades over
-        # about the lattice's height inside the free edge, so its term lies on that band of the
-        # pad (a load on the plate's last node is lost to the free margin beyond); its moment is
-        # s, half on the sheet, half straight onto the deep sheet
-        band = self.on_pad & (np.abs(self.x) >= self.pad_radius - self.law.h_mm)
-        edge = np.where(band, np.sign(self.x), 0.0)
-        edge_term = lattice_share * edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
-        load += 0.5 * edge_term
         # a fixed sheet reuses its operator; a friction-held one has its own field per state
         lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
-        jac = lin1 + sp.diags(stiff)
+        w1 = self._solve_m1(lin1 + sp.diags(slope + self.k_cover * touching), load)
+        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA)
+
+    def edge_couple(self, sol: LaminateSolution | None = None) -> CoupleResponse:
+        """Response to a unit couple handed to the lattice over the whole pad: the lattice's route
+        of the shear's moment (lever s H of `couple`) and of the columns' lean (F_z u).
+
+        The lattice is a thin layer in shear. Across its height h the shear stress is uniform, so
+        vertical equilibrium makes its normal stress change by h dtau/dx from its top to its base:
+        nothing inside the pad, where tau is uniform, and a band at the pad's edge, where tau
+        falls to zero over about h (the lattice's side is free). Its compression follows the mean
+        of the two, so with the top at p_top = k w - h tau'/2 and the base at p_base = k w + h
+        tau'/2 the edge term splits in halves: one loads the sheet (D lap^2 w + k w = h tau'/2),
+        whose bending spreads it, the other the lattice hands straight to the deep sheet
+        (`CoupleResponse.direct_kpa`). Together they carry the whole couple; the deep sheet reads
+        the base (foundation_kpa), the sheet the top (foundation_kpa - 2 direct_kpa).
+
+        The edge lies on the pad, not about the contact, so the fast model takes this from the
+        "rod" geometry (a straight edge, per unit length along it) on the unloaded lattice
+        (sol None: its tangent stiffness at zero compression, the sheet's own rigidity, as where
+        no lattice pressure clamps the films) and adds it at the pad's four sides. With a loaded
+        sol, the state's tangent stiffness and rigidity (how `couple` carried it before the
+        routes were split: their sum is that response)."""
+        n = len(self.x)
+        if sol is None:
+            w = np.zeros(n)
+            lin1, touching = self._linear1, np.zeros(n, bool)
+        else:
+            w = sol.w_mm
+            lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
+            touching = sol.contact_kpa > 0.0
+        _, slope = self.foundation(w)
+        # the step of 1 / A_pad at the pad's edge: the traction fades over about the lattice's
+        # height inside the free edge, so its term lies on that band of the pad (a load on the
+        # plate's last node is lost to the free margin beyond); normalised to a unit moment
+        band = self.on_pad & (np.abs(self.x) >= self.pad_radius - self.law.h_mm)
+        edge = np.where(band, np.sign(self.x), 0.0)
+        edge_term = edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
+        w1 = self._solve_m1(lin1 + sp.diags(slope + self.k_cover * touching), 0.5 * edge_term)
+        direct = 0.5 * edge_term / KPA
+        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA + direct,
+                              direct)
+
+    def _solve_m1(self, jac, load: np.ndarray) -> np.ndarray:
+        """Deflection of the first angular mode (hemisphere; the rod's odd one) under load."""
+        load = load.copy()
         if self.kind == "hemisphere":
             load[0] = 0.0
             jac = jac.tolil()
             jac[0, :] = 0.0
             jac[0, 0] = 1.0
-            jac = jac.tocsc()
         w1 = spla.spsolve(jac.tocsc(), load)
         if self.kind == "hemisphere":
             w1[0] = 0.0
-        direct = 0.5 * edge_term / KPA
-        return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA + direct,
-                              direct)
+        return w1
 
     def flank(self, sol: LaminateSolution) -> tuple[CoupleResponse, float]:
         """Response to the cap moving tangentially by a unit distance v relative to the sheet
@@ -370,16 +398,7 @@ class PlateOnFoundation:
         kc = self.k_cover
         dp = kc * self.x / self.radius * touching  # N/mm^2 per mm of v (cos(phi) amplitude: x = r)
         lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
-        jac = lin1 + sp.diags(slope + kc * touching)
-        load = dp.copy()
-        if self.kind == "hemisphere":
-            load[0] = 0.0
-            jac = jac.tolil()
-            jac[0, :] = 0.0
-            jac[0, 0] = 1.0
-        w1 = spla.spsolve(jac.tocsc(), load)
-        if self.kind == "hemisphere":
-            w1[0] = 0.0
+        w1 = self._solve_m1(lin1 + sp.diags(slope + kc * touching), dp)
         # second moment of the contact about the axis across the motion: 1/2 int r^2 dA (disc)
         # or int d^2 dd (rod, per unit length)
         half = 0.5 if self.kind == "hemisphere" else 1.0

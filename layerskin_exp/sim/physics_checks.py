@@ -170,13 +170,19 @@ def interface_record(sim: SimConfig) -> dict:
 
 
 def moment_equilibrium(sim: SimConfig, model_sim: SimConfig | None = None) -> Check:
-    """The shear's couple about the deep plane is taken by the lattice and the indenter together."""
+    """The shear's couple about the deep plane is taken by the lattice and the indenter together:
+    the cover's lever under the contact (the hemisphere at 3 N) and the lattice's at the pad's
+    sides (the straight side the fast model places, per unit length)."""
     ms = model_sim or sim
     plate = _solver(ms, "hemisphere")
     sol = plate.solve(_depth_for(_model(ms), 3.0))
     lattice_mm = ms.spacer.thickness_mm - float(np.maximum(sol.w_mm, 0.0)[0])
-    resp = plate.couple(sol, lattice_mm / (ms.cover.thickness_mm + ms.fsr.layer_thickness_mm + lattice_mm))
-    total = plate.first_moment(resp.foundation_kpa) - plate.first_moment(resp.contact_kpa)
+    share = lattice_mm / (ms.cover.thickness_mm + ms.fsr.layer_thickness_mm + lattice_mm)
+    resp = plate.couple(sol, share)
+    side = _solver(ms, "rod")
+    edge = side.edge_couple()
+    total = (plate.first_moment(resp.foundation_kpa) - plate.first_moment(resp.contact_kpa)
+             + share * (side.first_moment(edge.foundation_kpa) - side.first_moment(edge.contact_kpa)))
     return Check("moment of lattice + indenter pressure per unit couple",
                  "static equilibrium: the two pressure moments add up to F_t H exactly", total, 0.98, 1.02, "",
                  "a couple response out of equilibrium (the indenter's or the lattice's share lost or double-counted)")

@@ -54,47 +54,66 @@ class ReferenceSkin:
     def fields(self, rec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pressure (kPa) of both layers on the quadrature grid (n*q, n*q) [y, x] for one state
         (a row of SkinModel.step_many's records): the superficial core half the contact's and
-        half the lattice's (contact.py), the deep layer the lattice's; neither FSR reads tension."""
+        half the lattice top's (contact.py), the deep layer the lattice's on the deep sheet;
+        neither FSR reads tension."""
         if rec[mk.S_FZ] <= 0.0:
             m = len(self.q)
             return np.zeros((m, m)), np.zeros((m, m))
-        contact, lattice = self.signed_fields(rec, self.x, self.y, self.lattice)
-        return np.maximum(0.5 * (contact + lattice), 0.0), np.maximum(lattice, 0.0)
+        contact, lattice, top = self.signed_fields(rec, self.x, self.y, self.lattice)
+        return np.maximum(0.5 * (contact + top), 0.0), np.maximum(lattice, 0.0)
+
+    def edge_fields(self, rec: np.ndarray, x: np.ndarray, y: np.ndarray, h_lat: float,
+                    k_lean: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """The lattice's route at points x, y (mm, the pad centred on the array): its pressure on
+        the deep sheet and its top's, from the couple per mm along the pad's sides
+        (frame_kernels._edge_loads: the shear's F_t h_L, the columns' lean F_z u, the torque's
+        T h_L and k_lean)."""
+        tab, two_l = self.tab, self.sim.spacer.width_mm
+        fz = rec[mk.S_FZ]
+        cx = (rec[mk.S_FX] * h_lat + fz * rec[mk.S_UX]) / two_l
+        cy = (rec[mk.S_FY] * h_lat + fz * rec[mk.S_UY]) / two_l
+        kk = (rec[mk.S_TORQUE] * h_lat + k_lean) * (two_l - self.sim.spacer.thickness_mm) / (two_l**4 / 6.0)
+        # couple per mm across the x- and the y-sides, each pair along its own length
+        across_x = np.where(np.abs(y) <= 0.5 * two_l, cx - kk * y, 0.0)
+        across_y = np.where(np.abs(x) <= 0.5 * two_l, cy + kk * x, 0.0)
+
+        def side(table):
+            return (np.interp(x, tab.edge_dist_mm, table, left=0.0, right=0.0) * across_x
+                    + np.interp(y, tab.edge_dist_mm, table, left=0.0, right=0.0) * across_y)
+
+        return side(tab.edge_deep_kpa), side(tab.edge_top_kpa)
 
     def signed_fields(self, rec: np.ndarray, x: np.ndarray, y: np.ndarray,
-                      cells: np.ndarray | float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                      cells: np.ndarray | float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The contact's pressure on the sheet (kPa, in the sheet's frame, where the superficial
-        taxels are) and the lattice's pressure on the deep plane (kPa, signed: the bonded lattice
-        pulls where the sheet lifts; times `cells`, its cell pattern) at points x, y (mm) for one
-        loaded state."""
+        taxels are), the lattice's pressure on the deep plane and its top's on the sheet (kPa,
+        signed: the bonded lattice pulls where the sheet lifts; times `cells`, its cell pattern)
+        at points x, y (mm) for one loaded state."""
         tab = self.tab
         i, t = self._row(rec[mk.S_DELTA])
         h = tab.height_mm[i] * (1 - t) + tab.height_mm[i + 1] * t
+        h_lat = tab.lattice_height_mm[i] * (1 - t) + tab.lattice_height_mm[i + 1] * t
         fz = rec[mk.S_FZ]
-        # the couple of the shear about the deep plane and the normal load's lean F_z u about the
-        # columns' feet (frame_kernels.frame_fields)
+        # the couple of the shear about the deep plane: the tables' response carries the cover's
+        # lever; the lattice's lies at the pad's sides (frame_kernels.frame_fields)
         mx, my = rec[mk.S_FX] * h, rec[mk.S_FY] * h
-        lx, ly = fz * rec[mk.S_UX], fz * rec[mk.S_UY]
         ax, ay = rec[mk.S_CX], rec[mk.S_CY]
         dist = tab.dist_mm
         if self.tab.kind == "hemisphere":
-            def layer(profile, couple, lean, cx, cy):
+            def layer(profile, couple, cx, cy):
                 dx, dy = x - cx, y - cy
                 r = np.hypot(dx, dy)
                 p0 = _row_interp(profile, i, t, r, dist)
                 p1 = _row_interp(couple, i, t, r, dist)
-                p2 = _row_interp(lean, i, t, r, dist)
-                safe = np.maximum(r, 1e-12)
-                cos_m = np.where(r > 0, (mx * dx + my * dy) / safe, 0.0)
-                cos_l = np.where(r > 0, (lx * dx + ly * dy) / safe, 0.0)
-                return p0 + cos_m * p1 + cos_l * p2
+                cos_m = np.where(r > 0, (mx * dx + my * dy) / np.maximum(r, 1e-12), 0.0)
+                return p0 + cos_m * p1
 
-            return (layer(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa, ax, ay),
-                    # the deep pattern at the columns' feet under the cap (frame_kernels.frame_fields)
-                    layer(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa, ax, ay) * cells)
+            base, top = self.edge_fields(rec, x, y, h_lat)
+            # the deep pattern at the columns' feet under the cap (frame_kernels.frame_fields)
+            under = layer(tab.deep_kpa, tab.deep_couple_kpa, ax, ay)
+            return layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay), (under + base) * cells, (under + top) * cells
         # rod: line load across the axis, per unit length, about the cap's line in the sheet's
-        # frame (frame_kernels._rod_fields): the couple and the lean grow along the line with the
-        # torque and the sheet's turn
+        # frame (frame_kernels._rod_fields): the couple grows along the line with the torque
         yaw_s = rec[mk.S_YAW] - rec[mk.S_THETA]
         s1, s2 = mk.chord(ax, ay, yaw_s, self.model._half)
         length = max(s2 - s1, 1e-9)
@@ -106,17 +125,15 @@ class ReferenceSkin:
         along = e[0] * dx + e[1] * dy
         i_s = (s2**3 - s1**3) / 3.0
         couple = (mx * nrm[0] + my * nrm[1]) / length + rec[mk.S_TORQUE] * h / i_s * along
-        lean = (lx * nrm[0] + ly * nrm[1]) / length + line_q * rec[mk.S_THETA] * along
-        beta = (mx * e[0] + my * e[1] + lx * e[0] + ly * e[1]) / (line_q * length**3 / 12.0)
+        beta = (rec[mk.S_FX] * e[0] + rec[mk.S_FY] * e[1]) * (h - h_lat) / (line_q * length**3 / 12.0)
         ramp = np.maximum(1.0 + beta * (along - 0.5 * (s1 + s2)), 0.0)
 
-        def layer(profile, couple_resp, lean_resp):
-            return (_row_interp(profile, i, t, d, dist) + couple * _row_interp(couple_resp, i, t, d, dist)
-                    + lean * _row_interp(lean_resp, i, t, d, dist))
+        def layer(profile, couple_resp):
+            return _row_interp(profile, i, t, d, dist) + couple * _row_interp(couple_resp, i, t, d, dist)
 
-        contact = layer(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa)
-        lattice = layer(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa) * ramp * cells
-        return contact, lattice
+        base, top = self.edge_fields(rec, x, y, h_lat, line_q * rec[mk.S_THETA] * i_s)
+        under = layer(tab.deep_kpa, tab.deep_couple_kpa) * ramp
+        return layer(tab.cover_kpa, tab.cover_couple_kpa), (under + base) * cells, (under + top) * cells
 
     def maps(self, recs: np.ndarray) -> np.ndarray:
         """(N, 2, n, n) Gauss means of both layers' pressure over each taxel's electrode (kPa)."""

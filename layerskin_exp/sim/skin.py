@@ -16,13 +16,16 @@ position, times the lattice's cell pattern. Superficial, in the superficial fram
 contact pressure under the cover around the contact point and that lattice pressure (its core
 lies between the sheet's films, loaded by the contact above and the lattice below; `contact`). The
 shear's couple F_t H about the deep plane (H the height of the cover above it) adds the
-laminate's first-order response to both: the cover's lever under the contact, the lattice's at the
-pad's edge, half through the sheet (which tilts) and half straight onto the deep sheet; the
-indenter takes a share. The sheet's travel u leans the lattice's columns under the contact: their
-thrust adds the couple F_z u, which takes the lattice's route (`contact.ContactTables.deep_lean_kpa`),
-so the deep plane's moment is the load's where the sheared stack holds it. Neither FSR reads
-tension. For the rod, torsion loads the line with traction proportional to the distance along
-it, whose local moments rotate the deep line.
+laminate's first-order response to both. The cover's part of the lever acts under the contact
+(the indenter takes a share), from the contact tables. The lattice's part, F_t h_L, and the
+columns' lean F_z u (the sheet's travel u leans the lattice's columns under the contact; their
+thrust joins the lattice's shear) are handed over the whole pad by the in-plane-stiff sheet and
+end at the pad's four sides, wherever the contact is: half through the sheet (which tilts), half
+straight onto the deep sheet (`contact.ContactTables.edge_deep_kpa`). So the deep plane's moment is
+the load's where the sheared stack holds it. A torque's lattice part ends at the sides alike, as
+the rotation of a uniform traction field. Neither FSR reads tension. For the rod, torsion loads
+the line with traction proportional to the distance along it, whose local moments (the cover's
+lever) rotate the deep line.
 Each taxel integrates its electrode footprint with Gauss points.
 
 Frames (`frames`, or `frames_batch` on arrays): row-sequential sampling instants, FSR
@@ -253,10 +256,11 @@ class SkinModel:
         point) or in the signed distance (rod), on a grid fine enough that nearest-bin error is
         far below the profile's own scale. Stored as (value, next row - value) float32 pairs per
         pair of indentation rows, with one guard column of zeros, profile and couple response
-        and lean response side by side: `_lk` (2, n_delta - 1, n_fine, 6) [the cover's (the superficial core's
+        side by side: `_lk` (2, n_delta - 1, n_fine, 4) [the cover's (the superficial core's
         contact half), deep]. Also the window reach of each pair of rows (`_bounds`: the
-        cover's and the lattice's; the superficial core spans both) and the stack height per row
-        (`_rows`), see frame_kernels."""
+        cover's and the lattice's; the superficial core spans both), the stack's and the
+        lattice's height per row (`_rows`) and the lattice's route across the pad's sides at the
+        quadrature coordinates (`_edge`), see frame_kernels."""
         tab = self.tab
         if self.kind == "hemisphere":
             # the deep profile is broad and smooth, the cover's narrow (the contact and the
@@ -285,16 +289,16 @@ class SkinModel:
                 fine[k, :-1] = v
             return fine
 
-        def quads(profile, couple, lean, at, per_r):
-            out = np.empty((profile.shape[0] - 1, n_fine, 6), dtype=np.float32)
-            for j, a in enumerate((resample(profile, at), resample(couple, at, per_r), resample(lean, at, per_r))):
+        def quads(profile, couple, at, per_r):
+            out = np.empty((profile.shape[0] - 1, n_fine, 4), dtype=np.float32)
+            for j, a in enumerate((resample(profile, at), resample(couple, at, per_r))):
                 out[..., 2 * j], out[..., 2 * j + 1] = a[:-1], a[1:] - a[:-1]
             return out
 
         hemi = self.kind == "hemisphere"
         self._lk = np.ascontiguousarray(np.stack([
-            quads(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa, at_layer[0], hemi),
-            quads(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa, at_layer[1], hemi)]))
+            quads(tab.cover_kpa, tab.cover_couple_kpa, at_layer[0], hemi),
+            quads(tab.deep_kpa, tab.deep_couple_kpa, at_layer[1], hemi)]))
         # Per pair of rows (k, k+1): how far from the contact either the profile or its couple
         # response exceeds WINDOW_EPS of its own peak, for each layer.
 
@@ -306,15 +310,21 @@ class SkinModel:
             return out
 
         self._bounds = np.ascontiguousarray(np.column_stack([
-            reach(tab.cover_kpa, tab.cover_couple_kpa, tab.cover_lean_kpa),
-            reach(tab.deep_kpa, tab.deep_couple_kpa, tab.deep_lean_kpa)]))
+            reach(tab.cover_kpa, tab.cover_couple_kpa),
+            reach(tab.deep_kpa, tab.deep_couple_kpa)]))
         self._dist = np.ascontiguousarray(tab.dist_mm, dtype=float)
-        self._rows = np.ascontiguousarray(tab.height_mm.reshape(-1, 1), dtype=float)
+        self._rows = np.ascontiguousarray(np.column_stack([tab.height_mm, tab.lattice_height_mm]), dtype=float)
+        # the lattice's route across a side of the pad (per unit couple per mm along it), at the
+        # quadrature coordinates (the same along x and y): [deep sheet, the lattice's top]
+        self._edge = np.ascontiguousarray(np.stack([np.interp(self._q, tab.edge_dist_mm, tab.edge_deep_kpa, 0.0, 0.0),
+                                                    np.interp(self._q, tab.edge_dist_mm, tab.edge_top_kpa, 0.0, 0.0)]),
+                                          dtype=np.float32)
 
     def _kernel_tables(self) -> tuple:
         """The kernels' table arguments after the state (frame_kernels: prm, lk, rows, bounds,
-        dist, quad, lattice)."""
-        return (self._params, self._lk, self._rows, self._bounds, self._dist, self._quad32, self._lattice32)
+        dist, quad, lattice, edge)."""
+        return (self._params, self._lk, self._rows, self._bounds, self._dist, self._quad32, self._lattice32,
+                self._edge)
 
     def _window_reach(self, pair_max: np.ndarray, factor: np.ndarray) -> np.ndarray:
         """Radius (mm) beyond which pair_max (M, n_dist) x factor (M or 1, n_dist) stays below
@@ -335,6 +345,7 @@ class SkinModel:
         prm["n_taxels"], prm["quad_points"], prm["rod"] = skin.n_taxels, self._nq, float(self.kind == "rod")
         prm["first_centre_mm"], prm["pitch_mm"] = self._centres[0], skin.pitch_mm
         prm["half_electrode_mm"], prm["half_pad_mm"] = self._half_electrode, self._half
+        prm["edge_band_mm"] = self.sim.spacer.thickness_mm
         prm["delta_step_mm"], prm["last_delta_row"] = tab.d_delta, len(tab.delta_mm) - 1.000001
         prm["lk_origin"], prm["lk_scale"] = self._lk_origin, self._lk_scale
         prm["lk_origin_deep"], prm["lk_scale_deep"] = self._lk_origin_deep, self._lk_scale_deep
