@@ -200,9 +200,11 @@ class PlateOnFoundation:
             with np.errstate(invalid="ignore", divide="ignore"):
                 total = np.where(self.x > 0, inside / np.maximum(self.x, 1e-12), 0.0)
         else:
+            # from the axis outwards (trapezoids: odd across it for an even load, as it must be;
+            # a one-sided sum counted the axis's cell on one side only and tilted the solution)
             mid = len(self.x) // 2
-            c = np.cumsum(net) * self.step
-            total = c - c[mid]  # from the axis outwards, odd across it
+            c = np.concatenate([[0.0], np.cumsum(0.5 * (net[1:] + net[:-1]))]) * self.step
+            total = c - c[mid]
         # the lattice walls (Pasternak) carry G_p |w'| of it; the sheet carries the rest
         shear = np.abs(total) - self._gp * np.abs(np.gradient(w_mm, self.step))
         shear = np.maximum(shear, 0.0)
