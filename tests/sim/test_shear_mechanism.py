@@ -213,3 +213,47 @@ def _without_the_lean(reference) -> None:
         return edge_fields(rec, x, y, h_lat, 0.0)
 
     reference.edge_fields = no_lean
+
+
+def test_the_lattices_route_lies_at_the_pads_sides_wherever_the_contact_is(monkeypatch):
+    """The lattice's part of the couple and the columns' lean are handed over the whole pad by the
+    in-plane-stiff sheet, so their pressure lies at the pad's sides and does not move with the
+    contact: the same sheared state at the centre and 8 mm off it gives the same route (deep and
+    top), near the sides (inside the pad, more than 8 mm from every side, below 5 % of its peak).
+    Placed about the contact instead, as before bd9af12 (the injection: the route's coordinates
+    taken from the contact), the two differ and the off-centre one reaches into the grid."""
+    from layerskin_exp.config import SkinConfig
+    from layerskin_exp.sim import mechanics as mk
+    from layerskin_exp.sim.reference import ReferenceSkin
+    from layerskin_exp.sim.skin import SkinModel
+
+    sim = replace(SIM, readout=replace(SIM.readout, noise_counts=0.0, scan_jitter_ms=0.0))
+    model = SkinModel(sim, SkinConfig(), "hemisphere", np.random.default_rng(0))
+    rec = model.step_many(np.array([0.0]), np.array([[0.0, 0.0, -2.0]]), np.zeros(1))[0]
+    rec[[mk.S_FX, mk.S_FY, mk.S_UX, mk.S_UY]] = (-1.0, 0.4, -0.3, 0.1)
+    off = rec.copy()
+    off[mk.S_CX] = 8.0
+    g = np.arange(-13.0, 13.0, 0.1) + 0.05
+    x, y = np.meshgrid(g, g)
+
+    def routes(reference):
+        return [np.stack(reference.edge_fields(r, x, y, 2.0)) for r in (rec, off)]
+
+    centred, moved = routes(ReferenceSkin(model))
+    peak = np.abs(centred).max()
+    assert peak > 0.5  # kPa
+    np.testing.assert_allclose(moved, centred, atol=1e-9 * peak)
+    inside = (np.abs(x) < 5.0) & (np.abs(y) < 5.0)
+    assert np.abs(centred[:, inside]).max() < 0.05 * peak
+
+    # the injection: the route placed about the contact
+    reference = ReferenceSkin(model)
+    edge_fields = reference.edge_fields
+
+    def about_the_contact(r, x, y, h_lat, k_lean=0.0):
+        return edge_fields(r, x - r[mk.S_CX], y - r[mk.S_CY], h_lat, k_lean)
+
+    monkeypatch.setattr(reference, "edge_fields", about_the_contact)
+    centred, moved = routes(reference)
+    assert not np.allclose(moved, centred, atol=1e-9 * peak)
+    assert np.abs(moved[:, inside]).max() > 0.05 * peak
