@@ -220,7 +220,7 @@ def test_the_lattices_route_lies_at_the_pads_sides_wherever_the_contact_is(monke
     in-plane-stiff sheet, so their pressure lies at the pad's sides and does not move with the
     contact: the same sheared state at the centre and 8 mm off it gives the same route (deep and
     top), near the sides (inside the pad, more than 8 mm from every side, below 5 % of its peak).
-    Placed about the contact instead, as before bd9af12 (the injection: the route's coordinates
+    Placed about the contact instead, as before e3c57ee (the injection: the route's coordinates
     taken from the contact), the two differ and the off-centre one reaches into the grid."""
     from layerskin_exp.config import SkinConfig
     from layerskin_exp.sim import mechanics as mk
