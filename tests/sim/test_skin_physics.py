@@ -184,8 +184,9 @@ def test_slide_friction_bound_and_stick_slip_events():
 
 
 def _without_couple_responses(m):
-    """The skin model m with its shear-couple and lean responses zeroed (the patterns then lie
-    about the cap's line in the sheet's frame and nothing else)."""
+    """The skin model m with both routes' responses zeroed, the cover's couple tables and the
+    lattice's at the pad's sides, which carry the lean too (the patterns then lie about the cap's
+    line in the sheet's frame and nothing else)."""
     from dataclasses import replace
 
     t = m.tab
