@@ -44,6 +44,19 @@ import scipy.sparse.linalg as spla
 from layerskin_exp.sim.spacer import SpacerLaw
 
 KPA = 1e-3  # N/mm^2 per kPa
+# How fast a bonded layer's end effect dies away from a free side, as Re(lambda) h: the
+# eigenfunctions of a strip clamped on both faces decay as exp(-lambda s), s in from the side,
+# with w = lambda h the roots of (3 - 4 nu) sin w + w = 0 (plane strain). The slowest root has
+# Re w = 4.21 for nu = 0.5 (the Papkovich-Fadle value), 4.33 for nu = 0.3 and 4.42 for nu = 0; the
+# lattice's homogenised Poisson's ratio lies in that range, so its end effect reaches
+# h / 4.21 (the longest of these) inside the pad's side.
+END_DECAY = 4.21
+
+
+def edge_fade_mm(lattice_height_mm: float) -> float:
+    """Distance (mm) over which the lattice's shear traction fades to zero inside the pad's free
+    side (`END_DECAY`); the side's load is centred this far inside it."""
+    return lattice_height_mm / END_DECAY
 
 
 def laplacian(kind: str, n: int, step_mm: float) -> sp.csr_matrix:
@@ -330,7 +343,8 @@ class PlateOnFoundation:
         The lattice is a thin layer in shear. Across its height h the shear stress is uniform, so
         vertical equilibrium makes its normal stress change by h dtau/dx from its top to its base:
         nothing inside the pad, where tau is uniform, and a band at the pad's edge, where tau
-        falls to zero over about h (the lattice's side is free). Its compression follows the mean
+        falls to zero as the bonded layer's end effect (the lattice's side is free; it dies
+        away over `edge_fade_mm(h)`, about a quarter of h). Its compression follows the mean
         of the two, so with the top at p_top = k w - h tau'/2 and the base at p_base = k w + h
         tau'/2 the edge term splits in halves: one loads the sheet (D lap^2 w + k w = h tau'/2),
         whose bending spreads it, the other the lattice hands straight to the deep sheet
@@ -352,11 +366,13 @@ class PlateOnFoundation:
             lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
             touching = sol.contact_kpa > 0.0
         _, slope = self.foundation(w)
-        # the step of 1 / A_pad at the pad's edge: the traction fades over about the lattice's
-        # height inside the free edge, so its term lies on that band of the pad (a load on the
-        # plate's last node is lost to the free margin beyond); normalised to a unit moment
-        band = self.on_pad & (np.abs(self.x) >= self.pad_radius - self.law.h_mm)
-        edge = np.where(band, np.sign(self.x), 0.0)
+        # the step of 1 / A_pad at the pad's edge: the traction fades inside the free side as the
+        # bonded layer's end effect, tau ~ 1 - exp(-s / l) with s in from the side and
+        # l = edge_fade_mm(h), so its term h tau' lies on the pad as exp(-s / l) / l;
+        # normalised to a unit moment
+        fade = edge_fade_mm(self.law.h_mm)
+        inside = np.clip(self.pad_radius - np.abs(self.x), 0.0, None)
+        edge = np.where(self.on_pad, np.sign(self.x) * np.exp(-inside / fade) / fade, 0.0)
         edge_term = edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
         w1 = self._solve_m1(lin1 + sp.diags(slope + self.k_cover * touching), 0.5 * edge_term)
         direct = 0.5 * edge_term / KPA

