@@ -304,14 +304,39 @@ def test_the_hemispheres_press_carries_the_load():
 
 
 def test_the_homogenised_section_carries_the_load_and_its_comparison_is_of_the_data(committed):
-    """The section again with its lattice homogenised (reference/homogenised.npz): every layer
-    carries F_z within 2 %, and reference/homogenisation.json (cells beside homogenised on each
-    compared quantity) is computed from the two committed data sets."""
-    hom = fc.load_fem("homogenised")
-    for line, b in regen.balance(hom).items():
-        assert np.all(np.abs(b - 1.0) < 0.02), (line, b)
-    check = json.loads((fc.DATA / "homogenisation.json").read_text())["branches"]
-    assert check == json.loads(json.dumps(regen.homogenisation_check(committed, hom, SIM)))
+    """The section again with its lattice homogenised, inside the cells' solid rim
+    (reference/homogenised.npz) and out to the pad's sides (homogenised_no_rim.npz): every layer
+    carries F_z within 2 %, and reference/homogenisation.json (cells beside each on every
+    compared quantity) is computed from the committed data sets."""
+    study = json.loads((fc.DATA / "homogenisation.json").read_text())
+    for name, key in (("homogenised", "branches"), (regen.HOMOGENISED_NO_RIM, "without_rim")):
+        hom = fc.load_fem(name)
+        for line, b in regen.balance(hom).items():
+            assert np.all(np.abs(b - 1.0) < 0.02), (name, line, b)
+        assert study[key] == json.loads(json.dumps(regen.homogenisation_check(committed, hom, SIM))), name
+
+
+def test_the_homogenised_section_keeps_the_cells_solid_rim_and_nothing_else():
+    """The homogenised section differs from the cells' by the cells only: solid silicone exactly in
+    the cells' rim (the lattice elements beyond the last full wall), the homogenised lattice in every
+    other lattice element; without the rim (Section.rim False) no lattice element is solid."""
+    from layerskin_exp.sim.fem_reference.model import Section, build_mesh, materials, rim_from_mm
+
+    sec = Section.from_sim(SIM)
+    mesh = build_mesh(sec)
+    lattice = mesh.layer == mesh.names.index("lattice")
+    xc = mesh.points[mesh.cells[:, 8], 0]
+    cells_rim = lattice & mesh.wall & (np.abs(xc) > rim_from_mm(sec))
+    assert cells_rim.any() and np.all(np.abs(xc[cells_rim]) < 0.5 * sec.width_mm)
+    assert not (lattice & ~mesh.wall & (np.abs(xc) > rim_from_mm(sec))).any()  # the rim has no voids
+
+    def solid_lattice(s):
+        return [mask & lattice for mask, mat in materials(s, mesh)
+                if type(mat).__name__ == "NeoHooke" and (mask & lattice).any()]
+
+    solid = solid_lattice(replace(sec, homogenised=True))
+    assert len(solid) == 1 and np.array_equal(solid[0], cells_rim)
+    assert solid_lattice(replace(sec, homogenised=True, rim=False)) == []
 
 
 def test_the_sections_homogenised_lattice_meets_the_honeycombs_moduli():

@@ -16,7 +16,8 @@
     python -m layerskin_exp.sim.fem_reference --cover-poisson 0.499  # the section with a less
         # compressible cover (cover_poisson/): cover_compressibility.json
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
-        # homogenised (homogenised.npz, 34 s) beside the cells: homogenisation.json
+        # homogenised inside the same solid rim (homogenised.npz) and out to the pad's sides
+        # (homogenised_no_rim.npz, the 3D model's lattice), 50 s, beside the cells: homogenisation.json
     python -m layerskin_exp.sim.fem_reference --alignments  # the cap pressed in 0.5, 1, 1.5 mm from
         # the centre wall (alignment/, 7 min); `python -m layerskin_exp.sim.fem_reference.alignment`
         # prints each count-CoP shear signal over the alignments, FEM beside the fast model
@@ -62,16 +63,19 @@ SCALARS = ("phase", "cap_x_mm", "depth_mm", "fx_n_per_mm", "fz_n_per_mm", "conta
 # mid-planes (what each FSR reads), the lattice-to-deep-sheet interface and the base
 LINES = ("superficial", "deep", "interface", "base")
 BOUND = "bonded"
+# the section with its lattice homogenised out to the pad's sides, no solid rim (the 3D model's lattice)
+HOMOGENISED_NO_RIM = "homogenised_no_rim"
 # a layer's profile must carry the cap's load: sum(p w) / F_z within this of 1
 BALANCE_TOL = 0.02
 
 
 def run_bound(sim, mesher: Mesher | None = None, log=print, homogenised: bool = False,
-              cap_x0_mm: float = 0.0, cover_nu: float | None = None) -> dict:
+              cap_x0_mm: float = 0.0, cover_nu: float | None = None, rim: bool = True) -> dict:
     """The section's press and shear branches. cap_x0_mm: where the cap presses in, from the
-    wall under the pad's centre (the walls stay where they are; `--alignments`)."""
+    wall under the pad's centre (the walls stay where they are; `--alignments`); rim False with
+    homogenised: no solid rim (Section.rim)."""
     interface = BOUND
-    sec = replace(Section.from_sim(sim), homogenised=homogenised, cover_nu=cover_nu)
+    sec = replace(Section.from_sim(sim), homogenised=homogenised, cover_nu=cover_nu, rim=rim)
     mesher = mesher or Mesher()
     fe = StackFE(sec, mesher)
     states = []
@@ -248,9 +252,10 @@ def plane_strain_check(section: dict, axi: dict) -> dict:
 
 def homogenisation_check(cells: dict, hom: dict, sim) -> dict:
     """The section with its lattice as cells (the committed bonded.npz) beside the same section
-    with the lattice homogenised (homogenised.npz), on each quantity the fast model is compared
-    on (compare.fem_side, through the simulator's FSR law): the error a homogenised lattice makes
-    in each, measured in the reference itself. Differences are homogenised - cells."""
+    with the lattice homogenised (homogenised.npz; or homogenised_no_rim.npz, without the solid
+    rim as well), on each quantity the fast model is compared on (compare.fem_side, through the
+    simulator's FSR law): the error a homogenised lattice makes in each, measured in the
+    reference itself. Differences are homogenised - cells."""
     from layerskin_exp.sim.fem_reference.compare import Reader, fem_side, line_model, line_sim
 
     reader = Reader(line_model(line_sim(sim, BOUND)))
@@ -346,8 +351,9 @@ def main(argv=None) -> int:
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
     ap.add_argument("--homogenised-lattice", action="store_true",
-                    help="the section again with its lattice homogenised (reference/homogenised.npz) and "
-                         "reference/homogenisation.json: what the cells do to each compared quantity")
+                    help="the section again with its lattice homogenised inside the solid rim (reference/homogenised.npz) "
+                         "and out to the pad's sides (reference/homogenised_no_rim.npz), and reference/homogenisation.json: "
+                         "what the cells, and the rim, do to each compared quantity")
     ap.add_argument("--cover-poisson", type=float, nargs="+", default=None, metavar="NU",
                     help="the section again with the cover's Poisson ratio NU (reference/cover_poisson/nu_*.npz) and "
                          "reference/cover_compressibility.json: what the cover's assumed compressibility does to each "
@@ -386,11 +392,16 @@ def main(argv=None) -> int:
     if args.homogenised_lattice:
         t0 = time.time()
         out = args.out or DATA
+        cells = dict(np.load(out / f"{BOUND}.npz"))
         hom = run_bound(sim, MESHES["default"], homogenised=True)
         require_balance(hom)
         np.savez_compressed(out / "homogenised.npz", **hom)
+        bare = run_bound(sim, MESHES["default"], homogenised=True, rim=False)
+        require_balance(bare)
+        np.savez_compressed(out / f"{HOMOGENISED_NO_RIM}.npz", **bare)
         _write_study(out / "homogenisation.json", t0,
-                     {"branches": homogenisation_check(dict(np.load(out / f"{BOUND}.npz")), hom, sim)})
+                     {"branches": homogenisation_check(cells, hom, sim),
+                      "without_rim": homogenisation_check(cells, bare, sim)})
     if args.shear3d:
         from layerskin_exp.sim.fem_reference.shear3d import LOADS_N, run_shear3d
 

@@ -3,9 +3,9 @@
 The section's walls (2 mm pitch) carry the lattice's load about ten times the cells' level, and
 the taxels (1.5 mm pitch) sample it; at the one alignment of the committed section (the cap on the
 centre wall, between two taxels) the walls decide the sign of every count-CoP shear signal
-(reference/homogenisation.json: homogenised, the inter-layer shift is -0.23 / -0.33 mm where the
-cells give +0.24 / +0.53). A campaign presses at a hundred positions, every alignment. So each
-signal is also taken here over a grid of alignments:
+(reference/homogenisation.json: homogenised inside the same solid rim, the inter-layer shift is
+-0.15 / -0.23 mm where the cells give +0.24 / +0.53). A campaign presses at a hundred positions,
+every alignment. So each signal is also taken here over a grid of alignments:
 
 - the FEM: the cap pressed in at ALIGN_X0_MM from the centre wall (`python -m
   layerskin_exp.sim.fem_reference --alignments`, reference/alignment/), each read with the
@@ -136,15 +136,16 @@ def _summary(values: list[float]) -> dict:
     return {"mean": float(v.mean()), "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
 
 
-def section_signals(sim, data: Path = DATA, model_hook=None) -> dict:
+def section_signals(sim, data: Path = DATA, model_hook=None, homogenised: str = "homogenised") -> dict:
     """The section's signals over its alignments: {"cells": {branch: [signals per alignment]},
     "homogenised": {...}} (cells: each wall alignment x each taxel alignment; homogenised: each
-    taxel alignment, it has no walls); with the model that read them (model_hook(sim) -> sim
-    alters its design, as in compare.compare)."""
+    taxel alignment, it has no walls; `homogenised` names its data: "homogenised", inside the
+    cells' solid rim, or "homogenised_no_rim"); with the model that read them (model_hook(sim) ->
+    sim alters its design, as in compare.compare)."""
     fsim = line_sim(sim, "bonded")
     model = line_model(fsim if model_hook is None else model_hook(fsim))
     runs = {"cells": [load_fem("bonded", data)] + [load_fem(f"alignment/x0_{x0:.2f}", data) for x0 in ALIGN_X0_MM[1:]],
-            "homogenised": [load_fem("homogenised", data)]}
+            "homogenised": [load_fem(homogenised, data)]}
     out: dict = {"model": model}
     for kind, fems in runs.items():
         by: dict = {}
@@ -181,10 +182,13 @@ def gate(sim, data: Path = DATA, tolerances: dict | None = None, model_hook=None
     every count-CoP shear signal (SIGNALS, and the effective height's rise) judged on its mean
     over the alignments (alignment_table) instead of at the committed section's one alignment,
     where the walls' aliasing decides its sign. The same signals are judged again against the
-    section with its lattice homogenised (bound "homogenised": reference/homogenised.npz, taxel
-    alignments only), the continuum the fast model's lattice is: where a count row passes against
-    one section and fails against the other, the walls' discreteness decides it, not the stack's
-    continuum mechanics. The bands are the same (tolerances.yaml) for every row. The
+    section with its lattice homogenised inside the same solid rim (bound "homogenised":
+    reference/homogenised.npz, taxel alignments only), the continuum the fast model's lattice is:
+    where a count row passes against one section and fails against the other, the walls'
+    discreteness decides it, not the stack's continuum mechanics. (The pad's solid rim beyond the
+    last full wall carries much of the lattice's side load in both; without it the homogenised
+    section's deep count CoP moves 0.758 / 0.946 mm instead of 0.464 / 0.585: homogenisation.json's
+    "without_rim".) The bands are the same (tolerances.yaml) for every row. The
     single-alignment values stay in the record (record["bonded"]); the alignment table is
     record["alignments"]."""
     tol = tolerances or load_tolerances()

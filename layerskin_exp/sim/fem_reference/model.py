@@ -91,8 +91,12 @@ class Section:
     radius_mm: float
     deep_sheet: bool = True  # False: the lattice bonded to the rigid base (the closed-form checks)
     # True: the lattice as one homogenised layer (`homogenised_lattice`) instead of walls and
-    # smeared medium: the section's own measure of what its cells do to each compared quantity
+    # smeared medium, inside the same solid rim: the section's own measure of what its cells do to
+    # each compared quantity
     homogenised: bool = False
+    # with `homogenised`: False puts the homogenised lattice out to the pad's sides, without the
+    # solid rim (the lattice of the 3D half-model, `shear3d`)
+    rim: bool = True
     # the cover's Poisson ratio; None: the spacer's silicone_nu (the simulator has one for both).
     # Its neo-Hooke's volume term resists at most ~K = E / 3(1 - 2 nu) of pressure (0.58 MPa at
     # 0.49): `--cover-poisson` measures what that choice does to each compared quantity
@@ -143,16 +147,26 @@ LAYERS = ("deep_film_along", "deep_core", "deep_film_across", "lattice", "film_a
           "film_along", "cover")
 
 
+def _last_wall(sec: Section) -> int:
+    """Index k of the last full wall (centred at k pitch) inside the pad's half-width."""
+    return int(np.floor((0.5 * sec.width_mm - 0.5 * sec.wall_mm) / sec.pitch_mm + 1e-9))
+
+
+def rim_from_mm(sec: Section) -> float:
+    """Where the pad's solid rim begins, |x| (mm): the outer face of the last full wall."""
+    return _last_wall(sec) * sec.pitch_mm + 0.5 * sec.wall_mm
+
+
 def _x_edges(sec: Section, wall_elems: int, void_elems: int, coarse: int, fine_mm: float = 7.0
              ) -> tuple[np.ndarray, np.ndarray]:
     """Element edges along the section and, per element, whether it lies in a wall. Walls are
     centred on multiples of the pitch (one under the cap's start position x = 0); the pad's rim
-    (beyond the last full wall) is solid. Beyond fine_mm from the centre, where the sheet has
-    spread the load into a smooth field, walls and voids get `coarse` elements each."""
+    (beyond the last full wall, `rim_from_mm`) is solid. Beyond fine_mm from the centre, where
+    the sheet has spread the load into a smooth field, walls and voids get `coarse` elements each."""
     half = 0.5 * sec.width_mm
     p, w = sec.pitch_mm, sec.wall_mm
     edges, wall = [-half], []
-    k_last = int(np.floor((half - 0.5 * w) / p + 1e-9))
+    k_last = _last_wall(sec)
 
     def fill(to, n, solid):
         edges.extend(np.linspace(edges[-1], to, n + 1)[1:])
@@ -381,7 +395,11 @@ def materials(sec: Section, mesh: Mesh) -> list[tuple[np.ndarray, object]]:
     # walls' contact when it closes (a third medium).
     mu_fill = fill_shear_modulus_mpa(sec)
     if sec.homogenised:
-        lattice = [(is_("lattice"), homogenised_lattice(sec, axis=1))]
+        # the cells homogenised, the pad's solid rim kept: the two sections differ by the cells only
+        xc = mesh.points[mesh.cells[:, 8], 0]  # the quad9's centre node
+        rim = is_("lattice") & (np.abs(xc) > rim_from_mm(sec)) & sec.rim
+        lattice = [(is_("lattice") & ~rim, homogenised_lattice(sec, axis=1)),
+                   (rim, _neo_hooke(sec.silicone_e_mpa, sec.silicone_nu))]
     else:
         lattice = [(is_("lattice") & mesh.wall, _neo_hooke(sec.silicone_e_mpa, sec.silicone_nu)),
                    (is_("lattice") & ~mesh.wall, fem.NeoHookeCompressible(mu=mu_fill, lmbda=0.0))]

@@ -673,9 +673,9 @@ def count_signals_vs_section(res: dict, sim, data: Path = DATA) -> dict:
     each read through the simulator's FSR law and readout (compare.Reader) and averaged over the
     taxel grid's alignments (alignment.ALIGN_TAXEL_MM; the 3D model along x and across, the
     section along x, its cells also over its wall alignments). 'plane_strain_error' is the 3D
-    mean minus the homogenised section's (the same lattice model, so plane strain and the 3D
-    mesh); '3d_minus_cells' the 3D mean minus the section with cells (plane strain and
-    homogenisation together). Positions in mm; the effective height -F_z dc / F_x in mm too."""
+    mean minus the homogenised section's without the solid rim (homogenised_no_rim.npz: the same
+    lattice model out to the pad's sides, so plane strain and the 3D mesh); '3d_minus_cells' the
+    3D mean minus the section with cells (plane strain, homogenisation and the rim together). Positions in mm; the effective height -F_z dc / F_x in mm too."""
     from layerskin_exp.sim.fem_reference.alignment import (
         ALIGN_TAXEL_MM,
         _summary,
@@ -683,7 +683,7 @@ def count_signals_vs_section(res: dict, sim, data: Path = DATA) -> dict:
         section_signals,
     )
 
-    sec = section_signals(sim, data)
+    sec = section_signals(sim, data, homogenised="homogenised_no_rim")  # the 3D model has no solid rim
     three: dict = {}
     for tx in ALIGN_TAXEL_MM:
         for ty in ALIGN_TAXEL_MM:
