@@ -104,6 +104,21 @@ def test_stale_partial_from_a_dead_writer_is_replaced(tmp_path):
     assert s.complete and s.labels == {"who": "rerun"} and len(s.streams["skin"]["seq"]) == 1
 
 
+def test_a_rerun_removes_the_owner_note_copies_a_killed_writer_left(tmp_path):
+    """A writer killed between writing its owner note's temporary copy and moving it into place
+    leaves `<file>.<pid>.tmp`; the next owner of the file removes it, and nothing else."""
+    path = tmp_path / "t.mcap.partial"
+    stale = [tmp_path / "t.mcap.partial.4242.tmp", tmp_path / "t.mcap.partial.77.tmp"]
+    kept = [tmp_path / "t.mcap.partial.notes.tmp", tmp_path / "u.mcap.partial.4242.tmp"]
+    for p in stale + kept:
+        p.write_text('{"pid": 4242}')
+    with SessionWriter(path, labels={"who": "rerun"}, overwrite=True) as w:
+        w.write(frame(0))
+    assert not any(p.exists() for p in stale)
+    assert all(p.exists() for p in kept)
+    assert sorted(p.name for p in tmp_path.glob("t.mcap.partial*")) == ["t.mcap.partial", "t.mcap.partial.notes.tmp"]
+
+
 def test_existing_file_without_overwrite_is_still_refused(tmp_path):
     path = tmp_path / "t.mcap"
     path.write_bytes(b"recorded data")

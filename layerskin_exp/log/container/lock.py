@@ -8,12 +8,14 @@ is not held by anyone and may be replaced, a file being written never is.
 
 Who holds a lock is written beside the file, in `<file>.owner` (pid, host, start time), so the
 refusal can say which process to look at. The note is removed at close; one left by a crash is
-harmless (the lock, not the note, decides) and is overwritten by the next owner.
+harmless (the lock, not the note, decides) and is overwritten by the next owner, who also removes
+the note's temporary copies (`<file>.<pid>.tmp`) a writer killed while writing it left behind.
 """
 
 from __future__ import annotations
 
 import fcntl
+import glob
 import json
 import os
 import socket
@@ -97,13 +99,21 @@ class WriterLock:
                                 f"writing the same trial?")
 
     def _write_owner(self) -> None:
+        # Only a holder of the lock writes the note, so any other temporary copy of it is a dead
+        # holder's (killed between writing it and moving it into place): remove it.
+        for stale in self.path.parent.glob(f"{glob.escape(self.path.name)}.*.tmp"):
+            if stale.name[len(self.path.name) + 1:-len(".tmp")].isdigit():
+                try:
+                    stale.unlink()
+                except OSError:
+                    pass
         info = {
             "pid": os.getpid(),
             "host": socket.gethostname(),
             "started": time.strftime("%Y-%m-%d %H:%M:%S %z"),
             "file": self.path.name,
         }
-        tmp = owner_path(self.path).with_suffix(f".{os.getpid()}.tmp")
+        tmp = self.path.with_name(f"{self.path.name}.{os.getpid()}.tmp")
         try:
             tmp.write_text(json.dumps(info))
             os.replace(tmp, owner_path(self.path))
