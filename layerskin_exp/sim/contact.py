@@ -50,7 +50,6 @@ from layerskin_exp.sim.laminate import (
     PlateOnFoundation,
     cover_shear_stiffness_n_per_mm3,
     cover_stiffness_n_per_mm3,
-    edge_fade_mm,
     pad_radius_mm,
 )
 from layerskin_exp.sim.spacer import SpacerLaw
@@ -105,9 +104,9 @@ class ContactTables:
     edge_deep_kpa: np.ndarray  # (n_edge,)
     edge_top_kpa: np.ndarray  # (n_edge,)
     lattice_height_mm: np.ndarray  # (n_delta,) the lattice's height under the contact: its lever
-    # how far inside each side the lattice's shear fades, the side load's centre (mm; the edge
-    # tables were solved with it: laminate.edge_fade_mm of the unloaded lattice's height)
-    edge_fade_mm: float
+    # how far inside each side its load's moment acts (mm; the edge tables' own:
+    # PlateOnFoundation.side_inset_mm, negative where the solid rim's couple outweighs its net load)
+    side_inset_mm: float
 
     @property
     def d_delta(self) -> float:
@@ -150,7 +149,7 @@ def _solver(sim: SimConfig, kind: str, radius_mm: float | None = None) -> PlateO
     g_c = cover_shear_stiffness_n_per_mm3(sim.cover.modulus_kpa, sim.spacer.poisson, sim.cover.thickness_mm)
     return PlateOnFoundation(kind, law, sheet.rigidity_n_mm, g_p, k_c, radius,
                              pad_radius_mm(kind, sim.spacer.width_mm), step_mm=_PLATE_STEP_MM, interface=interface,
-                             cover_shear_n_per_mm3=g_c)
+                             cover_shear_n_per_mm3=g_c, rim_mm=sim.spacer.rim_mm)
 
 
 def contact_confinement_mm(kind: str, x_mm: np.ndarray, weight: np.ndarray, contact_kpa: np.ndarray) -> float:
@@ -251,7 +250,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
     cover1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
     superficial1 = 0.5 * (cover1 + deep1)
-    edge_dist, edge_deep, edge_top, edge_fade = _edge_tables(sim, sigma_d)
+    edge_dist, edge_deep, edge_top, side_inset = _edge_tables(sim, sigma_d)
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)
     k_extra = np.where(comp > 0, k_extra, 0.0)
     shear_extra = k_extra @ weight * KPA_MM2_TO_N
@@ -263,17 +262,17 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     height = sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre]
     return ContactTables(kind, delta, load, dist, superficial, deep, shear_extra, torsion_extra, fr,
                          halfwidth, superficial1, deep1, height, comp[:, centre].copy(), cover_shear, cover_torsion,
-                         cover_kc, cover, cover1, edge_dist, edge_deep, edge_top, h - comp[:, centre], edge_fade)
+                         cover_kc, cover, cover1, edge_dist, edge_deep, edge_top, h - comp[:, centre], side_inset)
 
 
 def _edge_tables(sim: SimConfig, sigma_d: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The lattice's route across the pad (`ContactTables.edge_deep_kpa`): a straight side, per
     unit couple per mm along it, on the unloaded lattice (`PlateOnFoundation.edge_couple`);
-    blurred like the deep profiles (half a sheet's thickness); and the fade it was solved with."""
+    blurred like the deep profiles (half a sheet's thickness); and its side load's inset."""
     plate = _solver(sim, "rod")
     resp = plate.edge_couple()
     reach = plate.pad_radius + 1.0
     dist = np.linspace(-reach, reach, 961)
     blur = _line_gauss_matrix(dist, plate.x, plate.step, sigma_d)
     return (dist, blur @ resp.foundation_kpa, blur @ (resp.foundation_kpa - 2.0 * resp.direct_kpa),
-            edge_fade_mm(plate.law.h_mm))
+            plate.side_inset_mm())

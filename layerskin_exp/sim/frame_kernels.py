@@ -58,8 +58,8 @@ PARAMS = np.dtype([
     # first taxel centre, the pitch and half the electrode's side (mm), half the pad's side (mm)
     ("n_taxels", np.float64), ("quad_points", np.float64), ("rod", np.float64), ("first_centre_mm", np.float64),
     ("pitch_mm", np.float64), ("half_electrode_mm", np.float64), ("half_pad_mm", np.float64),
-    # how far inside the pad's sides the lattice's shear fades (laminate.edge_fade_mm, mm)
-    ("edge_fade_mm", np.float64),
+    # how far inside the pad's sides their load's moment acts (ContactTables.side_inset_mm, mm)
+    ("side_inset_mm", np.float64),
     # the contact tables: indentation step and last row index; the fine lookups' origin and scale
     # (superficial, deep: r^2 or signed distance to bin)
     ("delta_step_mm", np.float64), ("last_delta_row", np.float64), ("lk_origin", np.float64), ("lk_scale", np.float64),
@@ -145,8 +145,8 @@ def _edge_loads(st, prm, h_lat, k_lean):
     mlx = st[S_FX] * h_lat + st[S_FZ] * st[S_UX]
     mly = st[S_FY] * h_lat + st[S_FZ] * st[S_UY]
     k = st[S_TORQUE] * h_lat + k_lean
-    # the pair of sides' loads are 2 (L - fade) apart, each centred the fade inside its side
-    kk = k * (two_l - 2.0 * prm.edge_fade_mm) / (two_l**4 / 6.0)
+    # the pair of sides' loads act 2 (L - inset) apart
+    kk = k * (two_l - 2.0 * prm.side_inset_mm) / (two_l**4 / 6.0)
     return np.float32(mlx / two_l), np.float32(mly / two_l), np.float32(kk)
 
 

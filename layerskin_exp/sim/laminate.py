@@ -159,13 +159,17 @@ class PlateOnFoundation:
 
     kind: "hemisphere" (axisymmetric) or "rod" (line contact). `rigidity_n_mm` D, `pasternak_n_per_mm`
     G_p, `cover_n_per_mm3` k_c (compression) and `cover_shear_n_per_mm3` G_c / t_c (shear); `law` the lattice's compression law; `pad_radius_mm` where the
-    plate ends (hemisphere: radius of the disc of the pad's area; rod: half the pad width).
+    plate ends (hemisphere: radius of the disc of the pad's area; rod: half the pad width);
+    `rim_mm` the width of the pad's solid rim inside that edge (`SpacerConfig.rim_mm`; 0: the
+    lattice runs out to the side). The rim is bonded solid silicone: a linear foundation of
+    E_s / (1 - nu^2) / h (a strip long along the side, free across it: plane strain), about
+    three times the open lattice's E_lat / h, and 2 / rho times the lattice's shear modulus.
     """
 
     def __init__(self, kind: str, law: SpacerLaw, rigidity_n_mm: float, pasternak_n_per_mm: float,
                  cover_n_per_mm3: float, indenter_radius_mm: float, pad_radius_mm: float,
                  step_mm: float = 0.05, interface: FrictionInterface | None = None,
-                 cover_shear_n_per_mm3: float = 0.0):
+                 cover_shear_n_per_mm3: float = 0.0, rim_mm: float = 0.0):
         if kind not in ("hemisphere", "rod"):
             raise ValueError(f"kind={kind!r}: must be 'hemisphere' or 'rod'")
         self.kind, self.law = kind, law
@@ -186,6 +190,12 @@ class PlateOnFoundation:
             self.area = np.full(self.x.shape, step_mm)  # per mm of rod length
         on_pad = np.abs(self.x) <= pad_radius_mm
         self.on_pad, self.pad_radius = on_pad, pad_radius_mm
+        if not 0.0 <= rim_mm < pad_radius_mm:
+            raise ValueError(f"rim_mm={rim_mm!r}: the solid rim's width must lie in [0, {pad_radius_mm}) mm")
+        self.rim_mm = rim_mm
+        self.rim = on_pad & (np.abs(self.x) > pad_radius_mm - rim_mm) if rim_mm > 0 else np.zeros(len(self.x), bool)
+        cfg = law.cfg
+        self._k_rim = cfg.modulus_kpa / (1.0 - cfg.poisson**2) * KPA / law.h_mm
         self._lap = laplacian(kind, len(self.x), step_mm)
         self._lap1 = laplacian_m1(len(self.x), step_mm) if kind == "hemisphere" else self._lap
         self.z_ind = self.indenter_height(self.x)
@@ -244,6 +254,9 @@ class PlateOnFoundation:
         p = np.where(w >= 0.0, self.law.pressure_kpa(comp) * KPA, self._e_lat * w)
         slope = np.where(w >= 0.0, (self.law.pressure_kpa(comp + eps) - self.law.pressure_kpa(np.maximum(comp - eps, 0.0)))
                          * KPA / (comp + eps - np.maximum(comp - eps, 0.0)), self._e_lat)
+        if self.rim_mm > 0:  # the solid rim: linear, in compression and tension (it is bonded)
+            p = np.where(self.rim, self._k_rim * w, p)
+            slope = np.where(self.rim, self._k_rim, slope)
         p = np.where(self.on_pad, p, 0.0)
         slope = np.where(self.on_pad, slope, 0.0)
         return p, slope
@@ -366,18 +379,51 @@ class PlateOnFoundation:
             lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
             touching = sol.contact_kpa > 0.0
         _, slope = self.foundation(w)
-        # the step of 1 / A_pad at the pad's edge: the traction fades inside the free side as the
-        # bonded layer's end effect, tau ~ 1 - exp(-s / l) with s in from the side and
-        # l = edge_fade_mm(h), so its term h tau' lies on the pad as exp(-s / l) / l;
-        # normalised to a unit moment
-        fade = edge_fade_mm(self.law.h_mm)
-        inside = np.clip(self.pad_radius - np.abs(self.x), 0.0, None)
-        edge = np.where(self.on_pad, np.sign(self.x) * np.exp(-inside / fade) / fade, 0.0)
-        edge_term = edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
+        edge_term = self.side_load()
         w1 = self._solve_m1(lin1 + sp.diags(slope + self.k_cover * touching), 0.5 * edge_term)
         direct = 0.5 * edge_term / KPA
         return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA + direct,
                               direct)
+
+    def side_load(self) -> np.ndarray:
+        """The lattice's shear traction's term h tau' at the pad's sides (odd across the pad),
+        normalised to a unit moment.
+
+        The in-plane-stiff sheet shears the whole pad by one strain, so the traction is each
+        material's shear modulus times it, and it fades to zero inside the free side as the
+        bonded layer's end effect, tau ~ 1 - exp(-s / l), s in from the side, l =
+        edge_fade_mm(h). Without a rim that is the lattice's, and h tau' lies on the pad as
+        exp(-s / l) / l. With a rim of width b the fade is the rim's own, r (1 - exp(-s / l))
+        with r = 2 / rho its shear modulus over the lattice's, and where the rim meets the
+        lattice (s = b) the traction steps from the lattice's 1 to r (1 - exp(-b / l)), a line
+        load of the other sign: h tau' = r exp(-s / l) / l in the rim less that step at s = b.
+        Both put one lattice traction's worth of net side load on each side."""
+        fade = edge_fade_mm(self.law.h_mm)
+        inside = np.clip(self.pad_radius - np.abs(self.x), 0.0, None)
+        if self.rim_mm > 0:
+            cfg = self.law.cfg
+            r = cfg.solid_shear_modulus_kpa / cfg.shear_modulus_kpa
+            b = self.rim_mm
+            density = np.where(self.rim, r * np.exp(-inside / fade) / fade, 0.0)
+            # the step, on each side's first grid point inside the rim's face
+            for sign in (-1.0, 1.0):  # (the hemisphere's radius has one side)
+                lattice = np.flatnonzero(self.on_pad & ~self.rim & (sign * self.x > 0))
+                if len(lattice) == 0:
+                    continue
+                face = lattice[np.argmin(inside[lattice])]
+                density[face] -= (r * (1.0 - math.exp(-b / fade)) - 1.0) / self.step
+        else:
+            density = np.exp(-inside / fade) / fade
+        edge = np.where(self.on_pad, np.sign(self.x) * density, 0.0)
+        return edge / self.first_moment(edge / KPA)  # (first_moment reads kPa)
+
+    def side_inset_mm(self) -> float:
+        """How far inside the pad's side the side load's moment acts (its centroid: the lever of
+        a pair of sides is 2 (L - inset)); h / 4.21 without a rim, negative where the rim's
+        couple outweighs its net load."""
+        edge, half = self.side_load(), self.x > 0
+        net = float(edge[half].sum())
+        return float(self.pad_radius - (edge[half] * self.x[half]).sum() / net)
 
     def _solve_m1(self, jac, load: np.ndarray) -> np.ndarray:
         """Deflection of the first angular mode (hemisphere; the rod's odd one) under load."""

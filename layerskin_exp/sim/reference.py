@@ -72,7 +72,7 @@ class ReferenceSkin:
         fz = rec[mk.S_FZ]
         cx = (rec[mk.S_FX] * h_lat + fz * rec[mk.S_UX]) / two_l
         cy = (rec[mk.S_FY] * h_lat + fz * rec[mk.S_UY]) / two_l
-        kk = (rec[mk.S_TORQUE] * h_lat + k_lean) * (two_l - 2.0 * float(tab.edge_fade_mm)) / (two_l**4 / 6.0)
+        kk = (rec[mk.S_TORQUE] * h_lat + k_lean) * (two_l - 2.0 * float(tab.side_inset_mm)) / (two_l**4 / 6.0)
         # couple per mm across the x- and the y-sides, each pair along its own length
         across_x = np.where(np.abs(y) <= 0.5 * two_l, cx - kk * y, 0.0)
         across_y = np.where(np.abs(x) <= 0.5 * two_l, cy + kk * x, 0.0)

@@ -4,9 +4,14 @@ and the spacer's law (`spacer.SpacerLaw`), which the config's sheet rigidity rea
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from layerskin_exp.config import require
+
+# A regular hexagonal honeycomb has its walls in three directions. Cut along one of them, two
+# thirds of the wall material crosses the cut (the walls at +-60 deg) and one third lies along it.
+CROSSING_SHARE = 2.0 / 3.0
 
 
 def positive(value: float, key: str, what: str = "must be > 0") -> None:
@@ -69,3 +74,20 @@ class SpacerConfig:
     @property
     def solid_shear_modulus_kpa(self) -> float:
         return self.modulus_kpa / (2.0 * (1.0 + self.poisson))
+
+    @property
+    def section_wall_mm(self) -> float:
+        """Width of a wall crossing a straight cut through the lattice, as a plane-strain wall:
+        the crossing walls' share of the material over a cell, times (1 - nu^2) (a plane-strain
+        wall is that much stiffer in compression)."""
+        return CROSSING_SHARE * self.solid_fraction * self.cell_mm * (1.0 - self.poisson ** 2)
+
+    @property
+    def rim_mm(self) -> float:
+        """Width of the pad's solid rim: the silicone between the outer face of the last full
+        wall (walls centred on multiples of the cell pitch from the pad's centre) and the pad's
+        side, 0.78 mm here. The reference's section is built so, and the fast model's foundation
+        and side load take it from here."""
+        half, w = 0.5 * self.width_mm, self.section_wall_mm
+        k_last = math.floor((half - 0.5 * w) / self.cell_mm + 1e-9)
+        return half - (k_last * self.cell_mm + 0.5 * w)

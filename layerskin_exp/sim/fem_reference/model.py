@@ -58,13 +58,14 @@ from scipy.sparse.linalg import spsolve
 
 from layerskin_exp import rig
 from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim.spacer_config import CROSSING_SHARE
 
 KPA = 1e-3  # MPa per kPa
 # A regular hexagonal honeycomb has its walls in three directions. Cut along one of them, two
 # thirds of the wall material crosses the section (the walls at +-60 deg, drawn as bands) and one
 # third lies along it (the walls parallel to the section, which carry shear along x by their
 # in-plane stiffness and which a plane-strain section can only smear over the voids).
-BAND_SHARE = 2.0 / 3.0
+BAND_SHARE = CROSSING_SHARE
 FILM_NU = 0.34  # polyimide (and the films' homogenised copper strips)
 CORE_NU = 0.4  # Velostat (carbon-loaded polyolefin)
 
@@ -110,7 +111,7 @@ class Section:
         cu_a = sh.copper_modulus_mpa * sh.copper_thickness_mm
         along = pi_a + sh.electrode_fill * cu_a
         across = 1.0 / (sh.electrode_fill / (pi_a + cu_a) + (1.0 - sh.electrode_fill) / pi_a)
-        wall = BAND_SHARE * sp_.solid_fraction * sp_.cell_mm * (1.0 - sp_.poisson ** 2)
+        wall = sp_.section_wall_mm
         return cls(width_mm=sp_.width_mm, lattice_mm=sp_.thickness_mm, pitch_mm=sp_.cell_mm,
                    wall_mm=wall, solid_fraction=sp_.solid_fraction, cover_mm=sim.cover.thickness_mm,
                    film_mm=t_film, core_mm=sh.velostat_thickness_mm, silicone_e_mpa=sp_.modulus_kpa * KPA,
