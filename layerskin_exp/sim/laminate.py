@@ -356,8 +356,9 @@ class PlateOnFoundation:
         The lattice is a thin layer in shear. Across its height h the shear stress is uniform, so
         vertical equilibrium makes its normal stress change by h dtau/dx from its top to its base:
         nothing inside the pad, where tau is uniform, and a band at the pad's edge, where tau
-        falls to zero as the bonded layer's end effect (the lattice's side is free; it dies
-        away over `edge_fade_mm(h)`, about a quarter of h). Its compression follows the mean
+        falls to zero as the bonded layer's end effect (the side is free; it dies away over
+        `edge_fade_mm(h)`, about a quarter of h), in the pad's solid rim where it has one, which
+        carries more of it (`side_load`). Its compression follows the mean
         of the two, so with the top at p_top = k w - h tau'/2 and the base at p_base = k w + h
         tau'/2 the edge term splits in halves: one loads the sheet (D lap^2 w + k w = h tau'/2),
         whose bending spreads it, the other the lattice hands straight to the deep sheet
