@@ -8,8 +8,13 @@ on the caller's side.
 Time stamps: host_t_ns is time.monotonic_ns() when read() returns the frame. device_t_ns is
 the capture time: the backend's frame timestamp (CAP_PROP_POS_MSEC: V4L2's buffer time, the
 RealSense frame time) when it gives one (> 0), else the host receive time minus the configured
-pipeline latency (latency_ms), an estimate as good as that constant. frame_seq counts frames
-read since connect(); a capture gives no frame numbers to find lost frames by.
+pipeline latency (latency_ms), an estimate as good as that constant.
+
+frame_seq numbers the camera's frames since connect. A capture gives no frame numbers, so where
+it gives timestamps the number advances by the frame periods (1 / fps) between two frames' capture
+times, rounded: a frame the capture's ring dropped (a host that read too slowly) leaves a gap in
+frame_seq and counts as lost in the stream's health. Without timestamps it advances by one per
+frame read, and a dropped frame cannot be seen.
 """
 
 from __future__ import annotations
@@ -51,10 +56,11 @@ class OpenCVMarkerCamera(MarkerCamera):
         self._last_rx_ns: int | None = None
         self._error: str | None = None
         self._seq = 0
+        self._last_dev_ns: int | None = None  # capture time of the previous frame, when the capture stamps them
 
     def _connect(self) -> None:
         c = self.config
-        self._error, self._last_rx_ns, self._latest, self._seq = None, None, None, 0
+        self._error, self._last_rx_ns, self._latest, self._seq, self._last_dev_ns = None, None, None, 0, None
         self.tracker.reset()
         with self._lock:
             self._buf.clear()
@@ -96,6 +102,7 @@ class OpenCVMarkerCamera(MarkerCamera):
     def _run(self) -> None:
         cap, c = self._cap, self.config
         latency_ns = int(round(c.latency_ms * 1e6))
+        period_ns = 1e9 / c.fps
         while not self._stop.is_set():
             try:
                 ok, frame = cap.read()
@@ -111,7 +118,8 @@ class OpenCVMarkerCamera(MarkerCamera):
             pos_ms = float(cap.get(cv2.CAP_PROP_POS_MSEC) or 0.0)
             dev_ns = int(round(pos_ms * 1e6)) if pos_ms > 0 else host_ns - latency_ns
             grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
-            self._seq += 1
+            prev_seq = self._seq if self._seq else None
+            self._seq += self._frame_steps(dev_ns if pos_ms > 0 else None, period_ns)
             seq = self._seq
             dets = []
             try:
@@ -121,12 +129,20 @@ class OpenCVMarkerCamera(MarkerCamera):
             except cv2.error as exc:  # a frame the detector cannot take: counted, the stream goes on
                 self.health.corrupt += 1
                 log.warning("camera: frame %d rejected by the detector: %s", seq, exc)
-            self.health.observe_seq(seq - 1 if seq > 1 else None, seq)
+            self.health.observe_seq(prev_seq, seq)
             with self._lock:
                 self._buf.extend(dets)
                 self._latest = (grey, dev_ns, host_ns)
             self._last_rx_ns = host_ns
             self._first.set()
+
+    def _frame_steps(self, dev_ns: int | None, period_ns: float) -> int:
+        """How many frame periods since the previous frame: from the capture times when the
+        capture stamps its frames (at least 1: a repeated or earlier stamp is not a gap), else 1."""
+        prev, self._last_dev_ns = self._last_dev_ns, dev_ns
+        if dev_ns is None or prev is None:
+            return 1
+        return max(1, round((dev_ns - prev) / period_ns))
 
     def read_available(self) -> list[MarkerDetection]:
         self._require_connected()

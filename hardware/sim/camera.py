@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -19,6 +20,9 @@ from layerskin_exp.vision import quat_xyzw
 # Camera axes in the skin frame at the home pose: looking down the skin normal onto the cover,
 # image x along skin x, image y along -skin y.
 R_SKIN_CAMERA = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+# Frames kept for take_images() when images are kept: half a second at 30 fps. A consumer that
+# falls further behind loses the oldest (counted in images_overrun), as a capture ring does.
+KEPT_FRAMES = 16
 
 
 class SimMarkerCamera(SimStreamMixin, MarkerCamera):
@@ -43,6 +47,8 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         self._R_cam_base = np.ascontiguousarray(self.R_base_cam.T)
         self._marker_ids = [int(m) for m in cfg.marker_ids]
         self._latest: tuple[SensorFrame | np.ndarray, int, int] | None = None
+        self._kept: deque[tuple[SensorFrame, int, int]] = deque(maxlen=KEPT_FRAMES)
+        self.images_overrun = 0  # kept frames pushed out before take_images() took them
         self._last_host_ns = -1
         world.add_producer(self.stream, self._produce)
         world.on_trial(self._reseed)
@@ -85,6 +91,9 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
             frame = self.imager.render(self.marker_poses(snaps[i], recs[i]), self._img_rng)
             if cfg.keep_images:
                 self._latest = (frame, dev_ns[i], h)  # composed into a full image when asked for
+                if len(self._kept) == KEPT_FRAMES:
+                    self.images_overrun += 1
+                self._kept.append((frame, dev_ns[i], h))
             for d in self.imager.detect(frame):
                 pose = Pose(d.tvec_mm * 1e-3, quat_xyzw(d.rvec), "camera", dev_ns[i], h, seq[i])
                 self.stream.push(h, MarkerDetection(d.marker_id, pose, d.corners_px, seq[i], dev_ns[i], h))
@@ -108,6 +117,19 @@ class SimMarkerCamera(SimStreamMixin, MarkerCamera):
         if self._latest is not None and isinstance(self._latest[0], SensorFrame):
             self._latest = (self._latest[0].full(), *self._latest[1:])
         return self._latest
+
+    def take_images(self) -> list[tuple[SensorFrame, int, int]]:
+        """Every frame made since the last call (at most KEPT_FRAMES), oldest first, when images are
+        kept: (frame, device_t_ns, host_t_ns); `frame.full()` is the (H, W) uint8 image. For a
+        consumer that must see each frame (the loopback camera), where latest_image_stamped()
+        would skip those made between two looks. Safe without the world's lock (each deque
+        operation is atomic), so a consumer need not wait out a world catching up under it."""
+        out = []
+        while True:
+            try:
+                out.append(self._kept.popleft())
+            except IndexError:
+                return out
 
     def calibration(self) -> dict:
         """Intrinsics and the camera's pose in the arm base frame (for the session metadata)."""

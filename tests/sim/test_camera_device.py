@@ -26,6 +26,24 @@ def test_kept_images_are_complete_frames_holding_what_was_detected():
     assert np.all(img[:40, :40] == rig.camera.imager.background_gray)
 
 
+def test_every_kept_frame_is_handed_out_once_in_order():
+    # A consumer that must see each frame (the loopback camera) takes them all, not the newest only.
+    rig = build_rig(app_config(seed=3, camera__keep_images=True), "gripper")
+    rig.connect()
+    rig.camera.take_images()
+    rig.clock.sleep(0.3)
+    dets = rig.camera.read_available()
+    made = rig.camera.take_images()
+    dev = np.array([d for _, d, _ in made])
+    assert len(made) >= 8 and np.all(np.diff(dev) > 0)
+    period_ns = 1e9 / rig.extras["world"].rig.camera.fps
+    assert np.all(np.round(np.diff(dev) / period_ns) == 1)  # no frame left out
+    assert {d.device_t_ns for d in dets} <= set(dev.tolist())  # every detected frame among them
+    assert made[-1][1] == rig.camera.latest_image_stamped()[1]
+    assert rig.camera.take_images() == []  # handed out once
+    assert rig.camera.images_overrun == 0
+
+
 def test_images_are_not_kept_by_default():
     rig = build_rig(app_config(seed=3), "gripper")
     rig.connect()

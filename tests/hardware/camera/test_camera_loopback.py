@@ -90,6 +90,30 @@ def test_without_backend_timestamps_capture_time_is_receive_time_minus_latency(e
     assert all(d.pose.device_t_ns == d.device_t_ns for d in dets)
 
 
+class SlowCapture(FakeCapture):
+    """A host that reads the capture slower (10 per s) than the camera makes frames (30 per s)."""
+
+    def read(self):
+        time.sleep(0.1)
+        return super().read()
+
+
+def test_frames_a_slow_reader_loses_show_as_gaps_and_are_counted(emu):
+    # The ring keeps the newest frames; the driver numbers frames by their capture times, so what
+    # the ring overwrote is a gap in frame_seq and lost in the health, not silently skipped.
+    cfg = CameraConfig()
+    with OpenCVMarkerCamera(cfg, lambda: SlowCapture(emu)) as cam:
+        dets = collect_frames(cam, 10, timeout_s=10.0)
+        lost = cam.health.lost
+    assert emu.overwritten > 0 and lost > 0
+    frames = {d.frame_seq: d.device_t_ns for d in dets}
+    seq = np.array(sorted(frames))
+    dev = np.array([frames[k] for k in seq])
+    steps = np.round(np.diff(dev) / (1e9 / cfg.fps))
+    assert np.array_equal(np.diff(seq), steps)  # a frame number per frame period of capture time
+    assert int(np.sum(steps - 1)) <= lost  # every gap among the frames read is counted
+
+
 def test_a_capture_that_stops_is_a_fault(emu):
     with OpenCVMarkerCamera(CameraConfig(), emu.capture_factory) as cam:
         collect_frames(cam, 2)
