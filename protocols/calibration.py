@@ -168,25 +168,22 @@ class PlatformControl:
 
         kind, reason = self.loop.until(step, 1.5 * distance_mm / speed_mm_s + 2.0,
                                        f"platform move to {np.round(target_mm, 3).tolist()} mm")
-        if kind == "trip":
+        if kind == "stop":
+            self.platform.stop()
+        if kind != "arrived":
             self.wait_stopped()
+        # The stage stands, so no fast move is under way: samples still in flight from before the
+        # stop (the load goes on rising while the stage brakes, and a busy host reads them late)
+        # must not trip the slow zone before the next move (seen under load: SafetyError), nor
+        # during a hold at the target (seen on loopback: a "slow_zone" stop after every press).
+        self.safety.platform_speed_mm_s = 0.0
+        if kind == "trip":
             if trip_name(reason) == FORCE_LIMIT:
                 return FORCE_LIMIT
-            slow_zone = trip_name(reason) == SLOW_ZONE
-            if slow_zone:
-                # The stage stands, so no fast move is under way: a sample still in flight from
-                # before the stop (a busy host reads them late) must not trip the zone again
-                # between this acknowledgement and the slow move (seen under load: SafetyError).
-                self.safety.platform_speed_mm_s = 0.0
             rig.clear_trip()  # a stop condition checked per sample, not a fault
-            if slow_zone:  # near the limit: go on at a crawl
+            if trip_name(reason) == SLOW_ZONE:  # near the limit: go on at a crawl
                 return self.move(target_mm, min(speed_mm_s, self.cfg.safety.slow_zone_speed_mm_s), stop_when)
-        elif kind == "stop":
-            self.platform.stop()
-            self.wait_stopped()
         elif kind == "zone_stop":
-            self.wait_stopped()
-            self.safety.platform_speed_mm_s = 0.0  # the stage stands (see the slow zone above)
             rig.clear_trip()
         return reason
 
@@ -197,12 +194,13 @@ class PlatformControl:
         self.loop.hold(duration_s)
 
     def lift(self, xy_mm) -> None:
-        """Retract straight up to the clearance height; allowed while the force guard is tripped."""
+        """Retract straight up to the clearance height; allowed while the force guard is tripped.
+        Moving away from the skin only unloads it, so neither the force limit nor the slow zone
+        stops it (from a hold above the zone the retract went on at a crawl: 0.3 mm/s)."""
         self.log.event("phase", "retract")
         target = np.array([*xy_mm, self.cfg.approach.clearance_mm], float)
         tripped = self.log.rig.tripped is not None
-        if tripped:
-            self.safety.unloading = True
+        self.safety.unloading = True
         try:
             self.move(target, self.cfg.approach.travel_speed_mm_s)
         finally:
@@ -211,46 +209,70 @@ class PlatformControl:
                 self.log.rig.clear_trip()
 
     def press(self, target_n: float, stop_reason_on_target: bool) -> str:
-        """Press down at the contact point until Fz >= target_n; returns the stop reason."""
+        """Press down at the contact point until Fz >= target_n; returns the stop reason.
+
+        The press runs in stages (`press_stages`), each slower than the one before; a stage ends on
+        the F/T sample that crosses the next stage's force (a backend guard with
+        press.stop_on_sample, else at the next tick), the last on the sample that reaches the target.
+        """
         cfg = self.cfg
         contact = {"seen": False}
 
-        def check(wrenches) -> str | None:
-            if not wrenches:
-                return None
-            fz_n = np.array([w.force_n[2] for w in wrenches])
-            if not contact["seen"] and fz_n.max() >= cfg.approach.contact_force_n:
-                contact["seen"] = True
-                self.log.event("contact", "contact", fz_n=float(fz_n.max()))
-            return TARGET_REACHED if fz_n.max() >= target_n else None
+        def check(end_n: float):
+            def stop_when(wrenches) -> str | None:
+                if not wrenches:
+                    return None
+                fz_n = max(float(w.force_n[2]) for w in wrenches)
+                if not contact["seen"] and fz_n >= cfg.approach.contact_force_n:
+                    contact["seen"] = True
+                    self.log.event("contact", "contact", fz_n=fz_n)
+                if fz_n >= target_n:
+                    return TARGET_REACHED
+                return LOADING if fz_n >= end_n else None
+            return stop_when
 
-        def slow_down(wrenches) -> str | None:
-            reached = check(wrenches)
-            if reached is not None:
-                return reached
-            if wrenches and max(w.force_n[2] for w in wrenches) >= min(cfg.press.slow_above_n, target_n):
-                return LOADING
-            return None
-
-        def on_target(sample) -> str | None:  # checked by the backend on every F/T sample
-            return TARGET_REACHED if sample.force_n[2] >= target_n else None
+        def on_sample(end_n: float, reason: str):
+            """Checked by the backend on every F/T sample. Only while the stage moves: a sample read
+            after the stop was acknowledged (the load rises while the stage brakes) would otherwise
+            stop a standing stage again and trip before the next stage's move."""
+            safety = self.safety
+            return lambda sample: reason if safety.platform_speed_mm_s > 0 and sample.force_n[2] >= end_n else None
 
         x, y = self.position_mm()[:2]
         bottom = np.array([x, y, cfg.safety.platform_min_mm[2]])
         rig = self.log.rig
-        if cfg.press.stop_on_sample:
-            rig.add_guard(on_target)
-        try:
-            reason = self.move(bottom, cfg.press.speed_mm_s, slow_down)
-            if reason == LOADING:
-                reason = self.move(bottom, min(cfg.press.load_speed_mm_s, cfg.press.speed_mm_s), check)
-        finally:
-            rig.remove_guard(on_target)
+        reason = None
+        for speed_mm_s, end_n in press_stages(cfg.press, target_n):
+            guard = on_sample(end_n, TARGET_REACHED if end_n >= target_n else LOADING)
+            if cfg.press.stop_on_sample:
+                rig.add_guard(guard)
+            try:
+                reason = self.move(bottom, speed_mm_s, check(end_n))
+            finally:
+                rig.remove_guard(guard)
+            if reason != LOADING:
+                break
         reason = reason or DEPTH_LIMIT
         if reason != TARGET_REACHED or stop_reason_on_target:
             fz = None if self.log.last_wrench is None else float(self.log.last_wrench.force_n[2])
             self.log.stop(reason, fz_n=fz, tripped=self.log.rig.tripped)
         return reason
+
+
+def press_stages(press, target_n: float) -> list[tuple[float, float]]:
+    """The stages of a press to target_n, as (speed mm/s, force N where the stage ends): from
+    contact at press.speed_mm_s, above press.slow_above_n at load_speed_mm_s, above final_fraction
+    x the target at final_speed_mm_s, each no faster than the one before; stages of one speed are
+    one stage (no stop between them). The last ends at the target."""
+    changes = sorted((min(f, target_n), v) for f, v in (
+        (0.0, press.speed_mm_s), (press.slow_above_n, press.load_speed_mm_s),
+        (press.final_fraction * target_n, press.final_speed_mm_s)))
+    starts: list[tuple[float, float]] = []  # (speed, force where it starts), each slower than the last
+    for start_n, speed in changes:
+        if start_n < target_n and (not starts or speed < starts[-1][0]):
+            starts.append((speed, start_n))
+    ends = [start_n for _, start_n in starts[1:]] + [target_n]
+    return [(speed, end_n) for (speed, _), end_n in zip(starts, ends, strict=True)]
 
 
 def run_press(ctl: PlatformControl, trial: CalibrationTrial) -> None:

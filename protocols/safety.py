@@ -30,10 +30,10 @@ class Safety:
         self.rig = rig
         self.lo_mm = np.asarray(cfg.platform_min_mm, float)
         self.hi_mm = np.asarray(cfg.platform_max_mm, float)
-        # While lifting off after a trip the load is still above the limit; moving away from
-        # the skin is what makes it safe, so the guard lets that one kind of move run.
+        # While lifting off (after a trip the load is still above the limit) moving away from the
+        # skin is what makes it safe, so the guards let that one kind of move run.
         self.unloading = False
-        self.platform_speed_mm_s = 0.0  # speed of the platform move in progress
+        self.platform_speed_mm_s = 0.0  # speed of the platform move in progress (0: the stage stands)
         if rig.ft is not None:
             rig.add_guard(self._normal_force_guard)
             rig.add_guard(self._slow_zone_guard)

@@ -90,19 +90,29 @@ class FakePlatform(_Stream, Platform):
         self.speed_mm_s = 0.0
         self.stopped_at_ns: list[int] = []  # fake time of every stop() call
         self.clock_ns = lambda: 0
+        # A stop takes effect this long after stop() (the bench's path: host, link, controller)
+        self.stop_latency_ns = 0
+        self._stop_due_ns: int | None = None
 
     def move_to(self, target_mm, speed_mm_s) -> None:
         self._require_connected()
         self.target_mm, self.speed_mm_s = np.asarray(target_mm, float).copy(), float(speed_mm_s)
 
     def stop(self) -> None:
+        now = self.clock_ns()
+        self.stopped_at_ns.append(now)
+        if self.stop_latency_ns:
+            if self._stop_due_ns is None:
+                self._stop_due_ns = now + self.stop_latency_ns
+            return
         self.target_mm = self.pos_mm.copy()
-        self.stopped_at_ns.append(self.clock_ns())
 
     def is_moving(self) -> bool:
         return bool(np.linalg.norm(self.target_mm - self.pos_mm) > 1e-9)
 
     def step(self, dt_s: float) -> None:
+        if self._stop_due_ns is not None and self.clock_ns() >= self._stop_due_ns:
+            self.target_mm, self._stop_due_ns = self.pos_mm.copy(), None
         d = self.target_mm - self.pos_mm
         n = np.linalg.norm(d)
         step = self.speed_mm_s * dt_s
@@ -247,10 +257,11 @@ class FakeWorld:
                 rig.arm.buffer.append(Pose(rig.arm.pose6[:3].copy(), np.array([0, 0, 0, 1.0]), "tcp", t, t, seq))
 
 
-def platform_rig(**kw) -> Rig:
+def platform_rig(stop_latency_s: float = 0.0, **kw) -> Rig:
     world = FakeWorld(**kw)
     rig = Rig(backend="fake", clock=FakeClock(world), skin=FakeSkin(), ft=FakeFT(), platform=FakePlatform())
     rig.platform.clock_ns = lambda: world.t_ns
+    rig.platform.stop_latency_ns = int(round(stop_latency_s * 1e9))
     world.rig = rig
     return rig
 
