@@ -149,7 +149,7 @@ def _solver(sim: SimConfig, kind: str, radius_mm: float | None = None) -> PlateO
     g_c = cover_shear_stiffness_n_per_mm3(sim.cover.modulus_kpa, sim.spacer.poisson, sim.cover.thickness_mm)
     return PlateOnFoundation(kind, law, sheet.rigidity_n_mm, g_p, k_c, radius,
                              pad_radius_mm(kind, sim.spacer.width_mm), step_mm=_PLATE_STEP_MM, interface=interface,
-                             cover_shear_n_per_mm3=g_c, rim_mm=sim.spacer.rim_mm)
+                             cover_shear_n_per_mm3=g_c, rim_mm=sim.spacer.rim_width_mm)
 
 
 def contact_confinement_mm(kind: str, x_mm: np.ndarray, weight: np.ndarray, contact_kpa: np.ndarray) -> float:

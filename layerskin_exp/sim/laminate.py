@@ -160,7 +160,7 @@ class PlateOnFoundation:
     kind: "hemisphere" (axisymmetric) or "rod" (line contact). `rigidity_n_mm` D, `pasternak_n_per_mm`
     G_p, `cover_n_per_mm3` k_c (compression) and `cover_shear_n_per_mm3` G_c / t_c (shear); `law` the lattice's compression law; `pad_radius_mm` where the
     plate ends (hemisphere: radius of the disc of the pad's area; rod: half the pad width);
-    `rim_mm` the width of the pad's solid rim inside that edge (`SpacerConfig.rim_mm`; 0: the
+    `rim_mm` the width of the pad's solid rim inside that edge (`SpacerConfig.rim_width_mm`; 0: the
     lattice runs out to the side). The rim is bonded solid silicone: a linear foundation of
     E_s / (1 - nu^2) / h (a strip long along the side, free across it: plane strain), about
     three times the open lattice's E_lat / h, and 2 / rho times the lattice's shear modulus.

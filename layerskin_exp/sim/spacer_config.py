@@ -37,6 +37,9 @@ class SpacerConfig:
     width_mm: float = 26.0  # side of the square spacer pad (24 mm array + border)
     confinement_length_mm: float = 2.0  # half-width of the squeezed region (~ indenter radius), sets S
     lattice_contrast: float = 0.25  # relative depth of the cell pattern seen by the deep layer
+    # width of the pad's solid silicone rim at its sides; None: what the lattice leaves beyond its
+    # last full wall (`lattice_rim_mm`, as the reference's section is built)
+    rim_mm: float | None = None
 
     def __post_init__(self) -> None:
         positive(self.modulus_kpa, "sim.spacer.modulus_kpa", "Young's modulus must be > 0 kPa")
@@ -49,6 +52,9 @@ class SpacerConfig:
         positive(self.confinement_length_mm, "sim.spacer.confinement_length_mm", "must be > 0 mm")
         require(self.lattice_contrast is not None and 0 <= self.lattice_contrast < 0.5,
                 "sim.spacer.lattice_contrast", self.lattice_contrast, "must lie in [0, 0.5) to keep the load positive")
+        require(self.rim_mm is None or 0 <= self.rim_mm < 0.5 * self.width_mm, "sim.spacer.rim_mm", self.rim_mm,
+                f"the solid rim's width must lie in [0, {0.5 * self.width_mm:g}) mm (half the pad's side), "
+                "or null for what the lattice leaves beyond its last full wall")
 
     @property
     def solid_fraction(self) -> float:
@@ -83,11 +89,17 @@ class SpacerConfig:
         return CROSSING_SHARE * self.solid_fraction * self.cell_mm * (1.0 - self.poisson ** 2)
 
     @property
-    def rim_mm(self) -> float:
-        """Width of the pad's solid rim: the silicone between the outer face of the last full
-        wall (walls centred on multiples of the cell pitch from the pad's centre) and the pad's
-        side, 0.78 mm here. The reference's section is built so, and the fast model's foundation
-        and side load take it from here."""
+    def lattice_rim_mm(self) -> float:
+        """What the lattice leaves as solid rim: the silicone between the outer face of the last
+        full wall (walls centred on multiples of the cell pitch from the pad's centre) and the
+        pad's side, 0.78 mm for the study's design. The reference's section is built so."""
         half, w = 0.5 * self.width_mm, self.section_wall_mm
         k_last = math.floor((half - 0.5 * w) / self.cell_mm + 1e-9)
         return half - (k_last * self.cell_mm + 0.5 * w)
+
+    @property
+    def rim_width_mm(self) -> float:
+        """The pad's solid rim as the fast model's foundation and side load take it: `rim_mm`, or
+        `lattice_rim_mm` where that is None. Whether the study's cast pad has such a border, and
+        how wide, the study does not say; `rim_mm=0` is a pad whose lattice runs out to its sides."""
+        return self.lattice_rim_mm if self.rim_mm is None else float(self.rim_mm)

@@ -23,6 +23,8 @@ def report(sim) -> int:
 
     checks, extra = run(sim)
     print(table(checks))
+    for line in extra.get("fem_record", {}).get("disjoint", []):
+        print(f"no fast value passes both sections: {line}")
     for k, v in extra.items():
         if k == "fem_record":
             continue

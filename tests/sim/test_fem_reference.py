@@ -316,6 +316,20 @@ def test_the_homogenised_section_carries_the_load_and_its_comparison_is_of_the_d
         assert study[key] == json.loads(json.dumps(regen.homogenisation_check(committed, hom, SIM))), name
 
 
+def test_the_homogenised_sections_refinement_balances_and_its_convergence_record_is_of_the_data():
+    """The homogenised section (inside the rim) on the doubled mesh
+    (reference/refinement/fine/homogenised.npz) carries F_z within 2 % in every layer, solves the
+    same presses and branches as the default mesh, and homogenisation_convergence.json (each gate
+    signal's aligned mean on both meshes) is computed from the two committed data sets."""
+    fine = dict(np.load(fc.DATA / "refinement" / "fine" / "homogenised.npz"))
+    default = fc.load_fem("homogenised")
+    for line, b in regen.balance(fine).items():
+        assert np.all(np.abs(b - 1.0) < 0.02), (line, b)
+    np.testing.assert_allclose(fine["depth_mm"][fine["phase"] == 0], default["depth_mm"][default["phase"] == 0])
+    study = json.loads((fc.DATA / "homogenisation_convergence.json").read_text())
+    assert study["branches"] == json.loads(json.dumps(regen.homogenisation_convergence(default, fine, SIM)))
+
+
 def test_the_homogenised_section_keeps_the_cells_solid_rim_and_nothing_else():
     """The homogenised section differs from the cells' by the cells only: solid silicone exactly in
     the cells' rim (the lattice elements beyond the last full wall), the homogenised lattice in every
@@ -328,8 +342,8 @@ def test_the_homogenised_section_keeps_the_cells_solid_rim_and_nothing_else():
     xc = mesh.points[mesh.cells[:, 8], 0]
     cells_rim = lattice & mesh.wall & (np.abs(xc) > rim_from_mm(sec))
     assert cells_rim.any() and np.all(np.abs(xc[cells_rim]) < 0.5 * sec.width_mm)
-    # the fast model's rim (SpacerConfig.rim_mm) is the section's
-    assert rim_from_mm(sec) == pytest.approx(0.5 * sec.width_mm - SIM.spacer.rim_mm, abs=1e-12)
+    # the fast model's rim (SpacerConfig.rim_width_mm, by default lattice_rim_mm) is the section's
+    assert rim_from_mm(sec) == pytest.approx(0.5 * sec.width_mm - SIM.spacer.rim_width_mm, abs=1e-12)
     assert not (lattice & ~mesh.wall & (np.abs(xc) > rim_from_mm(sec))).any()  # the rim has no voids
 
     def solid_lattice(s):
@@ -399,3 +413,29 @@ def test_the_cover_poisson_ratio_reaches_the_covers_material_only():
         cover_seen |= is_cover
         assert (a.kwargs == b.kwargs) != is_cover, (names[mesh.layer[mask]][0], a.kwargs, b.kwargs)
     assert cover_seen
+
+
+def test_rows_that_no_fast_value_can_pass_against_both_sections_are_named():
+    """`alignment.disjoint_pairs`: where the cells and the homogenised section's accepted
+    intervals at one metric and load do not overlap (a ratio band about values of opposite sign,
+    or differences further apart than both limits), the gate says so; overlapping ones and rows
+    judged against one section only are not named."""
+    from layerskin_exp.sim.fem_reference.alignment import accepted_interval, disjoint_pairs
+
+    def row(bound, metric, load, fem, kind, lo, hi):
+        return fc.Comparison(bound, metric, load, fem, 0.0, kind, lo, hi)
+
+    rows = [row("bonded", "effective_height_counts", "b", -0.55, "ratio", 0.515, 1.95),
+            row("homogenised", "effective_height_counts", "b", -0.05, "ratio", 0.515, 1.95),
+            row("bonded", "effective_height_counts", "a", 0.34, "ratio", 0.515, 1.95),
+            row("homogenised", "effective_height_counts", "a", 0.16, "ratio", 0.515, 1.95),
+            row("bonded", "deep_cop_counts_mm", "a", 0.9, "difference", -0.2, 0.2),
+            row("homogenised", "deep_cop_counts_mm", "a", 0.45, "difference", -0.2, 0.2),
+            row("bonded", "superficial_offset_counts_mm", "a", 0.8, "difference", -0.28, 0.28)]
+    assert accepted_interval(rows[0]) == pytest.approx((-0.55 * 1.95, -0.55 * 0.515))
+    named = disjoint_pairs(rows)
+    assert len(named) == 2
+    assert named[0].startswith("effective_height_counts at b") and named[1].startswith("deep_cop_counts_mm at a")
+    # move the homogenised deep CoP within reach of the cells' band: that pair overlaps now
+    rows[5] = row("homogenised", "deep_cop_counts_mm", "a", 0.55, "difference", -0.2, 0.2)
+    assert len(disjoint_pairs(rows)) == 1

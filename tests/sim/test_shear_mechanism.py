@@ -113,7 +113,7 @@ def _rim_inset_closed_form(cfg, fade: float) -> float:
     modulus r times the lattice's): r exp(-s / l) / l on 0 < s < b, less the step
     r (1 - exp(-b / l)) - 1 at s = b. Net 1; moment about the side
     r l (1 - exp(-b / l)) - b (r - 1)."""
-    b, r = cfg.rim_mm, cfg.solid_shear_modulus_kpa / cfg.shear_modulus_kpa
+    b, r = cfg.rim_width_mm, cfg.solid_shear_modulus_kpa / cfg.shear_modulus_kpa
     return r * fade * (1.0 - np.exp(-b / fade)) - b * (r - 1.0)
 
 
@@ -121,7 +121,7 @@ def _grid_tolerance(plate, cfg, fade: float) -> float:
     """The closed form's step sits at s = b; the grid puts it on its first lattice point, up to
     one step away, moving the centroid by up to (its weight + the net 1) x step."""
     r = cfg.solid_shear_modulus_kpa / cfg.shear_modulus_kpa
-    return (r * (1.0 - np.exp(-cfg.rim_mm / fade)) - 1.0 + 1.0) * plate.step
+    return (r * (1.0 - np.exp(-cfg.rim_width_mm / fade)) - 1.0 + 1.0) * plate.step
 
 
 @pytest.mark.parametrize("kind", ["rod", "hemisphere"])
@@ -135,7 +135,7 @@ def test_the_lattice_hands_half_its_moment_straight_to_the_deep_sheet(kind):
     the rim's couple outweighs its net load); without the rim, h / Re(w) inside the side. The
     sheet-borne rest still balances the other half with the cap's share."""
     cfg = SIM.spacer
-    assert cfg.rim_mm > 0
+    assert cfg.rim_width_mm > 0
     plate = _solver(SIM, kind)
     fade = plate.law.h_mm / _strip_end_root(0.5).real
     for case, want, tol in ((plate, _rim_inset_closed_form(cfg, fade), _grid_tolerance(plate, cfg, fade)),
@@ -209,8 +209,8 @@ def test_the_deep_pattern_stays_at_the_columns_feet_whatever_the_sheets_travel(k
     from layerskin_exp.sim.reference import ReferenceSkin
 
     half, sigma = 0.5 * SIM.spacer.width_mm, 0.5 * SIM.fsr.layer_thickness_mm
-    assert half - SIM.spacer.rim_mm > centres.max() + 0.5 * model.skin.electrode_mm
-    rim_x = np.linspace(half - SIM.spacer.rim_mm + 3.0 * sigma, half - 0.05, 8)
+    assert half - SIM.spacer.rim_width_mm > centres.max() + 0.5 * model.skin.electrode_mm
+    rim_x = np.linspace(half - SIM.spacer.rim_width_mm + 3.0 * sigma, half - 0.05, 8)
     y = np.full(rim_x.shape, rec[mk.S_CY])
     quiet = replace(SIM, readout=replace(SIM.readout, noise_counts=0.0, scan_jitter_ms=0.0))
     reference = ReferenceSkin(SkinModel(quiet, SkinConfig(), kind, np.random.default_rng(0), contact_radius_mm=radius))
@@ -355,3 +355,25 @@ def test_the_lattices_route_lies_at_the_pads_sides_wherever_the_contact_is(monke
     centred, moved = routes(reference)
     assert not np.allclose(moved, centred, atol=1e-9 * peak)
     assert np.abs(moved[:, inside]).max() > 0.05 * peak
+
+
+def test_the_rim_is_a_design_parameter_that_reaches_the_plate_and_the_reference_it_is_judged_by():
+    """`sim.spacer.rim_mm`: null is what the lattice leaves beyond its last full wall (the
+    reference's section), 0 a lattice out to the pad's sides; the plate carries the width it is
+    given, validate judges a rimless pad against the rimless homogenised section, and a width
+    outside the half-pad is refused naming the key."""
+    from layerskin_exp.config import ConfigError
+    from layerskin_exp.sim.fem_reference.alignment import homogenised_for
+    from layerskin_exp.sim.spacer_config import SpacerConfig
+
+    assert SIM.spacer.rim_mm is None and SIM.spacer.rim_width_mm == SIM.spacer.lattice_rim_mm
+    assert SIM.spacer.lattice_rim_mm == pytest.approx(0.778, abs=1e-3)
+    for rim, name in ((0.0, "homogenised_no_rim"), (1.5, "homogenised"), (None, "homogenised")):
+        sim = replace(SIM, spacer=replace(SIM.spacer, rim_mm=rim))
+        plate = _solver(sim, "rod")
+        want = SIM.spacer.lattice_rim_mm if rim is None else rim
+        assert plate.rim_mm == want
+        assert plate.rim.any() == (want > 0)
+        assert homogenised_for(sim) == name
+    with pytest.raises(ConfigError, match=r"sim\.spacer\.rim_mm=13"):
+        SpacerConfig(rim_mm=13.0)

@@ -260,7 +260,7 @@ def test_rod_torsion_friction_torque_bound_and_rotational_slip():
     assert abs((lattice * x).sum()) < 1e-3 * lever and abs((lattice * y).sum()) < 1e-3 * lever
     # in the pad's solid rim (its inner face, where the traction steps the other way, kept 3
     # blur widths off)
-    rim_from = half - m.sim.spacer.rim_mm + 3.0 * 0.5 * m.sim.fsr.layer_thickness_mm
+    rim_from = half - m.sim.spacer.rim_width_mm + 3.0 * 0.5 * m.sim.fsr.layer_thickness_mm
     xs_side = (np.abs(x) > rim_from) & (np.abs(y) > 2.0) & (np.abs(y) < 8.0)
     ys_side = (np.abs(y) > rim_from) & (np.abs(x) > 2.0) & (np.abs(x) < 8.0)
     assert xs_side.any() and ys_side.any()

@@ -18,6 +18,9 @@
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
         # homogenised inside the same solid rim (homogenised.npz) and out to the pad's sides
         # (homogenised_no_rim.npz, the 3D model's lattice), 50 s, beside the cells: homogenisation.json
+    python -m layerskin_exp.sim.fem_reference --homogenised-refinement  # the homogenised section
+        # (inside the rim) again on the doubled mesh (refinement/fine/homogenised.npz, ~35 min):
+        # each gate signal's aligned mean on both meshes, homogenisation_convergence.json
     python -m layerskin_exp.sim.fem_reference --alignments  # the cap pressed in 0.5, 1, 1.5 mm from
         # the centre wall (alignment/, 7 min); `python -m layerskin_exp.sim.fem_reference.alignment`
         # prints each count-CoP shear signal over the alignments, FEM beside the fast model
@@ -276,6 +279,28 @@ def homogenisation_check(cells: dict, hom: dict, sim) -> dict:
     return out
 
 
+def homogenisation_convergence(default: dict, fine: dict, sim) -> dict:
+    """The homogenised section's count-CoP shear signals (the gate's homogenised rows: aligned
+    means over the taxel alignments) on the default and the doubled mesh, and their change: how
+    far that yardstick is from converged. Both runs must balance their load."""
+    from layerskin_exp.sim.fem_reference.alignment import taxel_aligned_means
+    from layerskin_exp.sim.fem_reference.compare import line_model, line_sim
+
+    model = line_model(line_sim(sim, BOUND))
+    a, b = taxel_aligned_means(default, model), taxel_aligned_means(fine, model)
+    out = {}
+    for branch, d in a.items():
+        f = b.get(branch)
+        if f is None:
+            out[f"{branch:.1f} mm"] = "not reached on the fine mesh"
+            continue
+        out[f"{branch:.1f} mm"] = {k: {"default": round(d[k], 5), "fine": round(f[k], 5),
+                                       "change": round(f[k] - d[k], 5),
+                                       "relative_change": round((f[k] - d[k]) / abs(d[k]), 4) if d[k] else None}
+                                   for k in d}
+    return out
+
+
 def write_shear3d(res: dict, out: Path, seconds: float, sim=None) -> dict:
     """The 3D half-model's data (shear3d.npz) and its comparison (shear3d.json): beside the
     section per quantity (shear3d.plane_strain_shear), and its press beside the solid of
@@ -354,6 +379,10 @@ def main(argv=None) -> int:
                     help="the section again with its lattice homogenised inside the solid rim (reference/homogenised.npz) "
                          "and out to the pad's sides (reference/homogenised_no_rim.npz), and reference/homogenisation.json: "
                          "what the cells, and the rim, do to each compared quantity")
+    ap.add_argument("--homogenised-refinement", action="store_true",
+                    help="the homogenised section (inside the solid rim) again on the doubled mesh "
+                         "(reference/refinement/fine/homogenised.npz) and reference/homogenisation_convergence.json: "
+                         "each gate signal's aligned mean on both meshes")
     ap.add_argument("--cover-poisson", type=float, nargs="+", default=None, metavar="NU",
                     help="the section again with the cover's Poisson ratio NU (reference/cover_poisson/nu_*.npz) and "
                          "reference/cover_compressibility.json: what the cover's assumed compressibility does to each "
@@ -364,7 +393,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     sim = load_sim([])
     if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
-            or args.alignments or args.shear3d_through_thickness or args.cover_poisson or args.shear3d_load_branch):
+            or args.alignments or args.shear3d_through_thickness or args.cover_poisson or args.shear3d_load_branch
+            or args.homogenised_refinement):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
             out = args.out or (DATA if mesh == "default" else REFINEMENT / mesh)
@@ -402,6 +432,15 @@ def main(argv=None) -> int:
         _write_study(out / "homogenisation.json", t0,
                      {"branches": homogenisation_check(cells, hom, sim),
                       "without_rim": homogenisation_check(cells, bare, sim)})
+    if args.homogenised_refinement:
+        t0 = time.time()
+        out = args.out or DATA
+        fine = run_bound(sim, MESHES["fine"], homogenised=True)
+        require_balance(fine)
+        (out / "refinement" / "fine").mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(out / "refinement" / "fine" / "homogenised.npz", **fine)
+        _write_study(out / "homogenisation_convergence.json", t0,
+                     {"branches": homogenisation_convergence(dict(np.load(out / "homogenised.npz")), fine, sim)})
     if args.shear3d:
         from layerskin_exp.sim.fem_reference.shear3d import LOADS_N, run_shear3d
 
