@@ -131,7 +131,7 @@ def _lookup(lk_row, t32, coord, origin32, scale32):
 
 
 @_jit
-def _edge_loads(st, prm, h_lat, k_lean):
+def _edge_loads(st, prm, h_lat):
     """The lattice's route of one state: the couple per mm along the pad's sides, as (cx, cy, kk)
     (float32) with cx - kk y across the sides x = +-L at height y and cy + kk x across the sides
     y = +-L at x (N mm / mm).
@@ -139,12 +139,14 @@ def _edge_loads(st, prm, h_lat, k_lean):
     The in-plane-stiff sheet hands the lattice the shear as a uniform traction over the pad, plus
     the rotation field (T / J)(-y, x) of a torque (J = (2L)^4 / 6, the square pad's polar
     moment); the lattice's thin sheared layer puts h tau.n on the pad's sides. Its couple: the
-    shear's F_t h_L (h_L the lattice's lever), the columns' lean F_z u (contact.ContactTables),
-    the torque's T h_L and the turned sheet's lean k_lean (rod: q theta I_s)."""
+    shear's F_t h_L and the torque's T h_L (h_L the lattice's lever). The normal load's own
+    moment about the columns' feet, F_z u, is not here: the lattice carries the load straight
+    down from where the sheet point under the cap now is (the deep pattern sits at the cap's
+    ground position, `frame_fields`)."""
     two_l = 2.0 * prm.half_pad_mm
-    mlx = st[S_FX] * h_lat + st[S_FZ] * st[S_UX]
-    mly = st[S_FY] * h_lat + st[S_FZ] * st[S_UY]
-    k = st[S_TORQUE] * h_lat + k_lean
+    mlx = st[S_FX] * h_lat
+    mly = st[S_FY] * h_lat
+    k = st[S_TORQUE] * h_lat
     # the pair of sides' loads act 2 (L - inset) apart
     kk = k * (two_l - 2.0 * prm.side_inset_mm) / (two_l**4 / 6.0)
     return np.float32(mlx / two_l), np.float32(mly / two_l), np.float32(kk)
@@ -211,17 +213,25 @@ def _row_done(colsum, r, c0, c1, quad, n, nq, tax):
 
 
 @_jit
-def _deep_pass(base, top, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax):
-    """The lattice's signed pressure base, top (m, m) times the cell pattern over rows [r0, r1) x
-    columns [c0, c1): the deep layer reads the base (no tension) into f_deep and its taxel
-    means; top is left with the pattern for the superficial core."""
+def _cells(top, lattice, r0, r1, c0, c1):
+    """The lattice top's signed pressure times the cell pattern over rows [r0, r1) x columns
+    [c0, c1) (the pattern is the lattice's, in the frame of the sheet it is bonded to)."""
+    for r in range(r0, r1):
+        for c in range(c0, c1):
+            top[r, c] *= lattice[r, c]
+
+
+@_jit
+def _deep_pass(base, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax):
+    """The lattice's signed pressure on the deep sheet, base (m, m), times the cell pattern over
+    rows [r0, r1) x columns [c0, c1): the deep layer reads it (no tension) into f_deep and its
+    taxel means."""
     m = n * nq
     for r in range(r0, r1):
         wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
             cell = lattice[r, c]
             v = max(base[r, c] * cell, _F0)
-            top[r, c] *= cell
             if store:
                 f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
@@ -241,7 +251,16 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
     lever (lk), and the lattice's route at the pad's sides (`_edge_loads`): the deep layer the
     lattice's pressure on the deep sheet times the cell pattern, the superficial core the mean
     of the cover's (the contact's, lk[0]) and the lattice top's (see contact.py). Neither FSR
-    reads tension (the bonded lattice pulls where the sheet lifts), hence the clip at 0."""
+    reads tension (the bonded lattice pulls where the sheet lifts), hence the clip at 0.
+
+    Where each pattern sits. The superficial layer's (the cover's and the lattice top's) lies
+    about the cap's point in the sheet's frame (S_AX, S_AY), where the superficial taxels are.
+    The deep layer's lies about the cap's ground position, that point moved by the sheet's
+    travel (S_AX + S_UX, S_AY + S_UY, the cap's position over the deep sheet): the homogenised
+    lattice carries the normal load straight down from where it is applied, so the deep force
+    CoP meets statics, x_cap + F_x H / F_z (the 3D model of the stack does the same,
+    fem_reference.shear3d; the columns' feet, S_AX, would leave the load's moment F_z u to a
+    route that does not exist)."""
     n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
@@ -251,12 +270,8 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
     delta = st[S_DELTA]
     fx, fy = st[S_FX], st[S_FY]
     ax, ay = st[S_AX], st[S_AY]
-    # the deep layer's profile: where the normal load lands, at the foot of the lattice columns
-    # under the cap. The sheet drags the columns' tops along (by S_UX, S_UY) and each column's
-    # load lands at its own foot, so the deep pattern sits at the cap's position in the sheet's
-    # frame, read on the deep grid (the reference section's lattice pressure under the contact
-    # moves with that point, not with the cap)
-    cdx, cdy = ax, ay
+    # the deep layer's profile about the cap's ground position (see above)
+    cdx, cdy = ax + st[S_UX], ay + st[S_UY]
     i, t = _delta_row(delta, prm)
     h_eff = rows[i, 0] * (1 - t) + rows[i + 1, 0] * t
     h_lat = rows[i, 1] * (1 - t) + rows[i + 1, 1] * t
@@ -274,7 +289,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
         return
     win = np.empty(4, np.int64)
     # the lattice's route: at the pad's sides, wherever the contact is
-    cx, cy, kk = _edge_loads(st, prm, h_lat, 0.0)
+    cx, cy, kk = _edge_loads(st, prm, h_lat)
     edges = cx != _F0 or cy != _F0 or kk != _F0
     if edges:
         _fill_edges(edge, q, prm.half_pad_mm, cx, cy, kk, base, top)
@@ -297,12 +312,28 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
         mdy = my32 * dy
         for c in range(c0, c1):
             v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
-            v = v0 + (mdx[c] + mdy) * v1
-            base[r, c] += v
-            top[r, c] += v
+            base[r, c] += v0 + (mdx[c] + mdy) * v1
     if edges:
         r0, r1, c0, c1 = 0, m, 0, m
-    _deep_pass(base, top, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax[1])
+    _deep_pass(base, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax[1])
+    # the lattice's top: the same profile and couple about the cap's point in the sheet's frame
+    _window(ax, ay, bounds[i, 1], prm, win, 0)
+    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
+    ax32, ay32 = np.float32(ax), np.float32(ay)
+    for c in range(c0, c1):
+        dx = q[c] - ax32
+        dx2[c] = dx * dx
+        mdx[c] = mx32 * dx
+    for r in range(r0, r1):
+        dy = q[r] - ay32
+        dy2 = dy * dy
+        mdy = my32 * dy
+        for c in range(c0, c1):
+            v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
+            top[r, c] += v0 + (mdx[c] + mdy) * v1
+    if edges:
+        r0, r1, c0, c1 = 0, m, 0, m
+    _cells(top, lattice, r0, r1, c0, c1)
     # superficial: around the contact, in the superficial frame, over the lattice's window and
     # the cover's (its half of the lattice top's pressure reaches as far as that does); the
     # cover's profile is looked up only in its own, much smaller, window (bounds[i, 0])
@@ -313,7 +344,6 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
     else:
         _window(ax, ay, max(bounds[i, 0], bounds[i, 1]), prm, win, 0)
         r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
-    ax32, ay32 = np.float32(ax), np.float32(ay)
     for c in range(cc0, cc1):
         dx = q[c] - ax32
         dx2[c] = dx * dx
@@ -350,6 +380,36 @@ def _band(a, b, reach, q, x0):
 
 
 @_jit
+def _rod_pattern(out, lk, t32, q, cx, cy, yaw, m0, kt, beta, mid32, reach, origin32, scale32):
+    """out (m, m) [y, x] += the lattice's line pattern about the line through (cx, cy) at yaw:
+    the profile across it plus the couple (m0 + kt s) times its response, s along the line from
+    the point, times the ramp 1 + beta (s - mid) (no lower than 0) of the shear along it."""
+    m = q.shape[0]
+    ex, ey = np.float32(math.cos(yaw)), np.float32(math.sin(yaw))
+    cx32, cy32 = np.float32(cx), np.float32(cy)
+    px = np.empty(m, np.float32)
+    sx = np.empty(m, np.float32)
+    ramp_x = np.empty(m, np.float32)
+    for c in range(m):
+        dx = q[c] - cx32
+        px[c] = -ey * dx
+        sx[c] = ex * dx
+        ramp_x[c] = _F1 + beta * (ex * dx - mid32)
+    for r in range(m):
+        dy = q[r] - cy32
+        py = ex * dy
+        sy = ey * dy
+        ramp_y = beta * sy
+        b0, b1 = _band(-np.float64(ey), np.float64(py), reach, q, np.float64(cx32))
+        for c in range(b0, b1):
+            v0, v1 = _lookup(lk, t32, px[c] + py, origin32, scale32)
+            ramp = ramp_x[c] + ramp_y
+            if ramp < _F0:
+                ramp = _F0
+            out[r, c] += (v0 + (m0 + kt * (sx[c] + sy)) * v1) * ramp
+
+
+@_jit
 def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge, f_sup, f_deep,
                 origin32, scale32, origin_d32, scale_d32, colsum, tax, reach_cover, reach_deep, base, top):
     """Rod line load on the quadrature grid, both layers [y, x] (float32), and taxel means. Each
@@ -357,15 +417,16 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge
     profile) or reach_deep (the lattice's) of the line (beyond, the profile is below WINDOW_EPS
     of its peak); base, top (m, m) zero or holding nothing yet, scratch for the lattice's pressure.
 
-    Both layers' patterns lie about the cap's line in the sheet's frame (the columns' feet under
-    it, as frame_fields). Across the line, per unit length, the shear's couple F_perp H adds the
-    couple response (the cover's lever, contact.ContactTables). The twist enters the same way,
-    strip by strip along the line: torsion loads the line with the traction T s / I_s (s along
-    the line from the contact point, I_s = int s^2 ds), a couple T H s / I_s per unit length.
-    Along the line, the cover's lever of the shear is balanced by a linear load gradient along
-    it. The lattice's route (`_edge_loads`: the shear's F_t h_L, the columns' lean F_z u, the
-    torque's T h_L and the turned sheet's lean q theta I_s, the columns under the line leaning by
-    theta s) lies at the pad's sides."""
+    The superficial patterns (the cover's, the lattice top's) lie about the cap's line in the
+    sheet's frame, the deep one about the cap's line over the deep sheet: its point moved by the
+    sheet's travel and its axis at the rod's own yaw, not turned with the sheet (as frame_fields:
+    the lattice carries the load straight down). Across the line, per unit length, the shear's
+    couple F_perp H adds the couple response (the cover's lever, contact.ContactTables). The
+    twist enters the same way, strip by strip along the line: torsion loads the line with the
+    traction T s / I_s (s along the line from the contact point, I_s = int s^2 ds), a couple
+    T H s / I_s per unit length. Along the line, the cover's lever of the shear is balanced by a
+    linear load gradient along it. The lattice's route (`_edge_loads`: the shear's F_t h_L, the
+    torque's T h_L) lies at the pad's sides."""
     n, nq = int(prm.n_taxels), int(prm.quad_points)
     m = n * nq
     q = quad[:m]
@@ -379,7 +440,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge
     ex, ey = np.float32(math.cos(yaw_s)), np.float32(math.sin(yaw_s))
     ex64, ey64 = np.float64(ex), np.float64(ey)
     i_s = (s2**3 - s1**3) / 3.0
-    cx, cy, kk = _edge_loads(st, prm, h_lat, line_q * st[S_ROT] * i_s)
+    cx, cy, kk = _edge_loads(st, prm, h_lat)
     if cx != _F0 or cy != _F0 or kk != _F0:
         _fill_edges(edge, q, prm.half_pad_mm, cx, cy, kk, base, top)
     # per unit length across the line (its normal (-ey, ex)): the shear's couple at the contact
@@ -389,31 +450,19 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge
     # along the line: the cover's lever of the shear, balanced by a linear load gradient
     mid32 = np.float32(0.5 * (s1 + s2))
     beta = np.float32((fx * ex64 + fy * ey64) * (h_eff - h_lat) / (line_q * length**3 / 12.0))
+    # the lattice top about the line in the sheet's frame, its base about the line over the deep sheet
+    _rod_pattern(top, lk_deep, t32, q, cdx, cdy, yaw_s, m0, kt, beta, mid32, reach_deep, origin_d32, scale_d32)
+    _cells(top, lattice, 0, m, 0, m)
+    _rod_pattern(base, lk_deep, t32, q, cdx + st[S_UX], cdy + st[S_UY], st[S_YAW], m0, kt, beta, mid32, reach_deep,
+                 origin_d32, scale_d32)
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
     px = np.empty(m, np.float32)  # across-line coordinate, column part
     sx = np.empty(m, np.float32)  # along-line coordinate, column part
-    ramp_x = np.empty(m, np.float32)
     for c in range(m):
         dx = q[c] - cdx32
         px[c] = -ey * dx
         sx[c] = ex * dx
-        ramp_x[c] = _F1 + beta * (ex * dx - mid32)
-    for r in range(m):
-        dy = q[r] - cdy32
-        py = ex * dy
-        sy = ey * dy
-        ramp_y = beta * sy
-        b0, b1 = _band(-ey64, np.float64(py), reach_deep, q, np.float64(cdx32))
-        for c in range(b0, b1):
-            along = sx[c] + sy
-            v0, v1 = _lookup(lk_deep, t32, px[c] + py, origin_d32, scale_d32)
-            ramp = ramp_x[c] + ramp_y
-            if ramp < _F0:
-                ramp = _F0
-            v = (v0 + (m0 + kt * along) * v1) * ramp
-            base[r, c] += v
-            top[r, c] += v
-    _deep_pass(base, top, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
+    _deep_pass(base, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
     for r in range(m):
         dy = q[r] - cdy32
         py = ex * dy

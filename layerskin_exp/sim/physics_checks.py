@@ -339,6 +339,10 @@ FEM_CATCHES = {
     "deep_cop_counts_mm": "a wrong movement of the deep layer's CoP under shear (the moment's share in the lattice)",
     "superficial_offset_counts_mm": "no (or wrong) flank load: the superficial map's shift against the contact under shear",
     "superficial_asymmetry_counts": "no (or wrong) direction signal in the superficial map under shear",
+    "depth_at_load": "a stack too stiff or too soft in compression (lattice law, sheet spreading, cover)",
+    "contact_radius": "a sheet that spreads the cap's load too little or too much (its rigidity, large deflection)",
+    "superficial_cop_counts_mm": "a wrong cover compliance or couple: how far the superficial map follows the cap",
+    "sheet_travel_mm": "a wrong split of the cap's travel between the cover and the lattice in shear",
 }
 
 
@@ -363,14 +367,36 @@ def fem_checks(sim: SimConfig, model_sim: SimConfig | None = None, bounds=None) 
     return checks, record
 
 
+def yardstick_checks(sim: SimConfig, model_sim: SimConfig | None = None) -> tuple[list[Check], dict]:
+    """The fast hemisphere against the 3D half-model of the study's geometry, within
+    tolerances.yaml's `yardstick3d:` (fem_reference.yardstick3d): the rows validate exits on."""
+    from layerskin_exp.sim.fem_reference import yardstick3d
+
+    hook = None if model_sim is None else (lambda _s, _ms=model_sim: _ms)
+    rows, record = yardstick3d.rows(sim, model_hook=hook)
+    checks = []
+    for r in rows:
+        unit = "fast / 3D" if r.kind == "ratio" else "fast - 3D"
+        checks.append(Check(f"3D: {r.metric} at {r.load} (3D {r.fem:.3g}, fast {r.fast:.3g})",
+                            "the fast model agrees with the 3D model of the study's geometry", r.value, r.lo, r.hi,
+                            unit, FEM_CATCHES.get(r.metric, "")))
+    return checks, record
+
+
 def run(sim: SimConfig | None = None, fem: bool = True) -> tuple[list[Check], dict]:
+    """The checks validate exits on (closed forms, bounds, the 3D yardstick) and, for the record,
+    what else it prints: the plane-strain section's rows (`section_checks`, diagnostics that gate
+    nothing: what the section's walls and plane strain do to each row)."""
     sim = sim or SimConfig()
     checks: list[Check] = [lateral_stiffness(sim), plate_on_winkler_closed_form(sim), vertical_stiffness(sim),
                            moment_equilibrium(sim), *friction_bound(sim), gain_spread(sim)]
     extra: dict = {}
     if fem:
+        rows3d, record3d = yardstick_checks(sim)
+        checks += rows3d
+        extra["yardstick3d_record"] = record3d
         fem_rows, fem_record = fem_checks(sim)
-        checks += fem_rows
+        extra["section_checks"] = fem_rows
         extra["fem_record"] = fem_record
     extra.update(interface_record(sim))
     extra.update(slide_record(sim))

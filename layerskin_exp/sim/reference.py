@@ -62,17 +62,14 @@ class ReferenceSkin:
         contact, lattice, top = self.signed_fields(rec, self.x, self.y, self.lattice)
         return np.maximum(0.5 * (contact + top), 0.0), np.maximum(lattice, 0.0)
 
-    def edge_fields(self, rec: np.ndarray, x: np.ndarray, y: np.ndarray, h_lat: float,
-                    k_lean: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    def edge_fields(self, rec: np.ndarray, x: np.ndarray, y: np.ndarray, h_lat: float) -> tuple[np.ndarray, np.ndarray]:
         """The lattice's route at points x, y (mm, the pad centred on the array): its pressure on
         the deep sheet and its top's, from the couple per mm along the pad's sides
-        (frame_kernels._edge_loads: the shear's F_t h_L, the columns' lean F_z u, the torque's
-        T h_L and k_lean)."""
+        (frame_kernels._edge_loads: the shear's F_t h_L, the torque's T h_L)."""
         tab, two_l = self.tab, self.sim.spacer.width_mm
-        fz = rec[mk.S_FZ]
-        cx = (rec[mk.S_FX] * h_lat + fz * rec[mk.S_UX]) / two_l
-        cy = (rec[mk.S_FY] * h_lat + fz * rec[mk.S_UY]) / two_l
-        kk = (rec[mk.S_TORQUE] * h_lat + k_lean) * (two_l - 2.0 * float(tab.side_inset_mm)) / (two_l**4 / 6.0)
+        cx = rec[mk.S_FX] * h_lat / two_l
+        cy = rec[mk.S_FY] * h_lat / two_l
+        kk = rec[mk.S_TORQUE] * h_lat * (two_l - 2.0 * float(tab.side_inset_mm)) / (two_l**4 / 6.0)
         # couple per mm across the x- and the y-sides, each pair along its own length
         across_x = np.where(np.abs(y) <= 0.5 * two_l, cx - kk * y, 0.0)
         across_y = np.where(np.abs(x) <= 0.5 * two_l, cy + kk * x, 0.0)
@@ -88,7 +85,9 @@ class ReferenceSkin:
         """The contact's pressure on the sheet (kPa, in the sheet's frame, where the superficial
         taxels are), the lattice's pressure on the deep plane and its top's on the sheet (kPa,
         signed: the bonded lattice pulls where the sheet lifts; times `cells`, its cell pattern)
-        at points x, y (mm) for one loaded state."""
+        at points x, y (mm) for one loaded state. The contact's and the lattice top's patterns lie
+        about the cap's point in the sheet's frame, the deep plane's about the cap's ground
+        position, that point moved by the sheet's travel (frame_kernels.frame_fields)."""
         tab = self.tab
         i, t = self._row(rec[mk.S_DELTA])
         h = tab.height_mm[i] * (1 - t) + tab.height_mm[i + 1] * t
@@ -98,6 +97,7 @@ class ReferenceSkin:
         # lever; the lattice's lies at the pad's sides (frame_kernels.frame_fields)
         mx, my = rec[mk.S_FX] * h, rec[mk.S_FY] * h
         ax, ay = rec[mk.S_CX], rec[mk.S_CY]
+        gx, gy = ax + rec[mk.S_UX], ay + rec[mk.S_UY]  # the cap over the deep sheet
         dist = tab.dist_mm
         if self.tab.kind == "hemisphere":
             def layer(profile, couple, cx, cy):
@@ -109,31 +109,37 @@ class ReferenceSkin:
                 return p0 + cos_m * p1
 
             base, top = self.edge_fields(rec, x, y, h_lat)
-            # the deep pattern at the columns' feet under the cap (frame_kernels.frame_fields)
+            deep = layer(tab.deep_kpa, tab.deep_couple_kpa, gx, gy)
             under = layer(tab.deep_kpa, tab.deep_couple_kpa, ax, ay)
-            return layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay), (under + base) * cells, (under + top) * cells
-        # rod: line load across the axis, per unit length, about the cap's line in the sheet's
-        # frame (frame_kernels._rod_fields): the couple grows along the line with the torque
+            return layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay), (deep + base) * cells, (under + top) * cells
+        # rod: line load across the axis, per unit length (frame_kernels._rod_fields): the contact
+        # and the lattice top about the cap's line in the sheet's frame, the deep plane about the
+        # cap's line over the deep sheet (its point moved by the sheet's travel, its axis the
+        # rod's yaw); the couple grows along the line with the torque
         yaw_s = rec[mk.S_YAW] - rec[mk.S_THETA]
         s1, s2 = mk.chord(ax, ay, yaw_s, self.model._half)
         length = max(s2 - s1, 1e-9)
         line_q = fz / length
         e = np.array([math.cos(yaw_s), math.sin(yaw_s)])
         nrm = np.array([-e[1], e[0]])
-        dx, dy = x - ax, y - ay
-        d = nrm[0] * dx + nrm[1] * dy
-        along = e[0] * dx + e[1] * dy
         i_s = (s2**3 - s1**3) / 3.0
-        couple = (mx * nrm[0] + my * nrm[1]) / length + rec[mk.S_TORQUE] * h / i_s * along
+        f_across = (mx * nrm[0] + my * nrm[1]) / length
         beta = (rec[mk.S_FX] * e[0] + rec[mk.S_FY] * e[1]) * (h - h_lat) / (line_q * length**3 / 12.0)
-        ramp = np.maximum(1.0 + beta * (along - 0.5 * (s1 + s2)), 0.0)
 
-        def layer(profile, couple_resp):
-            return _row_interp(profile, i, t, d, dist) + couple * _row_interp(couple_resp, i, t, d, dist)
+        def layer(profile, couple_resp, px, py, yaw, ramped):
+            ev = np.array([math.cos(yaw), math.sin(yaw)])
+            dx, dy = x - px, y - py
+            d = -ev[1] * dx + ev[0] * dy
+            along = ev[0] * dx + ev[1] * dy
+            couple = f_across + rec[mk.S_TORQUE] * h / i_s * along
+            p = _row_interp(profile, i, t, d, dist) + couple * _row_interp(couple_resp, i, t, d, dist)
+            return p * np.maximum(1.0 + beta * (along - 0.5 * (s1 + s2)), 0.0) if ramped else p
 
-        base, top = self.edge_fields(rec, x, y, h_lat, line_q * rec[mk.S_THETA] * i_s)
-        under = layer(tab.deep_kpa, tab.deep_couple_kpa) * ramp
-        return layer(tab.cover_kpa, tab.cover_couple_kpa), (under + base) * cells, (under + top) * cells
+        base, top = self.edge_fields(rec, x, y, h_lat)
+        deep = layer(tab.deep_kpa, tab.deep_couple_kpa, gx, gy, rec[mk.S_YAW], True)
+        under = layer(tab.deep_kpa, tab.deep_couple_kpa, ax, ay, yaw_s, True)
+        return (layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay, yaw_s, False), (deep + base) * cells,
+                (under + top) * cells)
 
     def maps(self, recs: np.ndarray) -> np.ndarray:
         """(N, 2, n, n) Gauss means of both layers' pressure over each taxel's electrode (kPa)."""

@@ -37,9 +37,10 @@ class SpacerConfig:
     width_mm: float = 26.0  # side of the square spacer pad (24 mm array + border)
     confinement_length_mm: float = 2.0  # half-width of the squeezed region (~ indenter radius), sets S
     lattice_contrast: float = 0.25  # relative depth of the cell pattern seen by the deep layer
-    # width of the pad's solid silicone rim at its sides; None: what the lattice leaves beyond its
-    # last full wall (`lattice_rim_mm`, as the reference's section is built)
-    rim_mm: float | None = None
+    # width of the pad's solid silicone rim at its sides; 0: the lattice runs out to them (the
+    # study describes a lattice; the 3D reference has no rim); None: what the lattice leaves beyond
+    # its last full wall (`lattice_rim_mm`, as the reference's section is built)
+    rim_mm: float | None = 0.0
 
     def __post_init__(self) -> None:
         positive(self.modulus_kpa, "sim.spacer.modulus_kpa", "Young's modulus must be > 0 kPa")

@@ -23,10 +23,15 @@ def report(sim) -> int:
 
     checks, extra = run(sim)
     print(table(checks))
+    section = extra.get("section_checks")
+    if section:
+        print("\nDiagnostics, gating nothing: the plane-strain section (what its walls and plane strain do to "
+              "each row; fem_reference.alignment)")
+        print(table(section))
     for line in extra.get("fem_record", {}).get("disjoint", []):
         print(f"no fast value passes both sections: {line}")
     for k, v in extra.items():
-        if k == "fem_record":
+        if k in ("fem_record", "section_checks", "yardstick3d_record"):
             continue
         print(f"{k}: {v}")
     return 0 if all(c.passed for c in checks) else 1

@@ -342,8 +342,9 @@ def test_the_homogenised_section_keeps_the_cells_solid_rim_and_nothing_else():
     xc = mesh.points[mesh.cells[:, 8], 0]
     cells_rim = lattice & mesh.wall & (np.abs(xc) > rim_from_mm(sec))
     assert cells_rim.any() and np.all(np.abs(xc[cells_rim]) < 0.5 * sec.width_mm)
-    # the fast model's rim (SpacerConfig.rim_width_mm, by default lattice_rim_mm) is the section's
-    assert rim_from_mm(sec) == pytest.approx(0.5 * sec.width_mm - SIM.spacer.rim_width_mm, abs=1e-12)
+    # the section's rim is what the lattice leaves (SpacerConfig.lattice_rim_mm; the fast model's
+    # with sim.spacer.rim_mm=null, conf/design/cast_rim.yaml)
+    assert rim_from_mm(sec) == pytest.approx(0.5 * sec.width_mm - SIM.spacer.lattice_rim_mm, abs=1e-12)
     assert not (lattice & ~mesh.wall & (np.abs(xc) > rim_from_mm(sec))).any()  # the rim has no voids
 
     def solid_lattice(s):

@@ -1,0 +1,102 @@
+"""The fast hemisphere against the 3D half-model of the study's geometry (fem_reference.yardstick3d):
+the shear signals at the 3D model's three loads, and what the comparison catches."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from layerskin_exp.sim.config import load_sim
+from layerskin_exp.sim.fem_reference import yardstick3d as y3
+from layerskin_exp.sim.fem_reference.compare import load_tolerances
+
+TOL = load_tolerances()["yardstick3d"]["difference"]
+
+
+@pytest.fixture(scope="module")
+def sides():
+    """{state label: (3D values, fast values)} at every 3D state, and the model that read them."""
+    model = y3.fast_model(load_sim([]))
+    fresh = model.mech_state()
+    out = {}
+    for label, name, depth in y3.STATES:
+        fem = y3.fem3d_side(label, name, depth, model)
+        out[label] = (fem, y3.fast_side(model, fresh, fem["fz_n"], fem["ft_n"]))
+    return out, model, fresh
+
+
+@pytest.mark.parametrize("label", [s[0] for s in y3.STATES])
+def test_the_deep_count_cop_travels_as_the_3d_models_at_each_load(sides, label):
+    fem, fast = sides[0][label]
+    assert abs(fast["deep_cop_counts_mm"] - fem["deep_cop_counts_mm"]) <= TOL["deep_cop_counts_mm"]
+
+
+@pytest.mark.parametrize("label", [
+    "0.29 N",
+    pytest.param("0.83 N", marks=pytest.mark.xfail(strict=True, reason=(
+        "measured: fast -0.44 mm against the 3D model's +0.25 (band 0.30): the fast superficial count CoP "
+        "travels 1.04 mm against 1.95, the deep 1.48 against 1.70; the 3D cover yields more (cap 1.26 mm "
+        "over the sheet against 0.52)"))),
+    pytest.param("3 N", marks=pytest.mark.xfail(strict=True, reason=(
+        "measured: fast -0.04 mm against +0.46 at F_t / F_z 0.027 (the 3D branch's cover keeps its volume, "
+        "nu 0.499): the 3D superficial count CoP moves 0.62 mm for 0.24 mm of cap over the sheet, the "
+        "fast one 0.09"))),
+])
+def test_the_interlayer_shift_agrees_with_the_3d_models_at_each_load(sides, label):
+    fem, fast = sides[0][label]
+    assert abs(fast["interlayer_shift_counts_mm"] - fem["interlayer_shift_counts_mm"]) \
+        <= TOL["interlayer_shift_counts_mm"]
+
+
+def test_the_deep_force_cop_meets_statics_on_both_sides(sides):
+    # x_cap + F_x H / F_z, each side against its own statics: the 3D model's within its mesh error,
+    # the fast model's within the deep sheet's spread and the cap's share of the couple
+    for label, (fem, fast) in sides[0].items():
+        assert fem["deep_force_cop_mm"] == pytest.approx(fem["deep_force_cop_statics_mm"], abs=0.28), label
+        assert fast["deep_force_cop_mm"] == pytest.approx(fast["deep_force_cop_statics_mm"], abs=0.35), label
+
+
+def test_dropping_the_tangential_loads_moment_fails_the_deep_rows(sides):
+    """Injection: the couple of the shear about the deep plane removed from the fast model (its
+    tables' couple responses and the lattice's route at the pad's sides zeroed): the deep count CoP
+    then moves only with the cap's ground position, and the comparison must refuse it."""
+    _, model, fresh = sides
+    lk, edge = model._lk.copy(), model._edge.copy()
+    try:
+        model._lk[..., 2:4] = 0.0
+        model._edge[:] = 0.0
+        failed = []
+        for label in ("0.29 N", "0.83 N"):
+            fem = sides[0][label][0]
+            fast = y3.fast_side(model, fresh, fem["fz_n"], fem["ft_n"])
+            failed.append(abs(fast["deep_cop_counts_mm"] - fem["deep_cop_counts_mm"]) > TOL["deep_cop_counts_mm"]
+                          or abs(fast["interlayer_shift_counts_mm"] - fem["interlayer_shift_counts_mm"])
+                          > TOL["interlayer_shift_counts_mm"])
+    finally:
+        model._lk[:], model._edge[:] = lk, edge
+    assert all(failed)
+
+
+def test_the_deep_pattern_at_the_columns_feet_fails_the_deep_rows(sides, monkeypatch):
+    """Injection: the deep pattern left at the columns' feet (the sheet's travel not added to its
+    position, as before), the moment F_z u with nowhere to go: the deep count CoP falls short where
+    the sheet travels enough to tell (0.38 mm at 0.83 N; 0.14 mm at 0.29 N is inside the band)."""
+    _, model, fresh = sides
+    fem = sides[0]["0.83 N"][0]
+    real = model.step_many
+
+    def feet(t, xyz, yaw):
+        recs = real(t, xyz, yaw)
+        recs[:, 9:11] = 0.0  # no travel in the frame pipeline: the deep pattern sits under the sheet's point
+        return recs
+
+    monkeypatch.setattr(model, "step_many", feet)
+    fast = y3.fast_side(model, fresh, fem["fz_n"], fem["ft_n"])
+    assert abs(fast["deep_cop_counts_mm"] - fem["deep_cop_counts_mm"]) > TOL["deep_cop_counts_mm"]
+
+
+def test_the_gate_refuses_a_state_the_fast_model_cannot_reach_sticking(sides):
+    _, model, fresh = sides
+    with pytest.raises(ValueError, match="did not reach F_x"):
+        y3.fast_side(model, fresh, 0.3, 5.0)
+    assert np.isfinite(sides[0]["0.29 N"][1]["tangential_stiffness"])
