@@ -100,3 +100,17 @@ def test_the_gate_refuses_a_state_the_fast_model_cannot_reach_sticking(sides):
     with pytest.raises(ValueError, match="did not reach F_x"):
         y3.fast_side(model, fresh, 0.3, 5.0)
     assert np.isfinite(sides[0]["0.29 N"][1]["tangential_stiffness"])
+
+
+def test_a_design_without_its_3d_data_fails_the_gate(tmp_path):
+    """Both designs are gated: with the stiff cover's 3D data missing its rows are there and fail
+    (validate cannot pass on the nominal design alone), and the record says what to run."""
+    from layerskin_exp.sim.fem_reference.compare import DATA
+
+    for name in ("shear3d", "shear3d_load_branch"):
+        (tmp_path / f"{name}.npz").symlink_to(DATA / f"{name}.npz")
+    rows, record = y3.rows(load_sim([]), data=tmp_path)
+    stiff = [r for r in rows if r.load.startswith("stiff cover")]
+    assert len(stiff) == len(y3.GATED_DIFFERENCE) + len(y3.GATED_RATIO)
+    assert not any(r.passed for r in stiff)
+    assert "--stiff-cover" in record["stiff cover 3 N"]["error"]

@@ -372,6 +372,10 @@ def main(argv=None) -> int:
                     help="the 3D model pressed to the study's load with shear3d.LOAD_BRANCH's cover, contact and mesh "
                          "and sheared sticking (reference/shear3d_load_branch.npz): its tangential stiffness beside the "
                          "series closed form, reference/shear3d_load_branch.json")
+    ap.add_argument("--stiff-cover", action="store_true",
+                    help="the load branch again for the design at the stiff end of the cover's bracket "
+                         "(shear3d.STIFF_COVER_KPA, a Dragon Skin / Sil-Poxy class silicone): "
+                         "reference/shear3d_stiff_cover.npz and .json, the yardstick's second design")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
@@ -394,6 +398,7 @@ def main(argv=None) -> int:
     sim = load_sim([])
     if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
             or args.alignments or args.shear3d_through_thickness or args.cover_poisson or args.shear3d_load_branch
+            or args.stiff_cover
             or args.homogenised_refinement):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
@@ -496,6 +501,17 @@ def main(argv=None) -> int:
         from layerskin_exp.sim.fem_reference.compare import load_tolerances, table
 
         print(table(s3.load_branch_rows(sim, load_tolerances(), out)))  # the fast model beside it (not gated)
+    if args.stiff_cover:
+        from layerskin_exp.sim.fem_reference import shear3d as s3
+
+        t0 = time.time()
+        out = args.out or DATA
+        res = s3.run_shear3d(s3.stiff_cover_sim(sim), depths=(), partial=lambda r: np.savez_compressed(
+            out / "shear3d_stiff_cover.npz", **r), **s3.LOAD_BRANCH)
+        np.savez_compressed(out / "shear3d_stiff_cover.npz", **res)
+        _write_study(out / "shear3d_stiff_cover.json", t0, {"cover_modulus_kpa": s3.STIFF_COVER_KPA, "dof": int(res["dof"]),
+                                                            "stopped": json.loads(str(res["stopped"])),
+                                                            "branches": s3.load_branch3d(res)})
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 

@@ -793,6 +793,17 @@ LOAD_BRANCH = {"loads_n": (3.0,), "cover_nu": 0.499, "sticking_press": True,
                "x_edges": REFINED_X_EDGES_MM, "y_edges": REFINED_Y_EDGES_MM}
 
 
+# The stiff end of the cover's bracket (the study says only "a 0.2 mm silicone cover"): 35 kPa, the
+# spacer's own silicone (nominal), to 1 MPa, a Dragon Skin / Sil-Poxy class. The yardstick's second
+# design is the load branch with this cover.
+STIFF_COVER_KPA = 1000.0
+
+
+def stiff_cover_sim(sim):
+    """The design with the stiff end of the cover's bracket."""
+    return dataclasses.replace(sim, cover=dataclasses.replace(sim.cover, modulus_kpa=STIFF_COVER_KPA))
+
+
 def series_shear_stiffness(sec: Section, a_x_mm: float, a_y_mm: float) -> dict:
     """The cap's tangential stiffness while sticking, as two springs in series (N/mm): the cover's
     shear under the contact patch, G_c pi a_x a_y / t_c (the cover outside the patch and the sheets'

@@ -4,7 +4,8 @@
 Both sides are the hemispherical cap on the whole stack (cover, superficial sheet, lattice, deep
 sheet). The 3D side is the committed half-model (`shear3d`): its branches pressed to 0.3 and 0.6 mm
 (reference/shear3d.npz) and to 3 N with a cover that keeps its volume (shear3d_load_branch.npz),
-each sheared with the contact sticking, taken at F_t / F_z = 1/3 or at the last ratio the branch
+and the design at the stiff end of the cover's bracket pressed to 3 N the same way
+(shear3d_stiff_cover.npz, `--stiff-cover`), each sheared with the contact sticking, taken at F_t / F_z = 1/3 or at the last ratio the branch
 reached. The fast side is the simulator's own skin model (hemisphere mode, noise-free, uniform
 gains, the sheet bonded as the 3D model's merged sheet is), pressed at the same spot to the same
 F_z and moved along +x while sticking until F_x reaches the same F_t. Every count row goes
@@ -43,8 +44,10 @@ from layerskin_exp.sim.fem_reference.compare import (
 from layerskin_exp.sim.skin import SkinModel
 
 # the 3D states compared: (label, data file, which branch: its press depth, or None for the
-# file's one sheared branch)
+# file's one sheared branch), per design: the nominal one, and the stiff end of the cover's bracket
+# (shear3d.STIFF_COVER_KPA, `--stiff-cover`)
 STATES = (("0.29 N", "shear3d", 0.3), ("0.83 N", "shear3d", 0.6), ("3 N", "shear3d_load_branch", None))
+STIFF_STATES = (("stiff cover 3 N", "shear3d_stiff_cover", None),)
 GATED_DIFFERENCE = ("deep_cop_counts_mm", "superficial_cop_counts_mm", "interlayer_shift_counts_mm", "sheet_travel_mm")
 GATED_RATIO = ("depth_at_load", "contact_radius", "peak_superficial_kpa", "peak_deep_taxel_kpa", "tangential_stiffness")
 REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "shear_ratio", "fz_n")
@@ -222,12 +225,24 @@ def rows(sim: SimConfig, data: Path = DATA, tolerances: dict | None = None, mode
     """The gated comparisons (compare.Comparison, bound "3d") of every state, and the record:
     {state label: {"3d": values, "fast": values}} with the reported rows. model_hook(sim) -> sim
     alters the fast model's design (the tests inject errors through it)."""
+    from layerskin_exp.sim.fem_reference.shear3d import stiff_cover_sim
+
     tol = (tolerances or load_tolerances())["yardstick3d"]
-    fsim = sim if model_hook is None else model_hook(sim)
+    out, record = [], {}
+    for design, states in ((sim, STATES), (stiff_cover_sim(sim), STIFF_STATES)):
+        _design_rows(design if model_hook is None else model_hook(design), states, data, tol, out, record)
+    return out, record
+
+
+def _design_rows(fsim: SimConfig, states, data: Path, tol: dict, out: list, record: dict) -> None:
     model = fast_model(fsim)
     fresh = model.mech_state()  # unloaded, nothing stuck
-    out, record = [], {}
-    for label, name, depth in STATES:
+    for label, name, depth in states:
+        if not (data / f"{name}.npz").exists():  # a design without its 3D data is not judged: it fails
+            record[label] = {"3d": None, "fast": None, "error": f"no 3D data {name}.npz (python -m "
+                             "layerskin_exp.sim.fem_reference --stiff-cover)"}
+            out.extend(_comparison(tol, m, label, float("nan"), float("nan")) for m in (*GATED_DIFFERENCE, *GATED_RATIO))
+            continue
         fem = fem3d_side(label, name, depth, model, data)
         try:
             fast = fast_side(model, fresh, fem["fz_n"], fem["ft_n"])
@@ -239,7 +254,6 @@ def rows(sim: SimConfig, data: Path = DATA, tolerances: dict | None = None, mode
         record[label] = {"3d": fem, "fast": fast}
         for metric in (*GATED_DIFFERENCE, *GATED_RATIO):
             out.append(_comparison(tol, metric, label, fem[metric], fast[metric]))
-    return out, record
 
 
 def _comparison(tol: dict, metric: str, label: str, fem: float, fast: float) -> Comparison:
@@ -251,9 +265,9 @@ def _comparison(tol: dict, metric: str, label: str, fem: float, fast: float) -> 
 
 
 def table_text(comparisons: list[Comparison], record: dict) -> str:
-    lines = [f"{'state':7} {'metric':28} {'3D':>10} {'fast':>10} {'judged':>9} {'band':>16}  ok"]
+    lines = [f"{'state':15} {'metric':28} {'3D':>10} {'fast':>10} {'judged':>9} {'band':>16}  ok"]
     for c in comparisons:
-        lines.append(f"{c.load:7} {c.metric:28} {c.fem:10.4g} {c.fast:10.4g} {c.value:9.3g} "
+        lines.append(f"{c.load:15} {c.metric:28} {c.fem:10.4g} {c.fast:10.4g} {c.value:9.3g} "
                      f"{f'[{c.lo:.3g}, {c.hi:.3g}]':>16}  {'yes' if c.passed else 'NO'}")
     for label, rec in record.items():
         if rec.get("fast") is None:
@@ -261,7 +275,7 @@ def table_text(comparisons: list[Comparison], record: dict) -> str:
             continue
         for metric in REPORTED:
             f3, ff = rec["3d"].get(metric), rec["fast"].get(metric)
-            lines.append(f"{label:7} {metric:28} {f3:10.4g} {'' if ff is None else format(ff, '10.4g'):>10}   (reported)")
+            lines.append(f"{label:15} {metric:28} {f3:10.4g} {'' if ff is None else format(ff, '10.4g'):>10}   (reported)")
     return "\n".join(lines)
 
 
