@@ -222,16 +222,19 @@ def _cells(top, lattice, r0, r1, c0, c1):
 
 
 @_jit
-def _deep_pass(base, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax):
+def _deep_pass(base, top, with_top, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax):
     """The lattice's signed pressure on the deep sheet, base (m, m), times the cell pattern over
     rows [r0, r1) x columns [c0, c1): the deep layer reads it (no tension) into f_deep and its
-    taxel means."""
+    taxel means; with_top: the lattice top's, top (m, m), gets the pattern over the same range
+    (for the superficial core)."""
     m = n * nq
     for r in range(r0, r1):
         wa = np.float64(quad[m + r % nq])
         for c in range(c0, c1):
             cell = lattice[r, c]
             v = max(base[r, c] * cell, _F0)
+            if with_top:
+                top[r, c] *= cell
             if store:
                 f_deep[r, c] = v
             colsum[c] += wa * np.float64(v)
@@ -306,34 +309,41 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
         dx = q[c] - cdx32
         dx2[c] = dx * dx
         mdx[c] = mx32 * dx
+    # the lattice's top carries the same profile and couple about the cap's point in the sheet's
+    # frame: the same points as the base's where the sheet has not travelled (a press)
+    same = st[S_UX] == 0.0 and st[S_UY] == 0.0
     for r in range(r0, r1):
         dy = q[r] - cdy32
         dy2 = dy * dy
         mdy = my32 * dy
         for c in range(c0, c1):
             v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
-            base[r, c] += v0 + (mdx[c] + mdy) * v1
-    if edges:
-        r0, r1, c0, c1 = 0, m, 0, m
-    _deep_pass(base, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax[1])
-    # the lattice's top: the same profile and couple about the cap's point in the sheet's frame
-    _window(ax, ay, bounds[i, 1], prm, win, 0)
-    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
+            v = v0 + (mdx[c] + mdy) * v1
+            base[r, c] += v
+            if same:
+                top[r, c] += v
+    tr0, tr1, tc0, tc1 = r0, r1, c0, c1
     ax32, ay32 = np.float32(ax), np.float32(ay)
-    for c in range(c0, c1):
-        dx = q[c] - ax32
-        dx2[c] = dx * dx
-        mdx[c] = mx32 * dx
-    for r in range(r0, r1):
-        dy = q[r] - ay32
-        dy2 = dy * dy
-        mdy = my32 * dy
-        for c in range(c0, c1):
-            v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
-            top[r, c] += v0 + (mdx[c] + mdy) * v1
-    if edges:
-        r0, r1, c0, c1 = 0, m, 0, m
-    _cells(top, lattice, r0, r1, c0, c1)
+    if not same:
+        _window(ax, ay, bounds[i, 1], prm, win, 0)
+        tr0, tr1, tc0, tc1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
+        for c in range(tc0, tc1):
+            dx = q[c] - ax32
+            dx2[c] = dx * dx
+            mdx[c] = mx32 * dx
+        for r in range(tr0, tr1):
+            dy = q[r] - ay32
+            dy2 = dy * dy
+            mdy = my32 * dy
+            for c in range(tc0, tc1):
+                v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
+                top[r, c] += v0 + (mdx[c] + mdy) * v1
+    if edges:  # the route covers the grid: one pass gives both their cell pattern
+        _deep_pass(base, top, True, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
+    else:
+        _deep_pass(base, top, same, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax[1])
+        if not same:
+            _cells(top, lattice, tr0, tr1, tc0, tc1)
     # superficial: around the contact, in the superficial frame, over the lattice's window and
     # the cover's (its half of the lattice top's pressure reaches as far as that does); the
     # cover's profile is looked up only in its own, much smaller, window (bounds[i, 0])
@@ -441,7 +451,8 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge
     ex64, ey64 = np.float64(ex), np.float64(ey)
     i_s = (s2**3 - s1**3) / 3.0
     cx, cy, kk = _edge_loads(st, prm, h_lat)
-    if cx != _F0 or cy != _F0 or kk != _F0:
+    edges = cx != _F0 or cy != _F0 or kk != _F0
+    if edges:
         _fill_edges(edge, q, prm.half_pad_mm, cx, cy, kk, base, top)
     # per unit length across the line (its normal (-ey, ex)): the shear's couple at the contact
     # point, and the torque's growth per mm along the line
@@ -450,11 +461,14 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge
     # along the line: the cover's lever of the shear, balanced by a linear load gradient
     mid32 = np.float32(0.5 * (s1 + s2))
     beta = np.float32((fx * ex64 + fy * ey64) * (h_eff - h_lat) / (line_q * length**3 / 12.0))
-    # the lattice top about the line in the sheet's frame, its base about the line over the deep sheet
+    # the lattice top about the line in the sheet's frame, its base about the line over the deep
+    # sheet (the same line where the sheet has neither travelled nor turned)
     _rod_pattern(top, lk_deep, t32, q, cdx, cdy, yaw_s, m0, kt, beta, mid32, reach_deep, origin_d32, scale_d32)
-    _cells(top, lattice, 0, m, 0, m)
-    _rod_pattern(base, lk_deep, t32, q, cdx + st[S_UX], cdy + st[S_UY], st[S_YAW], m0, kt, beta, mid32, reach_deep,
-                 origin_d32, scale_d32)
+    if st[S_UX] == 0.0 and st[S_UY] == 0.0 and st[S_ROT] == 0.0 and not edges:
+        base += top  # base held nothing yet
+    else:
+        _rod_pattern(base, lk_deep, t32, q, cdx + st[S_UX], cdy + st[S_UY], st[S_YAW], m0, kt, beta, mid32,
+                     reach_deep, origin_d32, scale_d32)
     cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
     px = np.empty(m, np.float32)  # across-line coordinate, column part
     sx = np.empty(m, np.float32)  # along-line coordinate, column part
@@ -462,7 +476,7 @@ def _rod_fields(st, prm, lk_sup, lk_deep, h_eff, h_lat, t32, quad, lattice, edge
         dx = q[c] - cdx32
         px[c] = -ey * dx
         sx[c] = ex * dx
-    _deep_pass(base, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
+    _deep_pass(base, top, True, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
     for r in range(m):
         dy = q[r] - cdy32
         py = ex * dy

@@ -15,17 +15,23 @@ TOL = load_tolerances()["yardstick3d"]["difference"]
 
 @pytest.fixture(scope="module")
 def sides():
-    """{state label: (3D values, fast values)} at every 3D state, and the model that read them."""
-    model = y3.fast_model(load_sim([]))
-    fresh = model.mech_state()
-    out = {}
-    for label, name, depth in y3.STATES:
-        fem = y3.fem3d_side(label, name, depth, model)
-        out[label] = (fem, y3.fast_side(model, fresh, fem["fz_n"], fem["ft_n"]))
-    return out, model, fresh
+    """{state label: (3D values, fast values)} at every 3D state of both designs, and the nominal
+    design's model and its unloaded state."""
+    from layerskin_exp.sim.fem_reference.shear3d import stiff_cover_sim
+
+    sim = load_sim([])
+    out, nominal = {}, None
+    for design, states in ((sim, y3.STATES), (stiff_cover_sim(sim), y3.STIFF_STATES)):
+        model = y3.fast_model(design)
+        fresh = model.mech_state()
+        nominal = nominal or (model, fresh)
+        for label, name, depth in states:
+            fem = y3.fem3d_side(label, name, depth, model)
+            out[label] = (fem, y3.fast_side(model, fresh, fem["fz_n"], fem["ft_n"]))
+    return out, *nominal
 
 
-@pytest.mark.parametrize("label", [s[0] for s in y3.STATES])
+@pytest.mark.parametrize("label", [s[0] for s in (*y3.STATES, *y3.STIFF_STATES)])
 def test_the_deep_count_cop_travels_as_the_3d_models_at_each_load(sides, label):
     fem, fast = sides[0][label]
     assert abs(fast["deep_cop_counts_mm"] - fem["deep_cop_counts_mm"]) <= TOL["deep_cop_counts_mm"]
@@ -41,6 +47,9 @@ def test_the_deep_count_cop_travels_as_the_3d_models_at_each_load(sides, label):
         "measured: fast -0.04 mm against +0.46 at F_t / F_z 0.027 (the 3D branch's cover keeps its volume, "
         "nu 0.499): the 3D superficial count CoP moves 0.62 mm for 0.24 mm of cap over the sheet, the "
         "fast one 0.09"))),
+    pytest.param("stiff cover 3 N", marks=pytest.mark.xfail(strict=True, reason=(
+        "measured: fast -0.61 mm against +0.18 at F_t / F_z 1/3 (cover 1 MPa): the 3D superficial count CoP "
+        "travels 1.01 mm, the fast 0.47; the deep 0.83 against 1.08"))),
 ])
 def test_the_interlayer_shift_agrees_with_the_3d_models_at_each_load(sides, label):
     fem, fast = sides[0][label]
