@@ -187,6 +187,28 @@ def _window(cx, cy, reach, prm, win, at):
 
 # ---------------------------------------------------------------------------------- fields
 @_jit
+def _disc_pattern(out, also, both, lk, t32, q, cx, cy, mx32, my32, r0, r1, c0, c1, dx2, mdx, origin32, scale32):
+    """out (m, m) [y, x] += the lattice's axisymmetric profile about (cx, cy) and its couple
+    response times the couple (mx32, my32) . (x - cx, y - cy), over rows [r0, r1) x columns
+    [c0, c1); also += the same where both. dx2, mdx (m,): scratch."""
+    cx32, cy32 = np.float32(cx), np.float32(cy)
+    for c in range(c0, c1):
+        dx = q[c] - cx32
+        dx2[c] = dx * dx
+        mdx[c] = mx32 * dx
+    for r in range(r0, r1):
+        dy = q[r] - cy32
+        dy2 = dy * dy
+        mdy = my32 * dy
+        for c in range(c0, c1):
+            v0, v1 = _lookup(lk, t32, dx2[c] + dy2, origin32, scale32)
+            v = v0 + (mdx[c] + mdy) * v1
+            out[r, c] += v
+            if both:
+                also[r, c] += v
+
+
+@_jit
 def _lattice_half(top, r, c0, c1, wa, store, f_sup, colsum):
     """Superficial quadrature row r, columns [c0, c1) beyond the cover's reach: the core reads
     half the lattice top's pressure there (no tension), added to the Gauss-weighted column sums."""
@@ -304,40 +326,18 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
     # deep: the lattice's pressure around the contact's deep-frame position
     _window(cdx, cdy, bounds[i, 1], prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
-    cdx32, cdy32 = np.float32(cdx), np.float32(cdy)
-    for c in range(c0, c1):
-        dx = q[c] - cdx32
-        dx2[c] = dx * dx
-        mdx[c] = mx32 * dx
     # the lattice's top carries the same profile and couple about the cap's point in the sheet's
     # frame: the same points as the base's where the sheet has not travelled (a press)
     same = st[S_UX] == 0.0 and st[S_UY] == 0.0
-    for r in range(r0, r1):
-        dy = q[r] - cdy32
-        dy2 = dy * dy
-        mdy = my32 * dy
-        for c in range(c0, c1):
-            v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
-            v = v0 + (mdx[c] + mdy) * v1
-            base[r, c] += v
-            if same:
-                top[r, c] += v
+    _disc_pattern(base, top, same, lk_deep, t32, q, cdx, cdy, mx32, my32, r0, r1, c0, c1, dx2, mdx,
+                  origin_d32, scale_d32)
     tr0, tr1, tc0, tc1 = r0, r1, c0, c1
     ax32, ay32 = np.float32(ax), np.float32(ay)
     if not same:
         _window(ax, ay, bounds[i, 1], prm, win, 0)
         tr0, tr1, tc0, tc1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
-        for c in range(tc0, tc1):
-            dx = q[c] - ax32
-            dx2[c] = dx * dx
-            mdx[c] = mx32 * dx
-        for r in range(tr0, tr1):
-            dy = q[r] - ay32
-            dy2 = dy * dy
-            mdy = my32 * dy
-            for c in range(tc0, tc1):
-                v0, v1 = _lookup(lk_deep, t32, dx2[c] + dy2, origin_d32, scale_d32)
-                top[r, c] += v0 + (mdx[c] + mdy) * v1
+        _disc_pattern(top, top, False, lk_deep, t32, q, ax, ay, mx32, my32, tr0, tr1, tc0, tc1, dx2, mdx,
+                      origin_d32, scale_d32)
     if edges:  # the route covers the grid: one pass gives both their cell pattern
         _deep_pass(base, top, True, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
     else:
