@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from layerskin_exp.sim.config import SimConfig
+from layerskin_exp.sim.fem_reference.alignment import ALIGN_TAXEL_MM, _centre
 from layerskin_exp.sim.fem_reference.compare import (
     DATA,
     SHEAR_RATIO,
@@ -39,6 +40,7 @@ from layerskin_exp.sim.fem_reference.compare import (
     Reader,
     _cop_x,
     line_sim,
+    load_fem,
     load_tolerances,
 )
 from layerskin_exp.sim.skin import SkinModel
@@ -51,14 +53,6 @@ STIFF_STATES = (("stiff cover 3 N", "shear3d_stiff_cover", None),)
 GATED_DIFFERENCE = ("deep_cop_counts_mm", "superficial_cop_counts_mm", "interlayer_shift_counts_mm", "sheet_travel_mm")
 GATED_RATIO = ("depth_at_load", "contact_radius", "peak_superficial_kpa", "peak_deep_taxel_kpa", "tangential_stiffness")
 REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "shear_ratio", "fz_n")
-
-
-def _load(name: str, data: Path) -> dict:
-    path = data / f"{name}.npz"
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no 3D reference data; run `python -m layerskin_exp.sim.fem_reference --shear3d`")
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
 
 
 def _state(res: dict, depth: float | None) -> dict:
@@ -92,14 +86,7 @@ def _force_cop(xy: np.ndarray, p: np.ndarray, w: np.ndarray) -> float:
     return float((xy[:, 0] * f).sum() / f.sum())  # the half-model is symmetric in y
 
 
-def _taxel_centre() -> float:
-    c = SKIN.taxel_centres_mm()
-    return float(c[np.argmin(np.abs(c))])
-
-
 def _alignments():
-    from layerskin_exp.sim.fem_reference.alignment import ALIGN_TAXEL_MM
-
     return [(tx, ty) for tx in ALIGN_TAXEL_MM for ty in ALIGN_TAXEL_MM]
 
 
@@ -116,13 +103,13 @@ def _mean_counts(rows: list[dict]) -> dict:
 
 def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, data: Path = DATA) -> dict:
     """The 3D model's values at one state (see the module's docstring)."""
-    res = _load(name, data)
+    res = load_fem(name, data)
     s = _state(res, depth)
     st = s["start"]
     counts = []
     peak_deep = []
     for tx, ty in _alignments():
-        reader = Reader(model, shift_mm=-tx - _taxel_centre(), shift_y_mm=-ty - _taxel_centre())
+        reader = Reader(model, shift_mm=-tx - _centre(), shift_y_mm=-ty - _centre())
         press_maps = reader.maps(res, res["superficial_kpa"][st], res["deep_kpa"][st])
         peak_deep.append(float(press_maps[1].max()))
         counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(res, s["superficial_kpa"],
@@ -131,7 +118,8 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     travel = float(s["cap_x_mm"] - res["cap_x_mm"][st])
     deep_cop = _force_cop(res["deep_xy_mm"], s["deep_kpa"], res["deep_w_mm2"]) - \
         _force_cop(res["deep_xy_mm"], res["deep_kpa"][st], res["deep_w_mm2"])
-    height = _stack_height() - float(res["depth_mm"][st])
+    sim = model.sim  # the 3D model is built from the same design's layers
+    height = sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + sim.spacer.thickness_mm - float(res["depth_mm"][st])
     out = {"label": label, "fz_n": fz, "ft_n": fx, "shear_ratio": fx / float(s["fz_n"]),
            "depth_at_load": float(res["depth_mm"][st]),
            "contact_radius": float(res["contact_to_mm"][st]),
@@ -145,15 +133,6 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     dc = out["interlayer_shift_counts_mm"]
     out["effective_height_counts"] = -fz * dc / fx if fx > 0 else float("nan")
     return out
-
-
-def _stack_height() -> float:
-    """The unloaded stack's cover surface above the deep sensing plane (mm), as the 3D model is
-    built from the simulator's design."""
-    from layerskin_exp.sim.config import load_sim
-
-    sim = load_sim([])
-    return sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + sim.spacer.thickness_mm
 
 
 def fast_sim(sim: SimConfig) -> SimConfig:
@@ -175,7 +154,7 @@ def fast_side(model: SkinModel, fresh: np.ndarray, fz_n: float, ft_n: float, tra
     reader = Reader(model)
     counts, peak_deep, rows = [], [], None
     for tx, ty in _alignments():
-        x0, y0 = _taxel_centre() + tx, _taxel_centre() + ty
+        x0, y0 = _centre() + tx, _centre() + ty
         model.restore_mech_state(fresh)
         rec0 = model.step_many(np.array([0.0]), np.array([[x0, y0, -delta]]), np.zeros(1))[0]
         xs = np.linspace(0.0, travel_mm, steps + 1)[1:]
