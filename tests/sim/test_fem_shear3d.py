@@ -143,10 +143,17 @@ def committed():
 
 def test_every_layer_of_the_3d_data_carries_the_load(committed):
     bal = s3.balance3d(committed)
-    assert set(bal) == {"superficial", "deep", "interface", "base", "contact"}
+    assert set(bal) == {"superficial", "deep", "interface", "base", "sheet_top", "sheet_bottom", "contact"}
     assert len(committed["phase"]) >= 2
     for line, b in bal.items():
         assert np.all(np.abs(b - 1.0) < s3.BALANCE_TOL), (line, b)
+
+
+def test_every_plane_of_the_3d_data_carries_the_loads_moment(committed):
+    moments = s3.moment_balance3d(committed)
+    assert moments is not None and set(moments) == {"superficial", "deep", "interface", "base", "sheet_top", "sheet_bottom"}
+    for line, err in moments.items():
+        assert np.all(np.abs(err) < s3.MOMENT_TOL), (line, err)
 
 
 def test_the_3d_balance_sees_an_extraction_error(committed):
@@ -157,6 +164,53 @@ def test_the_3d_balance_sees_an_extraction_error(committed):
     bad["deep_w_mm2"] = np.full_like(w, w.sum() / len(w))
     with pytest.raises(RuntimeError, match="does not carry the load"):
         s3.require_balance3d(bad, log=lambda *_: None)
+
+
+def _pressed_and_sheared(monkeypatch=None) -> list[dict]:
+    """A coarse half-model pressed 0.3 mm and sheared sticking by 0.3 mm: its two states."""
+    fe = s3.Stack3D(SEC, x_edges=(-13.0, -1.0, 0.0, 1.0, 2.0, 13.0), y_edges=(0.0, 1.0, 13.0))
+    top = fe.height_mm + SEC.radius_mm
+    fe.move_to(np.array([0.0, 0.0, top - 0.3]), sticking=False, step_mm=0.1)
+    states = [fe.state()]
+    fe.stick_all_in_contact()
+    fe.move_to(np.array([0.3, 0.0, fe.centre[2]]), sticking=True, step_mm=0.1)
+    states.append(fe.state())
+    return states
+
+
+def _moments(states: list[dict]) -> dict:
+    return s3.moment_balance3d(s3.scalars(states))
+
+
+def test_every_plane_of_the_3d_model_carries_the_loads_moment():
+    """Statics of everything above each layer's plane, the nodes where they are now: the first
+    moment of the normal force through it is the load's plus that of the tangential force through
+    it, in the press and in the shear; and the sheared load acts ahead of the cap (its flank)."""
+    states = _pressed_and_sheared()
+    assert states[1]["fx_n"] > 0.02
+    for line, err in _moments(states).items():
+        assert np.all(np.abs(err) < s3.MOMENT_TOL), (line, err)
+    s3.require_moment_balance3d(s3.scalars(states), log=lambda *_: None)
+    # the deep plane's force CoP meets x_load + F_x h / F_z without the cap's centre in it
+    sheared = states[1]
+    assert sheared["deep_cop_world_mm"] > sheared["load_x_mm"] > sheared["cap_x_mm"]
+
+
+def test_the_3d_moment_balance_sees_forces_put_on_the_wrong_nodes(monkeypatch):
+    """The plane's forces paired with its nodes in reverse order (every layer still carries F_z,
+    so the force balance passes) break the moment balance of the sheared state."""
+    real = s3.Stack3D.transmitted
+
+    def reversed_nodes(self, z_mm):
+        nodes, w, g = real(self, z_mm)
+        return nodes, w, g[::-1]
+
+    monkeypatch.setattr(s3.Stack3D, "transmitted", reversed_nodes)
+    states = _pressed_and_sheared()
+    worst = max(float(np.abs(e).max()) for e in _moments(states).values())
+    assert worst > s3.MOMENT_TOL
+    with pytest.raises(RuntimeError, match="does not carry the load's moment"):
+        s3.require_moment_balance3d(s3.scalars(states), log=lambda *_: None)
 
 
 def test_the_3d_data_was_sheared():

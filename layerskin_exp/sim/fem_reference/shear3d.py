@@ -72,6 +72,7 @@ from layerskin_exp.sim.fem_reference.model import (
     Section,
     _neo_hooke,
     homogenised_lattice,
+    moment_scale,
     simpson_weights,
 )
 
@@ -88,11 +89,15 @@ SHEAR_STEPS = 10  # secant advances of the cap per branch, each at most 0.5 mm
 # (0.7 % per halving; measured before stick_all_in_contact kept the press's normal force)
 SHEAR_STEP_MM = 0.05
 BALANCE_TOL = 0.02
+# the moment balance is exact for converged equilibria (consistent nodal forces carry first
+# moments exactly); the section's check allows the same (model.StackFE.state, tests)
+MOMENT_TOL = 0.01
 FINE_X_MM = (-1.05, 1.75)  # the cap's contact and its shear travel
 FINE_Y_MM = 1.05
 FINE_H_MM = 0.35
 OUTER_MM = (0.7, 1.75, 3.5)  # element sizes outside the fine zone, then one to the pad's edge
 LINES = ("superficial", "deep", "interface", "base")
+FACES = ("sheet_top", "sheet_bottom")  # the superficial sheet's faces (Stack3D.line_z)
 # The committed run's mesh: the graded one above (0.35 mm, 20k DOF) costs ~10 s a factorisation
 # on this machine's shared cores and the contact's active set needs ~100 of them per 0.3 mm of
 # press, so the run here uses this coarse one (0.5 mm under the cap, 6k DOF). Its error at the
@@ -428,8 +433,13 @@ class Stack3D:
         return nodes, w, f.reshape(-1, 3)[nodes]
 
     def line_z(self) -> dict:
+        """The planes read: the sheets' mid-planes (what each layer's FSR reads), the lattice's
+        base (interface), the model's base, and the superficial sheet's two faces (its top, under
+        the cover, and its bottom, on the lattice: a sandwich's soft core reads their mean, which
+        the merged homogeneous sheet's mid-plane need not)."""
         mid = {k: 0.5 * sum(self.layer_z[k]) for k in ("sheet", "deep_sheet")}
-        return {"superficial": mid["sheet"], "deep": mid["deep_sheet"], "interface": self.layer_z["lattice"][0], "base": 0.0}
+        return {"superficial": mid["sheet"], "deep": mid["deep_sheet"], "interface": self.layer_z["lattice"][0], "base": 0.0,
+                "sheet_top": self.layer_z["sheet"][1], "sheet_bottom": self.layer_z["sheet"][0]}
 
     def state(self) -> dict:
         """The whole skin's forces (twice the half's; F_z > 0 compressive), contact and per-layer
@@ -446,10 +456,27 @@ class Stack3D:
                "contact_y_mm": float(x_top[on, 1].max()) if on.any() else np.nan,
                "contact_kpa": -f[:, 2] / c.weights / KPA,
                "stuck_fraction": float(c.stuck[on].mean()) if on.any() else 0.0}
+        # where the load acts (the half's): its centroid along x and the height of its tangential
+        # part; the cap's normal pressure passes through the cap's centre, so a tangential load
+        # carried on the sunk cap's flank acts higher than the contact
+        fxh, fzh = float(f[:, 0].sum()), -float(f[:, 2].sum())
+        load_x = float((x_top[:, 0] * -f[:, 2]).sum() / fzh) if fzh else np.nan
+        load_h = float((x_top[:, 2] * f[:, 0]).sum() / fxh) if abs(fxh) > 1e-6 * abs(fzh) else float(self.height_mm)
+        out.update(load_x_mm=load_x, load_height_mm=load_h)
         for name, z in self.line_z().items():
             nodes, w, g = self.transmitted(z)
             out[f"{name}_kpa"] = g[:, 2] / w / KPA
             out[f"{name}_shear_kpa"] = g[:, 0] / w / KPA
+            # statics of everything above the plane, its nodes where they are now: the first
+            # moment of the normal force through it is the load's, F_z x_load + F_x h_load, plus
+            # that of the tangential force through it, sum(z g_x) (model.StackFE.state's check)
+            y = self.points[nodes] + self.u[nodes]
+            first = float((y[:, 0] * g[:, 2]).sum())
+            expected = fzh * load_x + fxh * load_h + float((y[:, 2] * g[:, 0]).sum())
+            out[f"{name}_moment_error"] = (first - expected) / moment_scale(fzh, fxh, load_x, load_h)
+            # the force CoP where the plane's nodes are now (the stored xy are their reference
+            # positions, the layer's own frame)
+            out[f"{name}_cop_world_mm"] = first / float(g[:, 2].sum()) if g[:, 2].sum() else np.nan
         sheet = self.plane(self.line_z()["superficial"])[0]
         out["sheet_shift_mm"] = float(self.u[sheet[np.abs(self.points[sheet, 0]) < 1.0], 0].mean())
         # the superficial core's mid-plane point (reference x, its own frame) now under the cap,
@@ -581,9 +608,14 @@ def run_shear3d(sim, log=print, x_edges=X_EDGES_MM, y_edges=Y_EDGES_MM, depths=S
                               "sticking_press": np.array(sticking_press)}, log)
 
 
-def _pack(fe: Stack3D, states: list, sec: Section) -> dict:
+def scalars(states: list) -> dict:
+    """The states' scalar entries (forces, positions, checks) as one array per key."""
     keys = [k for k in states[0] if np.ndim(states[0][k]) == 0]
-    out = {k: np.array([s[k] for s in states], float) for k in keys}
+    return {k: np.array([s[k] for s in states], float) for k in keys}
+
+
+def _pack(fe: Stack3D, states: list, sec: Section) -> dict:
+    out = scalars(states)
     out["contact_nodes_xy"] = fe.points[fe.contact.nodes, :2]
     out["contact_w_mm2"] = fe.contact.weights
     out["contact_kpa"] = np.stack([s["contact_kpa"] for s in states])
@@ -603,10 +635,20 @@ def _pack(fe: Stack3D, states: list, sec: Section) -> dict:
 def balance3d(res: dict) -> dict:
     """Per layer and the cap's contact: 2 sum(p A) / F_z per state (1 when pressures are forces)."""
     out = {}
-    for line in (*LINES, "contact"):
+    faces = tuple(f for f in FACES if f"{f}_kpa" in res)  # data solved before the faces were read lack them
+    for line in (*LINES, *faces, "contact"):
         w = res["contact_w_mm2"] if line == "contact" else res[f"{line}_w_mm2"]
         out[line] = 2e-3 * (np.asarray(res[f"{line}_kpa"]) * w).sum(axis=1) / np.asarray(res["fz_n"])
     return out
+
+
+def moment_balance3d(res: dict) -> dict | None:
+    """Per layer: each state's first-moment error of the force through its plane against the
+    statics of everything above it (Stack3D.state), over the load's moment (model.moment_scale);
+    None for data solved before the states recorded it."""
+    if not all(f"{line}_moment_error" in res for line in LINES):
+        return None
+    return {k.removesuffix("_moment_error"): np.asarray(res[k], float) for k in res if k.endswith("_moment_error")}
 
 
 def require_balance3d(res: dict, log=print) -> dict:
@@ -614,6 +656,18 @@ def require_balance3d(res: dict, log=print) -> dict:
     log(f"  3D balance, worst |2 sum(p A) / F_z - 1| per layer: {worst}")
     if max(worst.values()) > BALANCE_TOL:
         raise RuntimeError(f"a layer's pressure does not carry the load: {worst} (allowed {BALANCE_TOL})")
+    return require_moment_balance3d(res, log)
+
+
+def require_moment_balance3d(res: dict, log=print) -> dict:
+    moments = moment_balance3d(res)
+    if moments is None:
+        log("  3D moment balance: not recorded in these data (solved before the states carried it)")
+        return res
+    worst_m = {k: float(np.nanmax(np.abs(m))) for k, m in moments.items()}
+    log(f"  3D moment balance, worst first-moment error over the load's moment per layer: {worst_m}")
+    if max(worst_m.values()) > MOMENT_TOL:
+        raise RuntimeError(f"a layer's pressure does not carry the load's moment: {worst_m} (allowed {MOMENT_TOL})")
     return res
 
 

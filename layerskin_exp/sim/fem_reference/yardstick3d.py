@@ -19,7 +19,9 @@ travel, secant from the press), the sheet's travel over the deep sheet under the
 superficial and the deep count-CoP travel from the press (each layer in its own taxel frame) and
 the change of the inter-layer count shift. Reported beside them, not gated: the deep force CoP's
 travel against its own statics, x_cap + F_x H / F_z - x_cap,0 on each side, and the effective
-height F_z dc / F_t.
+height F_z dc / F_t; where the 3D data carry the superficial sheet's two faces, the superficial
+count-CoP travel and the inter-layer shift read from their mean (what a sandwich's soft core
+reads, shear3d.Stack3D.line_z) beside the fast superficial reading.
 
 `python -m layerskin_exp.sim.fem_reference.yardstick3d` prints the table.
 """
@@ -52,7 +54,8 @@ STATES = (("0.29 N", "shear3d", 0.3), ("0.83 N", "shear3d", 0.6), ("3 N", "shear
 STIFF_STATES = (("stiff cover 3 N", "shear3d_stiff_cover", None),)
 GATED_DIFFERENCE = ("deep_cop_counts_mm", "superficial_cop_counts_mm", "interlayer_shift_counts_mm", "sheet_travel_mm")
 GATED_RATIO = ("depth_at_load", "contact_radius", "peak_superficial_kpa", "peak_deep_taxel_kpa", "tangential_stiffness")
-REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "shear_ratio", "fz_n")
+REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "shear_ratio", "fz_n",
+            "superficial_cop_counts_faces_mm", "interlayer_shift_counts_faces_mm")
 
 
 def _state(res: dict, depth: float | None) -> dict:
@@ -76,7 +79,7 @@ def _state(res: dict, depth: float | None) -> dict:
     i1, i0 = idx[k], (idx[k - 1] if k > 0 else start)
     out = {key: (1 - t) * np.asarray(res[key][i0], float) + t * np.asarray(res[key][i1], float)
            for key in ("cap_x_mm", "fx_n", "fz_n", "sheet_shift_mm", "sheet_x_under_cap_mm", "superficial_kpa",
-                       "deep_kpa")}
+                       "deep_kpa", "sheet_top_kpa", "sheet_bottom_kpa") if key in res}
     out["start"] = start
     return out
 
@@ -106,14 +109,23 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     res = load_fem(name, data)
     s = _state(res, depth)
     st = s["start"]
-    counts = []
+    counts, faces = [], []
     peak_deep = []
+    # the superficial sheet's two faces where the data have them (shear3d.Stack3D.line_z): the
+    # mean of the cover's and the lattice's pressure on it, what a sandwich's soft core reads
+    if "sheet_top_kpa" in res:
+        on_faces = {**res, "superficial_xy_mm": res["sheet_top_xy_mm"], "superficial_w_mm2": res["sheet_top_w_mm2"]}
+        face_mean = 0.5 * (np.asarray(res["sheet_top_kpa"], float) + np.asarray(res["sheet_bottom_kpa"], float))
+        sheared_faces = 0.5 * (np.asarray(s["sheet_top_kpa"], float) + np.asarray(s["sheet_bottom_kpa"], float))
     for tx, ty in _alignments():
         reader = Reader(model, shift_mm=-tx - _centre(), shift_y_mm=-ty - _centre())
         press_maps = reader.maps(res, res["superficial_kpa"][st], res["deep_kpa"][st])
         peak_deep.append(float(press_maps[1].max()))
         counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(res, s["superficial_kpa"],
                                                                                         s["deep_kpa"]))))
+        if "sheet_top_kpa" in res:
+            faces.append(_count_rows(reader.counts(reader.maps(on_faces, face_mean[st], res["deep_kpa"][st])),
+                                     reader.counts(reader.maps(on_faces, sheared_faces, s["deep_kpa"]))))
     fz, fx = float(res["fz_n"][st]), float(s["fx_n"])
     travel = float(s["cap_x_mm"] - res["cap_x_mm"][st])
     deep_cop = _force_cop(res["deep_xy_mm"], s["deep_kpa"], res["deep_w_mm2"]) - \
@@ -132,6 +144,10 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
            **_mean_counts(counts)}
     dc = out["interlayer_shift_counts_mm"]
     out["effective_height_counts"] = -fz * dc / fx if fx > 0 else float("nan")
+    if faces:
+        mean_faces = _mean_counts(faces)
+        out["superficial_cop_counts_faces_mm"] = mean_faces["superficial_cop_counts_mm"]
+        out["interlayer_shift_counts_faces_mm"] = mean_faces["interlayer_shift_counts_mm"]
     return out
 
 
@@ -254,6 +270,10 @@ def table_text(comparisons: list[Comparison], record: dict) -> str:
             continue
         for metric in REPORTED:
             f3, ff = rec["3d"].get(metric), rec["fast"].get(metric)
+            if metric.endswith("_faces_mm"):  # the 3D sheet's faces' mean beside the fast superficial reading
+                ff = rec["fast"].get(metric.replace("_faces_mm", "_mm"))
+            if f3 is None:
+                continue  # 3D data solved before the states recorded it
             lines.append(f"{label:15} {metric:28} {f3:10.4g} {'' if ff is None else format(ff, '10.4g'):>10}   (reported)")
     return "\n".join(lines)
 
