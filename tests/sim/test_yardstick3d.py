@@ -123,3 +123,14 @@ def test_a_design_without_its_3d_data_fails_the_gate(tmp_path):
     assert len(stiff) == len(y3.GATED_DIFFERENCE) + len(y3.GATED_RATIO)
     assert not any(r.passed for r in stiff)
     assert "--stiff-cover" in record["stiff cover 3 N"]["error"]
+
+
+@pytest.mark.parametrize("label", [s[0] for s in (*y3.STATES, *y3.STIFF_STATES)])
+def test_every_3d_state_reports_the_sheets_faces_reading(sides, label):
+    """The committed 3D data carry the superficial sheet's faces (shear3d.Stack3D.line_z), so the
+    reading a sandwich's core gives is reported beside the gated mid-plane one; it is a different
+    reading (the merged sheet's mid-plane is not its faces' mean), not a copy of it."""
+    fem = sides[0][label][0]
+    for row in ("superficial_cop_counts", "interlayer_shift_counts"):
+        assert np.isfinite(fem[f"{row}_faces_mm"])
+    assert fem["superficial_cop_counts_faces_mm"] != fem["superficial_cop_counts_mm"]
