@@ -166,7 +166,7 @@ def test_the_3d_balance_sees_an_extraction_error(committed):
         s3.require_balance3d(bad, log=lambda *_: None)
 
 
-def _pressed_and_sheared(monkeypatch=None) -> list[dict]:
+def _pressed_and_sheared() -> list[dict]:
     """A coarse half-model pressed 0.3 mm and sheared sticking by 0.3 mm: its two states."""
     fe = s3.Stack3D(SEC, x_edges=(-13.0, -1.0, 0.0, 1.0, 2.0, 13.0), y_edges=(0.0, 1.0, 13.0))
     top = fe.height_mm + SEC.radius_mm

@@ -471,12 +471,12 @@ class Stack3D:
             # moment of the normal force through it is the load's, F_z x_load + F_x h_load, plus
             # that of the tangential force through it, sum(z g_x) (model.StackFE.state's check)
             y = self.points[nodes] + self.u[nodes]
-            first = float((y[:, 0] * g[:, 2]).sum())
+            first, through = float((y[:, 0] * g[:, 2]).sum()), float(g[:, 2].sum())
             expected = fzh * load_x + fxh * load_h + float((y[:, 2] * g[:, 0]).sum())
             out[f"{name}_moment_error"] = (first - expected) / moment_scale(fzh, fxh, load_x, load_h)
             # the force CoP where the plane's nodes are now (the stored xy are their reference
             # positions, the layer's own frame)
-            out[f"{name}_cop_world_mm"] = first / float(g[:, 2].sum()) if g[:, 2].sum() else np.nan
+            out[f"{name}_cop_world_mm"] = first / through if through else np.nan
         sheet = self.plane(self.line_z()["superficial"])[0]
         out["sheet_shift_mm"] = float(self.u[sheet[np.abs(self.points[sheet, 0]) < 1.0], 0].mean())
         # the superficial core's mid-plane point (reference x, its own frame) now under the cap,

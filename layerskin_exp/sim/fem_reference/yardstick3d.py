@@ -113,7 +113,8 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     peak_deep = []
     # the superficial sheet's two faces where the data have them (shear3d.Stack3D.line_z): the
     # mean of the cover's and the lattice's pressure on it, what a sandwich's soft core reads
-    if "sheet_top_kpa" in res:
+    has_faces = "sheet_top_kpa" in res
+    if has_faces:
         on_faces = {**res, "superficial_xy_mm": res["sheet_top_xy_mm"], "superficial_w_mm2": res["sheet_top_w_mm2"]}
         face_mean = 0.5 * (np.asarray(res["sheet_top_kpa"], float) + np.asarray(res["sheet_bottom_kpa"], float))
         sheared_faces = 0.5 * (np.asarray(s["sheet_top_kpa"], float) + np.asarray(s["sheet_bottom_kpa"], float))
@@ -123,7 +124,7 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
         peak_deep.append(float(press_maps[1].max()))
         counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(res, s["superficial_kpa"],
                                                                                         s["deep_kpa"]))))
-        if "sheet_top_kpa" in res:
+        if has_faces:
             faces.append(_count_rows(reader.counts(reader.maps(on_faces, face_mean[st], res["deep_kpa"][st])),
                                      reader.counts(reader.maps(on_faces, sheared_faces, s["deep_kpa"]))))
     fz, fx = float(res["fz_n"][st]), float(s["fx_n"])
