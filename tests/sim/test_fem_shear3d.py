@@ -584,3 +584,42 @@ def test_each_load_branch_row_sees_an_error_of_the_fast_model(error, monkeypatch
         b, g = base[metric], got[metric].fast
         moved = abs(g - b.fast) > b.hi if b.kind == "difference" else not b.lo <= g / b.fast <= b.hi
         assert moved, (error, metric, b.fast, g)
+
+
+def test_the_sheets_squeeze_is_its_bending_couple_along_its_curvature():
+    """shear3d._sheet_squeeze on prescribed deflections: a bowl of uniform curvature kappa pressed
+    and then tilted by theta across the pad has first moment int (M0 grad w1)_x dA / d =
+    -D (1 + nu) kappa theta A / d over the whole pad (the half-model reports half), the tilt fitted
+    exactly; a rigidity or lever taken wrong shows in the figure."""
+    fe = s3.Stack3D(SEC, x_edges=(-13.0, -1.0, 0.0, 1.0, 2.0, 13.0), y_edges=(0.0, 1.0, 13.0))
+    x, y = fe.points[:, 0], fe.points[:, 1]
+    kappa, theta = 0.01, 0.002
+    u0 = np.zeros_like(fe.points)
+    u0[:, 2] = -0.5 * kappa * (x**2 + y**2)  # w = -u_z, sagging upward: kappa_ij = -grad grad w = -kappa I
+    u = u0.copy()
+    u[:, 2] -= theta * x
+    got = s3._sheet_squeeze(fe, u0, u)
+    t = 2 * SEC.film_mm + SEC.core_mm
+    rigidity = s3.merged_sheet_e_mpa(SEC) * t**3 / (12 * (1 - 0.34**2))
+    pad = SEC.width_mm * SEC.width_mm
+    want = 0.5 * -rigidity * (1 + 0.34) * kappa * theta * pad / (2 * t / 3)
+    assert got["tilt_slope"] == pytest.approx(theta, rel=1e-9)
+    assert got["cross_terms"] == pytest.approx(want, rel=1e-6)
+    assert got["tilt_term"] == pytest.approx(want, rel=1e-6)
+
+
+def test_the_committed_squeeze_study_accounts_for_the_mid_planes_excess():
+    """reference/shear3d_squeeze.json (`--shear3d-squeeze`): at each sheared state the mid-plane's
+    first moment beyond its faces' mean is the films' squeeze from the sheet's own deflection, the
+    closed form within a quarter of the excess (its finite differences on the committed mesh), and
+    the excess is no small part of the faces' own travel."""
+    import json
+
+    study = json.loads((s3.DATA / "shear3d_squeeze.json").read_text())
+    assert len(study["states"]) == 2
+    for st in study["states"]:
+        excess = st["mid_plane_excess_mm"]
+        assert excess > 0.15 * st["cop_faces_mean_mm"]
+        # (each CoP over its own plane's load: the planes carry F_z alike within the balance's 1e-4)
+        assert st["cop_mid_plane_mm"] == pytest.approx(st["cop_faces_mean_mm"] + excess, abs=1e-3)
+        assert st["squeeze_closed_form_mm"] == pytest.approx(excess, rel=0.25)

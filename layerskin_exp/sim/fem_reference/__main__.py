@@ -376,6 +376,10 @@ def main(argv=None) -> int:
                     help="the load branch again for the design at the stiff end of the cover's bracket "
                          "(shear3d.STIFF_COVER_KPA, a Dragon Skin / Sil-Poxy class silicone): "
                          "reference/shear3d_stiff_cover.npz and .json, the yardstick's second design")
+    ap.add_argument("--shear3d-squeeze", action="store_true",
+                    help="the 3D model's 0.3 mm branch on the committed mesh, its mid-plane reading against its "
+                         "faces' mean and the films' squeeze from its own deflection (shear3d.squeeze3d): "
+                         "reference/shear3d_squeeze.json, ~2 min")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
@@ -398,7 +402,7 @@ def main(argv=None) -> int:
     sim = load_sim([])
     if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
             or args.alignments or args.shear3d_through_thickness or args.cover_poisson or args.shear3d_load_branch
-            or args.stiff_cover
+            or args.stiff_cover or args.shear3d_squeeze
             or args.homogenised_refinement):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
@@ -512,6 +516,11 @@ def main(argv=None) -> int:
         _write_study(out / "shear3d_stiff_cover.json", t0, {"cover_modulus_kpa": s3.STIFF_COVER_KPA, "dof": int(res["dof"]),
                                                             "stopped": json.loads(str(res["stopped"])),
                                                             "branches": s3.load_branch3d(res)})
+    if args.shear3d_squeeze:
+        from layerskin_exp.sim.fem_reference import shear3d as s3
+
+        t0 = time.time()
+        _write_study((args.out or DATA) / "shear3d_squeeze.json", t0, s3.squeeze3d(sim))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 

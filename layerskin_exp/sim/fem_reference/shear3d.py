@@ -435,8 +435,8 @@ class Stack3D:
     def line_z(self) -> dict:
         """The planes read: the sheets' mid-planes (what each layer's FSR reads), the lattice's
         base (interface), the model's base, and the superficial sheet's two faces (its top, under
-        the cover, and its bottom, on the lattice: a sandwich's soft core reads their mean, which
-        the merged homogeneous sheet's mid-plane need not)."""
+        the cover, and its bottom, on the lattice: the mid-plane reads their mean plus the squeeze
+        of the sheet's bending couple along its curvature, `squeeze3d`)."""
         mid = {k: 0.5 * sum(self.layer_z[k]) for k in ("sheet", "deep_sheet")}
         return {"superficial": mid["sheet"], "deep": mid["deep_sheet"], "interface": self.layer_z["lattice"][0], "base": 0.0,
                 "sheet_top": self.layer_z["sheet"][1], "sheet_bottom": self.layer_z["sheet"][0]}
@@ -982,3 +982,98 @@ def load_branch_rows(sim, tolerances: dict, data: Path = DATA, model_hook=None) 
                 kind, lo, hi = "difference", -tolerances["difference"][metric], tolerances["difference"][metric]
             rows.append(Comparison("3D", metric, f"{b}, hemisphere", fem_value, fast_value, kind, lo, hi))
     return rows
+
+
+def _sheet_squeeze(fe: Stack3D, u0: np.ndarray, u: np.ndarray) -> dict:
+    """The films' squeeze of the superficial core, from the sheet's own deflection at a state `u`
+    (its press `u0`), and the first moments it puts on the mid-plane.
+
+    A bonded sheet carries its bending moment M as a membrane couple, -+ M / d in its upper and
+    lower half (d the lever between them); a membrane force along the curved sheet presses on what
+    lies under or over it, so the mid-plane reads the faces' mean plus -div(M grad w) / d (w
+    positive down, M = D [(1 - nu) kappa + nu tr(kappa) I], kappa = -grad grad w). For the merged
+    sheet D is its bending rigidity and d = 2t / 3, the lever between its half-thickness stress
+    blocks (a film/core/film laminate's is the films' separation, 0.143 mm against 0.124 here).
+    By the divergence theorem the squeeze's first moment about x is int (M grad w)_x dA / d.
+    Finite differences on the mid-plane's node grid, mirrored across y = 0. Returns that moment
+    (N mm, the half-model's) from the cross terms of the press's and the shear's deflections
+    (the press's own term has none by symmetry), the same with the press's moment against the
+    shear deflection's best-fitting tilt across the pad alone, and that tilt's slope."""
+    sec = fe.sec
+    t = 2 * sec.film_mm + sec.core_mm
+    nu = 0.34
+    rigidity = merged_sheet_e_mpa(sec) * t ** 3 / (12 * (1 - nu ** 2))
+    lever = 2.0 * t / 3.0
+    nodes, w = fe.plane(fe.line_z()["superficial"])
+    xs, ix = np.unique(np.round(fe.points[nodes, 0], 9), return_inverse=True)
+    ys, iy = np.unique(np.round(fe.points[nodes, 1], 9), return_inverse=True)
+    yy = np.concatenate([-ys[:0:-1], ys])
+
+    def grid(v):
+        g = np.zeros((len(xs), len(ys)))
+        g[ix, iy] = v
+        return np.concatenate([g[:, :0:-1], g], axis=1)
+
+    def moment_and_slope(W):  # (second-order at the grid's ends too: exact for a quadratic field)
+        wx, wy = np.gradient(W, xs, yy, edge_order=2)
+        wxx, wxy = np.gradient(wx, xs, yy, edge_order=2)
+        wyy = np.gradient(wy, yy, axis=1, edge_order=2)
+        m = (rigidity * (-wxx - nu * wyy), rigidity * (-wyy - nu * wxx), rigidity * (1 - nu) * -wxy)
+        return m, (wx, wy)
+
+    def trapezoid(v):  # each node's share of its line (half an interval at the ends)
+        share = np.gradient(v)
+        share[0], share[-1] = 0.5 * (v[1] - v[0]), 0.5 * (v[-1] - v[-2])
+        return share
+
+    area = np.outer(trapezoid(xs), trapezoid(yy))
+
+    def first(m, g):  # int (M grad w)_x dA / d over the half (the divergence theorem's moment)
+        return 0.5 * float(((m[0] * g[0] + m[2] * g[1]) * area).sum()) / lever
+
+    w_press, w_now = grid(-u0[nodes, 2]), grid(-u[nodes, 2])
+    shear = w_now - w_press
+    m0, g0 = moment_and_slope(w_press)
+    m1, g1 = moment_and_slope(shear)
+    slope = float((shear * xs[:, None] * area).sum() / ((xs[:, None] ** 2 + 0 * yy[None]) * area).sum())
+    tilt = slope * xs[:, None] + 0 * yy[None]
+    mt, gt = moment_and_slope(tilt)
+    return {"cross_terms": first(m0, g1) + first(m1, g0) + first(m1, g1), "tilt_term": first(m0, gt),
+            "tilt_slope": slope}
+
+
+def squeeze3d(sim, depth: float = SHEAR_FROM_MM[0], travels=(0.45, 0.832), log=print) -> dict:
+    """The 3D model's mid-plane reading against its faces' mean and the films' squeeze: the
+    committed mesh pressed to `depth` (frictionless) and sheared sticking to each of `travels`
+    (mm of cap travel); per state the force CoP (sheet's frame, x) of the mid-plane, of the faces'
+    mean and of that mean plus the squeeze's first moment (`_sheet_squeeze`), and the share of the
+    squeeze's moment that the sheet's tilt across the pad gives."""
+    sec = Section.from_sim(sim)
+    fe = Stack3D(sec, x_edges=X_EDGES_MM, y_edges=Y_EDGES_MM)
+    top = fe.height_mm + sec.radius_mm
+    fe.move_to(np.array([0.0, 0.0, top - depth]), sticking=False, step_mm=0.1)
+    u0, centre = fe.u.copy(), fe.centre.copy()
+    fe.stick_all_in_contact()
+    lines = fe.line_z()
+    out = {"depth_mm": depth, "states": []}
+    for travel in travels:
+        fe.move_to(np.array([travel, 0.0, centre[2]]), sticking=True, step_mm=SHEAR_STEP_MM)
+        st = fe.state()
+        maps = {k: fe.transmitted(lines[k]) for k in ("superficial", "sheet_top", "sheet_bottom")}
+        x = fe.points[maps["superficial"][0], 0]
+        fz_half = float(maps["superficial"][2][:, 2].sum())
+
+        def cop(g, x=x):
+            return float((x * g).sum() / g.sum())
+
+        mid = maps["superficial"][2][:, 2]
+        faces = 0.5 * (maps["sheet_top"][2][:, 2] + maps["sheet_bottom"][2][:, 2])
+        sq = _sheet_squeeze(fe, u0, fe.u)
+        row = {"cap_travel_mm": travel, "fz_n": st["fz_n"], "fx_n": st["fx_n"], "cop_mid_plane_mm": cop(mid),
+               "cop_faces_mean_mm": cop(faces), "mid_plane_excess_mm": float((x * (mid - faces)).sum()) / fz_half,
+               "squeeze_closed_form_mm": sq["cross_terms"] / fz_half,
+               "squeeze_from_tilt_mm": sq["tilt_term"] / fz_half, "sheet_tilt_slope": sq["tilt_slope"]}
+        row["cop_faces_mean_plus_squeeze_mm"] = row["cop_faces_mean_mm"] + row["squeeze_closed_form_mm"]
+        log(f"  3D squeeze at travel {travel:.3f} mm: " + ", ".join(f"{k} {v:.4g}" for k, v in row.items()))
+        out["states"].append(row)
+    return out

@@ -20,8 +20,9 @@ superficial and the deep count-CoP travel from the press (each layer in its own 
 the change of the inter-layer count shift. Reported beside them, not gated: the deep force CoP's
 travel against its own statics, x_cap + F_x H / F_z - x_cap,0 on each side, and the effective
 height F_z dc / F_t; where the 3D data carry the superficial sheet's two faces, the superficial
-count-CoP travel and the inter-layer shift read from their mean (what a sandwich's soft core
-reads, shear3d.Stack3D.line_z) beside the fast superficial reading.
+count-CoP travel and the inter-layer shift read from their mean (the bonded core's reading less
+the films' squeeze, which the mid-plane carries: shear3d.Stack3D.line_z, shear3d.squeeze3d)
+beside the fast superficial reading, which is that mean too (contact.build_tables).
 
 `python -m layerskin_exp.sim.fem_reference.yardstick3d` prints the table.
 """
@@ -112,7 +113,7 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     counts, faces = [], []
     peak_deep = []
     # the superficial sheet's two faces where the data have them (shear3d.Stack3D.line_z): the
-    # mean of the cover's and the lattice's pressure on it, what a sandwich's soft core reads
+    # mean of the cover's and the lattice's pressure on it: the core's reading less the films' squeeze
     has_faces = "sheet_top_kpa" in res
     if has_faces:
         on_faces = {**res, "superficial_xy_mm": res["sheet_top_xy_mm"], "superficial_w_mm2": res["sheet_top_w_mm2"]}
