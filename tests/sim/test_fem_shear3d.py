@@ -616,8 +616,9 @@ def test_the_committed_squeeze_study_accounts_for_the_mid_planes_excess():
     import json
 
     study = json.loads((s3.DATA / "shear3d_squeeze.json").read_text())
-    assert len(study["states"]) == 2
-    for st in study["states"]:
+    states = [st for branch in study["branches"] for st in branch["states"]]
+    assert len(states) == sum(len(t) for t in s3.SQUEEZE_BRANCHES.values())
+    for st in states:
         excess = st["mid_plane_excess_mm"]
         assert excess > 0.15 * st["cop_faces_mean_mm"]
         # (each CoP over its own plane's load: the planes carry F_z alike within the balance's 1e-4)

@@ -377,9 +377,9 @@ def main(argv=None) -> int:
                          "(shear3d.STIFF_COVER_KPA, a Dragon Skin / Sil-Poxy class silicone): "
                          "reference/shear3d_stiff_cover.npz and .json, the yardstick's second design")
     ap.add_argument("--shear3d-squeeze", action="store_true",
-                    help="the 3D model's 0.3 mm branch on the committed mesh, its mid-plane reading against its "
+                    help="the 3D model's 0.3 and 0.6 mm branches on the committed mesh, their mid-plane reading against its "
                          "faces' mean and the films' squeeze from its own deflection (shear3d.squeeze3d): "
-                         "reference/shear3d_squeeze.json, ~2 min")
+                         "reference/shear3d_squeeze.json, ~8 min")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")

@@ -1042,7 +1042,17 @@ def _sheet_squeeze(fe: Stack3D, u0: np.ndarray, u: np.ndarray) -> dict:
             "tilt_slope": slope}
 
 
-def squeeze3d(sim, depth: float = SHEAR_FROM_MM[0], travels=(0.45, 0.832), log=print) -> dict:
+# the squeeze study's branches (`squeeze3d`): press depth (mm) -> cap travels (mm), the last of each
+# near where the committed run's branch reached F_t / F_z = 1/3 (0.83 mm) or its furthest (1.70 mm)
+SQUEEZE_BRANCHES = {0.3: (0.45, 0.832), 0.6: (0.65, 1.15, 1.65)}
+
+
+def squeeze3d(sim, branches: dict = SQUEEZE_BRANCHES, log=print) -> dict:
+    """`squeeze_branch3d` for each press depth of `branches` (its cap travels)."""
+    return {"branches": [squeeze_branch3d(sim, depth, travels, log) for depth, travels in branches.items()]}
+
+
+def squeeze_branch3d(sim, depth: float, travels, log=print) -> dict:
     """The 3D model's mid-plane reading against its faces' mean and the films' squeeze: the
     committed mesh pressed to `depth` (frictionless) and sheared sticking to each of `travels`
     (mm of cap travel); per state the force CoP (sheet's frame, x) of the mid-plane, of the faces'
@@ -1051,12 +1061,17 @@ def squeeze3d(sim, depth: float = SHEAR_FROM_MM[0], travels=(0.45, 0.832), log=p
     sec = Section.from_sim(sim)
     fe = Stack3D(sec, x_edges=X_EDGES_MM, y_edges=Y_EDGES_MM)
     top = fe.height_mm + sec.radius_mm
-    fe.move_to(np.array([0.0, 0.0, top - depth]), sticking=False, step_mm=0.1)
+    # the committed run's path (run_shear3d): pressed through the shallower branches' depths, then
+    # sheared through its first advance (Newton's contact sets depend on the path)
+    for d in [d for d in SHEAR_FROM_MM if d < depth] + [depth]:
+        fe.move_to(np.array([0.0, 0.0, top - d]), sticking=False, step_mm=0.1)
     u0, centre = fe.u.copy(), fe.centre.copy()
     fe.stick_all_in_contact()
     lines = fe.line_z()
     out = {"depth_mm": depth, "states": []}
     for travel in travels:
+        if fe.centre[0] < 0.15 < travel:
+            fe.move_to(np.array([0.15, 0.0, centre[2]]), sticking=True, step_mm=SHEAR_STEP_MM)
         fe.move_to(np.array([travel, 0.0, centre[2]]), sticking=True, step_mm=SHEAR_STEP_MM)
         st = fe.state()
         maps = {k: fe.transmitted(lines[k]) for k in ("superficial", "sheet_top", "sheet_bottom")}
@@ -1074,6 +1089,11 @@ def squeeze3d(sim, depth: float = SHEAR_FROM_MM[0], travels=(0.45, 0.832), log=p
                "squeeze_closed_form_mm": sq["cross_terms"] / fz_half,
                "squeeze_from_tilt_mm": sq["tilt_term"] / fz_half, "sheet_tilt_slope": sq["tilt_slope"]}
         row["cop_faces_mean_plus_squeeze_mm"] = row["cop_faces_mean_mm"] + row["squeeze_closed_form_mm"]
+        # a rigid pad rocking on the lattice (E3 / h per area, the square pad's second moment
+        # L^4 / 12) under the load's moment about the pad's centre at the deep plane
+        k = sec.honeycomb_moduli_kpa()[0] * KPA / sec.lattice_mm
+        moment = st["fz_n"] * st["load_x_mm"] + st["fx_n"] * (st["load_height_mm"] - lines["deep"])
+        row["rigid_rocking_slope"] = 12.0 * moment / (k * sec.width_mm ** 4)
         log(f"  3D squeeze at travel {travel:.3f} mm: " + ", ".join(f"{k} {v:.4g}" for k, v in row.items()))
         out["states"].append(row)
     return out
