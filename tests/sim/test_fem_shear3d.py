@@ -624,3 +624,44 @@ def test_the_committed_squeeze_study_accounts_for_the_mid_planes_excess():
         # (each CoP over its own plane's load: the planes carry F_z alike within the balance's 1e-4)
         assert st["cop_mid_plane_mm"] == pytest.approx(st["cop_faces_mean_mm"] + excess, abs=1e-3)
         assert st["squeeze_closed_form_mm"] == pytest.approx(excess, rel=0.25)
+
+
+def _diagonal_study() -> dict:
+    import json
+
+    return json.loads((s3.DATA / "shear3d_diagonal.json").read_text())
+
+
+def test_the_whole_pad_is_the_half_model_doubled():
+    """reference/shear3d_diagonal.json (`--shear3d-diagonal`): the whole pad sheared along x
+    carries the half-model's force at the same travel (the committed 0.3 mm branch, interpolated),
+    and every layer carries F_z."""
+    study = _diagonal_study()
+    res = dict(np.load(s3.DATA / "shear3d.npz"))
+    on = (res["phase"] == 1) & np.isclose(res["branch_depth_mm"], study["depth_mm"])
+    half_fx = np.interp(s3.DIAGONAL_TRAVEL_MM, res["cap_x_mm"][on], res["fx_n"][on])
+    along_x = study["branches"]["along x"]
+    assert along_x["ft_n"]["along"] == pytest.approx(half_fx, rel=s3.DIAGONAL_TOL)
+    for branch in study["branches"].values():
+        for balance in branch["balance"].values():
+            assert balance == pytest.approx(1.0, abs=s3.BALANCE_TOL)
+
+
+@pytest.mark.xfail(strict=True, reason="measured: along the diagonal the tangential force is 11.5 % above the axial "
+                   "one at the same travel (0.1170 against 0.1049 N) and the deep CoP travels 0.105 mm further; F_z "
+                   "(+3.4 %), the superficial CoP (+0.04 mm) and the sheet (+0.02 mm) agree. The committed mesh's "
+                   "0.5 mm elements under the cap; its refinement on the whole pad is not solved")
+def test_the_homogenised_lattice_answers_a_diagonal_shear_as_an_axial_one():
+    """The same travel along the diagonal and along x from one press: the tangential force and F_z
+    within DIAGONAL_TOL, each layer's CoP travel and the sheet's within DIAGONAL_POS_TOL_MM, and
+    nothing across the shear (the transversely isotropic lattice, the square pad's symmetry)."""
+    study = _diagonal_study()
+    diff = study["diagonal_minus_x"]
+    assert abs(diff["ft_relative"]) <= s3.DIAGONAL_TOL
+    assert abs(diff["fz_relative"]) <= s3.DIAGONAL_TOL
+    for k in ("superficial_cop_travel_mm", "deep_cop_travel_mm", "sheet_travel_mm"):
+        assert abs(diff[k]) <= s3.DIAGONAL_POS_TOL_MM
+    for branch in study["branches"].values():
+        assert abs(branch["ft_n"]["across"]) <= s3.DIAGONAL_TOL * branch["ft_n"]["along"]
+        for k in ("superficial_cop_travel_mm", "deep_cop_travel_mm", "sheet_travel_mm"):
+            assert abs(branch[k]["across"]) <= s3.DIAGONAL_POS_TOL_MM

@@ -380,6 +380,9 @@ def main(argv=None) -> int:
                     help="the 3D model's 0.3 and 0.6 mm branches on the committed mesh, their mid-plane reading against its "
                          "faces' mean and the films' squeeze from its own deflection (shear3d.squeeze3d): "
                          "reference/shear3d_squeeze.json, ~8 min")
+    ap.add_argument("--shear3d-diagonal", action="store_true",
+                    help="the whole pad pressed to 0.3 mm and sheared along x and along the diagonal (shear3d.diagonal3d): "
+                         "reference/shear3d_diagonal.json")
     ap.add_argument("--alignments", action="store_true",
                     help="the section with the cap pressed in at alignment.ALIGN_X0_MM from the centre wall "
                          "(reference/alignment/x0_*.npz): a campaign presses at every alignment")
@@ -402,7 +405,7 @@ def main(argv=None) -> int:
     sim = load_sim([])
     if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
             or args.alignments or args.shear3d_through_thickness or args.cover_poisson or args.shear3d_load_branch
-            or args.stiff_cover or args.shear3d_squeeze
+            or args.stiff_cover or args.shear3d_squeeze or args.shear3d_diagonal
             or args.homogenised_refinement):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
@@ -521,6 +524,11 @@ def main(argv=None) -> int:
 
         t0 = time.time()
         _write_study((args.out or DATA) / "shear3d_squeeze.json", t0, s3.squeeze3d(sim))
+    if args.shear3d_diagonal:
+        from layerskin_exp.sim.fem_reference import shear3d as s3
+
+        t0 = time.time()
+        _write_study((args.out or DATA) / "shear3d_diagonal.json", t0, s3.diagonal3d(sim))
     if args.refinement or args.convergence_only:
         from layerskin_exp.sim.fem_reference.convergence import write_convergence
 

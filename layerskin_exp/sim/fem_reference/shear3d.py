@@ -166,8 +166,12 @@ def stack(sec: Section, elements: dict | None = None) -> list[tuple[str, float, 
 class Stack3D:
     """The half-model, its bodies and a Newton solver with the sphere's contact."""
 
-    def __init__(self, sec: Section, penalty: float = 50.0, x_edges=None, y_edges=None, elements: dict | None = None):
+    def __init__(self, sec: Section, penalty: float = 50.0, x_edges=None, y_edges=None, elements: dict | None = None,
+                 symmetric: bool = True):
+        """symmetric: the half-model y >= 0 with u_y = 0 on y = 0 (forces reported twice the
+        half's); False: the whole pad (y_edges then span it), for loads off the x axis."""
         self.sec = sec
+        self.copies = 2 if symmetric else 1
         layers = stack(sec, elements)
         self.elements = {name: n for name, _, n in layers}
         half = 0.5 * sec.width_mm
@@ -198,7 +202,8 @@ class Stack3D:
         self.u = np.zeros((n, 3))
         fixed = np.zeros((n, 3), bool)
         fixed[np.isclose(pts[:, 2], 0.0)] = True
-        fixed[np.isclose(pts[:, 1], 0.0), 1] = True
+        if symmetric:
+            fixed[np.isclose(pts[:, 1], 0.0), 1] = True
         self.free = np.flatnonzero(~fixed.ravel())
         top, w = self.plane(self.height_mm)
         self.contact = CapContact(top, w, sec.radius_mm, penalty, dim=3)
@@ -445,7 +450,7 @@ class Stack3D:
         """The whole skin's forces (twice the half's; F_z > 0 compressive), contact and per-layer
         pressure maps (kPa) at the current equilibrium."""
         _, _, f, normal = self._system()
-        fx, fz = 2 * float(f[:, 0].sum()), -2 * float(f[:, 2].sum())
+        fx, fz = self.copies * float(f[:, 0].sum()), -self.copies * float(f[:, 2].sum())
         c = self.contact
         x_top = self.points[c.nodes] + self.u[c.nodes]
         on = normal > 1e-9
@@ -1097,3 +1102,79 @@ def squeeze_branch3d(sim, depth: float, travels, log=print) -> dict:
         log(f"  3D squeeze at travel {travel:.3f} mm: " + ", ".join(f"{k} {v:.4g}" for k, v in row.items()))
         out["states"].append(row)
     return out
+
+
+# The diagonal branch (`--shear3d-diagonal`): the whole pad (no symmetry plane), the committed
+# mesh's edges in x and mirrored in y (the same edges, so the mesh is symmetric about the pad's
+# diagonal), pressed to DIAGONAL_DEPTH_MM and sheared sticking by DIAGONAL_TRAVEL_MM along x and
+# along the diagonal (each from the same press). The homogenised lattice is transversely isotropic,
+# so the two must answer alike up to the square pad's shape; judged within DIAGONAL_TOL (relative,
+# forces) and DIAGONAL_POS_TOL_MM (travels), fixed before the branch was first solved.
+DIAGONAL_DEPTH_MM = SHEAR_FROM_MM[0]
+DIAGONAL_TRAVEL_MM = 0.832  # where the half-model's 0.3 mm branch reaches F_x / F_z = 1/3
+DIAGONAL_TOL = 0.05
+DIAGONAL_POS_TOL_MM = 0.1
+
+
+def diagonal3d(sim, depth: float = DIAGONAL_DEPTH_MM, travel: float = DIAGONAL_TRAVEL_MM, log=print) -> dict:
+    """Along x and along the diagonal, from one press: the tangential force along and across the
+    shear, F_z, each layer's force-CoP travel from the press (the sheet's frame) and the sheet's
+    travel under the cap, along and across; each layer's balance 2 sum(p A) / F_z (here sum)."""
+    sec = Section.from_sim(sim)
+    y_edges = tuple(sorted({-y for y in Y_EDGES_MM} | set(Y_EDGES_MM)))
+    fe = Stack3D(sec, x_edges=X_EDGES_MM, y_edges=y_edges, symmetric=False)
+    log(f"  3D whole pad: {len(fe.cells)} hex27, {len(fe.free)} free DOF")
+    top = fe.height_mm + sec.radius_mm
+    t0 = time.time()
+    fe.move_to(np.array([0.0, 0.0, top - depth]), sticking=False, step_mm=0.1)
+    press, centre = fe.snapshot(), fe.centre.copy()
+    lines = {k: fe.line_z()[k] for k in ("superficial", "deep")}
+
+    def read() -> dict:
+        _, _, f, _ = fe._system()
+        force = -f.sum(axis=0)  # on the skin: F_z > 0 compressive, the tangential along the cap's motion
+        force[:2] *= -1.0
+        out = {"f_n": force.tolist()}
+        for name, z in lines.items():
+            nodes, _, g = fe.transmitted(z)
+            xy = fe.points[nodes, :2]
+            out[f"{name}_cop_mm"] = ((xy * g[:, 2:3]).sum(axis=0) / g[:, 2].sum()).tolist()
+            out[f"{name}_balance"] = float(g[:, 2].sum() / force[2])
+        sheet = fe.plane(lines["superficial"])[0]
+        near = sheet[np.hypot(*fe.points[sheet, :2].T) < 1.0]
+        out["sheet_travel_mm"] = fe.u[near, :2].mean(axis=0).tolist()
+        return out
+
+    at_press = read()
+    log(f"  3D whole pad pressed to {depth} mm: F {np.round(at_press['f_n'], 4)} ({time.time() - t0:.0f} s)")
+    branches = {}
+    for name, angle in (("along x", 0.0), ("diagonal", 45.0)):
+        fe.restore(press)
+        fe.stick_all_in_contact()
+        e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+        for d in (0.15, travel):
+            fe.move_to(centre + np.array([*(d * e), 0.0]), sticking=True, step_mm=SHEAR_STEP_MM)
+        st = read()
+        across = np.array([-e[1], e[0]])
+
+        def split(v, at_press_v=None, e=e, across=across):
+            v = np.asarray(v) - (0.0 if at_press_v is None else np.asarray(at_press_v))
+            return {"along": float(v @ e), "across": float(v @ across)}
+
+        branches[name] = {"angle_deg": angle, "travel_mm": travel, "fz_n": st["f_n"][2],
+                          "ft_n": split(st["f_n"][:2]),
+                          "superficial_cop_travel_mm": split(st["superficial_cop_mm"], at_press["superficial_cop_mm"]),
+                          "deep_cop_travel_mm": split(st["deep_cop_mm"], at_press["deep_cop_mm"]),
+                          "sheet_travel_mm": split(st["sheet_travel_mm"]),
+                          "balance": {k: st[f"{k}_balance"] for k in lines}}
+        b = branches[name]
+        log(f"  3D whole pad sheared {name}: F_t {b['ft_n']}, F_z {b['fz_n']:.4f}, superficial CoP "
+            f"{b['superficial_cop_travel_mm']}, deep {b['deep_cop_travel_mm']}, sheet {b['sheet_travel_mm']} "
+            f"({time.time() - t0:.0f} s)")
+    a, d = branches["along x"], branches["diagonal"]
+    diff = {"ft_relative": d["ft_n"]["along"] / a["ft_n"]["along"] - 1.0,
+            "fz_relative": d["fz_n"] / a["fz_n"] - 1.0,
+            **{k: d[k]["along"] - a[k]["along"] for k in ("superficial_cop_travel_mm", "deep_cop_travel_mm",
+                                                          "sheet_travel_mm")}}
+    return {"depth_mm": depth, "dof": int(len(fe.free)), "press": at_press, "branches": branches,
+            "diagonal_minus_x": diff, "tol": DIAGONAL_TOL, "pos_tol_mm": DIAGONAL_POS_TOL_MM}
