@@ -447,7 +447,7 @@ class Stack3D:
                 "sheet_top": self.layer_z["sheet"][1], "sheet_bottom": self.layer_z["sheet"][0]}
 
     def state(self) -> dict:
-        """The whole skin's forces (twice the half's; F_z > 0 compressive), contact and per-layer
+        """The whole skin's forces (the half's times `copies`; F_z > 0 compressive), contact and per-layer
         pressure maps (kPa) at the current equilibrium."""
         _, _, f, normal = self._system()
         fx, fz = self.copies * float(f[:, 0].sum()), -self.copies * float(f[:, 2].sum())
@@ -1009,7 +1009,7 @@ def _sheet_squeeze(fe: Stack3D, u0: np.ndarray, u: np.ndarray) -> dict:
     nu = 0.34
     rigidity = merged_sheet_e_mpa(sec) * t ** 3 / (12 * (1 - nu ** 2))
     lever = 2.0 * t / 3.0
-    nodes, w = fe.plane(fe.line_z()["superficial"])
+    nodes = fe.plane(fe.line_z()["superficial"])[0]
     xs, ix = np.unique(np.round(fe.points[nodes, 0], 9), return_inverse=True)
     ys, iy = np.unique(np.round(fe.points[nodes, 1], 9), return_inverse=True)
     yy = np.concatenate([-ys[:0:-1], ys])
@@ -1040,9 +1040,9 @@ def _sheet_squeeze(fe: Stack3D, u0: np.ndarray, u: np.ndarray) -> dict:
     shear = w_now - w_press
     m0, g0 = moment_and_slope(w_press)
     m1, g1 = moment_and_slope(shear)
-    slope = float((shear * xs[:, None] * area).sum() / ((xs[:, None] ** 2 + 0 * yy[None]) * area).sum())
-    tilt = slope * xs[:, None] + 0 * yy[None]
-    mt, gt = moment_and_slope(tilt)
+    # the best-fitting tilt w = slope x: its gradient is (slope, 0) everywhere, its moment nil
+    slope = float((shear * xs[:, None] * area).sum() / (xs[:, None] ** 2 * area).sum())
+    gt = (np.full_like(shear, slope), np.zeros_like(shear))
     return {"cross_terms": first(m0, g1) + first(m1, g0) + first(m1, g1), "tilt_term": first(m0, gt),
             "tilt_slope": slope}
 
@@ -1073,6 +1073,8 @@ def squeeze_branch3d(sim, depth: float, travels, log=print) -> dict:
     u0, centre = fe.u.copy(), fe.centre.copy()
     fe.stick_all_in_contact()
     lines = fe.line_z()
+    # a rigid pad rocking on the lattice (E3 / h per area, the square pad's second moment L^4 / 12)
+    rocking = sec.honeycomb_moduli_kpa()[0] * KPA / sec.lattice_mm * sec.width_mm ** 4 / 12.0
     out = {"depth_mm": depth, "states": []}
     for travel in travels:
         if fe.centre[0] < 0.15 < travel:
@@ -1094,12 +1096,10 @@ def squeeze_branch3d(sim, depth: float, travels, log=print) -> dict:
                "squeeze_closed_form_mm": sq["cross_terms"] / fz_half,
                "squeeze_from_tilt_mm": sq["tilt_term"] / fz_half, "sheet_tilt_slope": sq["tilt_slope"]}
         row["cop_faces_mean_plus_squeeze_mm"] = row["cop_faces_mean_mm"] + row["squeeze_closed_form_mm"]
-        # a rigid pad rocking on the lattice (E3 / h per area, the square pad's second moment
-        # L^4 / 12) under the load's moment about the pad's centre at the deep plane
-        k = sec.honeycomb_moduli_kpa()[0] * KPA / sec.lattice_mm
+        # under the load's moment about the pad's centre at the deep plane
         moment = st["fz_n"] * st["load_x_mm"] + st["fx_n"] * (st["load_height_mm"] - lines["deep"])
-        row["rigid_rocking_slope"] = 12.0 * moment / (k * sec.width_mm ** 4)
-        log(f"  3D squeeze at travel {travel:.3f} mm: " + ", ".join(f"{k} {v:.4g}" for k, v in row.items()))
+        row["rigid_rocking_slope"] = moment / rocking
+        log(f"  3D squeeze at travel {travel:.3f} mm: " + ", ".join(f"{n} {v:.4g}" for n, v in row.items()))
         out["states"].append(row)
     return out
 
@@ -1131,7 +1131,8 @@ def diagonal3d(sim, depth: float = DIAGONAL_DEPTH_MM, travel: float = DIAGONAL_T
     lines = {k: fe.line_z()[k] for k in ("superficial", "deep")}
 
     def read() -> dict:
-        _, _, f, _ = fe._system()
+        c = fe.contact
+        f = c.forces(fe.points[c.nodes] + fe.u[c.nodes], fe.centre)[0]  # (not the whole tangent: _system)
         force = -f.sum(axis=0)  # on the skin: F_z > 0 compressive, the tangential along the cap's motion
         force[:2] *= -1.0
         out = {"f_n": force.tolist()}
