@@ -13,6 +13,8 @@
     python -m layerskin_exp.sim.fem_reference --shear3d-load-branch  # the 3D branch at 3 N with a cover
         # that keeps its volume, pressed sticking, on the refined mesh (shear3d_load_branch.npz):
         # its tangential stiffness beside a closed form, shear3d_load_branch.json
+    python -m layerskin_exp.sim.fem_reference --shear3d-mid-branch  # the same recipe at 0.83 N
+        # (shear3d_mid_branch.npz and .json), the yardstick's middle state
     python -m layerskin_exp.sim.fem_reference --cover-poisson 0.499  # the section with a less
         # compressible cover (cover_poisson/): cover_compressibility.json
     python -m layerskin_exp.sim.fem_reference --homogenised-lattice  # the section with its lattice
@@ -372,12 +374,15 @@ def main(argv=None) -> int:
                     help="the 3D model pressed to the study's load with shear3d.LOAD_BRANCH's cover, contact and mesh "
                          "and sheared sticking (reference/shear3d_load_branch.npz): its tangential stiffness beside the "
                          "series closed form, reference/shear3d_load_branch.json")
+    ap.add_argument("--shear3d-mid-branch", action="store_true",
+                    help="the load branch's recipe at 0.83 N (shear3d.MID_BRANCH): reference/shear3d_mid_branch.npz "
+                         "and .json, the yardstick's middle state")
     ap.add_argument("--stiff-cover", action="store_true",
                     help="the load branch again for the design at the stiff end of the cover's bracket "
                          "(shear3d.STIFF_COVER_KPA, a Dragon Skin / Sil-Poxy class silicone): "
                          "reference/shear3d_stiff_cover.npz and .json, the yardstick's second design")
     ap.add_argument("--shear3d-squeeze", action="store_true",
-                    help="the 3D model's 0.3 and 0.6 mm branches on the committed mesh, their mid-plane reading against its "
+                    help="the 3D model's 0.3 mm branch on the committed mesh, its mid-plane reading against its "
                          "faces' mean and the films' squeeze from its own deflection (shear3d.squeeze3d): "
                          "reference/shear3d_squeeze.json, ~8 min")
     ap.add_argument("--shear3d-diagonal", action="store_true",
@@ -405,7 +410,7 @@ def main(argv=None) -> int:
     sim = load_sim([])
     if not (args.convergence_only or args.axisymmetric or args.shear3d or args.shear3d_refinement or args.homogenised_lattice
             or args.alignments or args.shear3d_through_thickness or args.cover_poisson or args.shear3d_load_branch
-            or args.stiff_cover or args.shear3d_squeeze or args.shear3d_diagonal
+            or args.stiff_cover or args.shear3d_mid_branch or args.shear3d_squeeze or args.shear3d_diagonal
             or args.homogenised_refinement):
         meshes = tuple(MESHES) if args.refinement else (args.mesh,)
         for mesh in meshes:
@@ -508,6 +513,15 @@ def main(argv=None) -> int:
         from layerskin_exp.sim.fem_reference.compare import load_tolerances, table
 
         print(table(s3.load_branch_rows(sim, load_tolerances(), out)))  # the fast model beside it (not gated)
+    if args.shear3d_mid_branch:
+        from layerskin_exp.sim.fem_reference import shear3d as s3
+
+        t0 = time.time()
+        out = args.out or DATA
+        res = s3.run_shear3d(sim, depths=(), **s3.MID_BRANCH)
+        np.savez_compressed(out / "shear3d_mid_branch.npz", **res)
+        _write_study(out / "shear3d_mid_branch.json", t0, {"dof": int(res["dof"]), "stopped": json.loads(str(res["stopped"])),
+                                                           "branches": s3.load_branch3d(res)})
     if args.stiff_cover:
         from layerskin_exp.sim.fem_reference import shear3d as s3
 
