@@ -501,27 +501,23 @@ def main(argv=None) -> int:
             np.savez_compressed(out / "refinement" / f"shear3d_{name}.npz", **by_name[name])
         _write_study(out / "shear3d_through_thickness.json", t0,
                      s3.through_thickness3d(dict(np.load(out / "shear3d.npz")), by_name, sim, data=out))
+    for wanted, recipe, name in ((args.shear3d_load_branch, "LOAD_BRANCH", "shear3d_load_branch"),
+                                 (args.shear3d_mid_branch, "MID_BRANCH", "shear3d_mid_branch")):
+        if not wanted:
+            continue
+        from layerskin_exp.sim.fem_reference import shear3d as s3
+
+        t0 = time.time()
+        out = args.out or DATA
+        res = s3.run_shear3d(sim, depths=(), **getattr(s3, recipe))
+        np.savez_compressed(out / f"{name}.npz", **res)
+        _write_study(out / f"{name}.json", t0, {"dof": int(res["dof"]), "stopped": json.loads(str(res["stopped"])),
+                                                "branches": s3.load_branch3d(res)})
     if args.shear3d_load_branch:
         from layerskin_exp.sim.fem_reference import shear3d as s3
-
-        t0 = time.time()
-        out = args.out or DATA
-        res = s3.run_shear3d(sim, depths=(), **s3.LOAD_BRANCH)
-        np.savez_compressed(out / "shear3d_load_branch.npz", **res)
-        _write_study(out / "shear3d_load_branch.json", t0, {"dof": int(res["dof"]), "stopped": json.loads(str(res["stopped"])),
-                                                            "branches": s3.load_branch3d(res)})
         from layerskin_exp.sim.fem_reference.compare import load_tolerances, table
 
-        print(table(s3.load_branch_rows(sim, load_tolerances(), out)))  # the fast model beside it (not gated)
-    if args.shear3d_mid_branch:
-        from layerskin_exp.sim.fem_reference import shear3d as s3
-
-        t0 = time.time()
-        out = args.out or DATA
-        res = s3.run_shear3d(sim, depths=(), **s3.MID_BRANCH)
-        np.savez_compressed(out / "shear3d_mid_branch.npz", **res)
-        _write_study(out / "shear3d_mid_branch.json", t0, {"dof": int(res["dof"]), "stopped": json.loads(str(res["stopped"])),
-                                                           "branches": s3.load_branch3d(res)})
+        print(table(s3.load_branch_rows(sim, load_tolerances(), args.out or DATA)))  # the fast model beside it (not gated)
     if args.stiff_cover:
         from layerskin_exp.sim.fem_reference import shear3d as s3
 

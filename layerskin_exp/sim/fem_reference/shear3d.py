@@ -27,7 +27,8 @@ What is modelled (lengths mm, stresses MPa, forces N):
   node whose tie pulls (tension) is released only on the stuck patch's edge, then slides
   (frictionless) until it lifts off or the step ends.
 
-Where the 3D branches stop (measured 2026-11-27, coarse mesh; the figures in the closing note):
+Where the 3D branches stop (measured with the sheet's earlier bending stiffness, twice the
+laminate's; with the laminate's the frictionless press stalls past 0.4 mm, MID_BRANCH):
 the cover's neo-Hooke holds a volume change with K / 2 (J - 1)^2, K = E / 3(1 - 2 nu) = 0.58 MPa
 at the simulator's nu 0.49, so it carries at most ~K of pressure and gives up its volume beyond.
 The section's cover keeps J >= 0.78 to 1.2 mm (its peak contact pressure 197 kPa); in 3D the cap's
@@ -42,11 +43,12 @@ own sensitivity to the cover's nu: `--cover-poisson` (cover_compressibility.json
 With such a cover (nu 0.499), pressed sticking on the refined mesh (LOAD_BRANCH,
 `--shear3d-load-branch`), the 3 N press holds (cover J >= 0.43) and shears, and it says why 1/3
 is out of reach at the study's load: the contact patch hardly grows with load (the membrane-stiff
-sheet sinks with the cap into the lattice; half-width 0.87 mm at 0.3 mm, 1.25 mm at 3 N), so the
+sheet sinks with the cap into the lattice; half-width 1.13 mm at 0.83 N and at 3 N), so the
 cap's tangential load reaches the sheet only through the cover's shear over that patch, in series
-with the lattice's shear over the pad (series_shear_stiffness, ~0.2 N/mm at 3 N). F_x / F_z = 1/3
-then needs several mm of cap travel and a mean cover shear strain over ten
-(shear3d_load_branch.json), far past where these elements (or the silicone) hold.
+with the lattice's shear over the pad (series_shear_stiffness, 0.175 N/mm at 3 N). F_x / F_z = 1/3
+then needs 5.7 mm of cap travel and a mean cover shear strain of 21 (shear3d_load_branch.json),
+far past where these elements (or the silicone) hold; the branch's Newton stops at 1.28 mm
+(F_x / F_z 0.081).
 
 Each layer's load is read as in the section: the internal forces of the elements above a node
 plane, at its nodes, over the nodes' tensor-Simpson areas. Every layer's sum must carry F_z
