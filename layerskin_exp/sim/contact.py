@@ -82,7 +82,8 @@ class ContactTables:
     height_mm: np.ndarray  # (n_delta,) height of the cover surface above the deep sensing plane
     lattice_compression_mm: np.ndarray  # (n_delta,) the lattice's compression under the contact
     # the cover between cap and sheet (laminate.PlateOnFoundation.flank): its tangential
-    # stiffness, traction over the contact plus the flank pressure on the sunk cap's slope, N/mm
+    # stiffness, the traction over the contact and what the flank pressure on the sunk cap's
+    # slope adds to it once the sheet's response and the slope's change are counted, N/mm
     # (rod: per mm); its torsional stiffness, traction only: hemisphere N mm/rad, rod the
     # traction's N/mm per mm^2 of contact, to be taken with the line's second moment
     cover_shear: np.ndarray  # (n_delta,)
@@ -192,8 +193,6 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     cover_shear = np.zeros(n_delta)
     cover_kc = np.zeros(n_delta)
     cover_torsion = np.zeros(n_delta)
-    contact_f = np.zeros((n_delta, n_x))
-    found_f = np.zeros((n_delta, n_x))
     w = eta = None
     centre = int(np.argmin(np.abs(x)))
     cover_e, cover_t = sim.cover.modulus_kpa, sim.cover.thickness_mm
@@ -215,11 +214,11 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         lattice_mm = h - comp[k, centre]
         resp = plate.couple(sol, lattice_mm / (sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + lattice_mm))
         contact1[k], found1[k] = resp.contact_kpa, resp.foundation_kpa
-        flank, k_cv = plate.flank(sol)
-        if k_cv > 0.0:
-            # per N of tangential load the cap moves 1 / k_cv relative to the sheet
-            contact_f[k], found_f[k] = flank.contact_kpa / k_cv, flank.foundation_kpa / k_cv
-        cover_shear[k] = k_cv
+        # the cap moving relative to the sheet: its stiffness. Its response is the solved state
+        # moved with the cap (first moment F_z per unit travel: tests/sim/test_cover_shear.py), which
+        # the frame pipeline carries by placing the patterns about the cap's point in the sheet's
+        # frame; adding it to the couple's tables counted that travel twice
+        _, cover_shear[k] = plate.flank(sol)
         touching = sol.contact_kpa > 0.0
         g_c = plate.cover_shear_n_per_mm3
         cover_torsion[k] = g_c * float((x**2 * touching) @ plate.area) if kind == "hemisphere" \
@@ -244,11 +243,8 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     deep = found @ blur_d.T  # signed: where the sheet lifts, the bonded lattice pulls (the FSR reads 0)
     cover = contact @ blur_s.T
     superficial = 0.5 * (cover + deep)
-    # the flank's response joins the couple's: both are proportional to the tangential load, the
-    # couple's tables are per unit couple F_t H (H the row's height), so the flank's per N is / H
-    h_row = np.maximum(sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + h - comp[:, centre], 1e-6)
-    deep1 = (found1 + found_f / h_row[:, None]) @ blur_d.T
-    cover1 = (contact1 + contact_f / h_row[:, None]) @ blur_s.T
+    deep1 = found1 @ blur_d.T
+    cover1 = contact1 @ blur_s.T
     superficial1 = 0.5 * (cover1 + deep1)
     edge_dist, edge_deep, edge_top, side_inset = _edge_tables(sim, sigma_d)
     k_extra = law.shear_stiffness_kpa_per_mm(comp) - law.shear_stiffness_kpa_per_mm(0.0)

@@ -447,12 +447,18 @@ class PlateOnFoundation:
         along x (the sheet held) shears the cover over the contact (traction G_c v / t_c) and,
         because the cap is curved and sunk into the stack, squeezes the cover more on the
         leading flank and less on the trailing one: the cover's compression changes by
-        v dz_ind/dx = v x / R, its pressure by k_c v x / R (first angular mode). That flank
-        pressure pushes on the cap's slope, so it carries tangential load too (k_c v / R^2
-        times the contact's second moment), and it loads the sheet like a couple, which the
-        sheet hands to the lattice and the cap as `couple` does. Returns the response per unit
-        v (contact and lattice pressure changes, including the flank pressure itself) and the
-        traction + flank stiffness."""
+        v dz_ind/dx, its pressure by k_c v dz_ind/dx (first angular mode). That flank pressure
+        loads the sheet like a couple; the sheet deflects under it (w1) and gives most of the
+        squeeze back. Returns the response per unit v (contact and lattice pressure changes,
+        including the flank pressure itself) and the stiffness, the traction's alone.
+
+        Where the pad is uniform the response is the solved state moved with the cap (w1 =
+        -dw/dx: a shape moved across a uniform foundation keeps its energy), and the flank's
+        pressure on the cap's slope is given back by the tilt of the cap's normal, which moved
+        with it (`flank_force`; within a few per cent of the traction where the sheet's bending is
+        uniform, tests/sim/test_cover_shear.py). Counting the flank pressure alone, without the
+        sheet's response and the slope's change, made the cover several times too stiff in shear
+        under a deep press (3.4x the 3D half-model's tangential stiffness at 3 N, `yardstick3d`)."""
         pc = sol.contact_kpa * KPA
         n = len(self.x)
         touching = pc > 0.0
@@ -461,16 +467,32 @@ class PlateOnFoundation:
             return CoupleResponse(zero, zero.copy(), zero.copy()), 0.0
         _, slope = self.foundation(sol.w_mm)
         kc = self.k_cover
-        dp = kc * self.x / self.radius * touching  # N/mm^2 per mm of v (cos(phi) amplitude: x = r)
+        dp = kc * self._cap_slope()[0] * touching  # N/mm^2 per mm of v
         lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
         w1 = self._solve_m1(lin1 + sp.diags(slope + kc * touching), dp)
-        # second moment of the contact about the axis across the motion: 1/2 int r^2 dA (disc)
-        # or int d^2 dd (rod, per unit length)
-        half = 0.5 if self.kind == "hemisphere" else 1.0
-        second = half * float((self.x**2 * touching) @ self.area)
-        area = float(touching @ self.area)
-        stiffness = self.cover_shear_n_per_mm3 * area + kc * second / self.radius**2
-        return CoupleResponse(w1, (dp - kc * touching * w1) / KPA, self._lattice_m1(w1, slope) / KPA), stiffness
+        dpc = dp - kc * touching * w1
+        stiffness = self.cover_shear_n_per_mm3 * float(touching @ self.area)
+        return CoupleResponse(w1, dpc / KPA, self._lattice_m1(w1, slope) / KPA), stiffness
+
+    def _cap_slope(self) -> tuple[np.ndarray, np.ndarray]:
+        """The cap's slope dz/dx along a motion (the first mode's amplitude: cos(phi) for the
+        disc) and the mean over that mode of d2z/dx2 (disc: (z'' + z'/r) / 2; rod: z'')."""
+        r = np.abs(self.x)
+        s = np.sqrt(np.maximum(self.radius**2 - r * r, 1e-12))
+        d2z = self.radius**2 / s**3
+        if self.kind == "hemisphere":
+            d2z = 0.5 * (d2z + 1.0 / s)
+        return self.x / s, d2z
+
+    def flank_force(self, sol: LaminateSolution, response: CoupleResponse) -> float:
+        """The change of the contact's tangential force (N per mm of v; rod: per mm of length)
+        beyond the traction, from the flank response `flank` returned: the flank pressure left
+        on the cap's slope less the cap's whole contact pressure on the change of that slope
+        (the cap moved, its normal at a fixed point tilted by v d2z/dx2)."""
+        dz, d2z = self._cap_slope()
+        half = 0.5 if self.kind == "hemisphere" else 1.0  # the disc's cos(phi)^2 mean
+        return half * float((response.contact_kpa * KPA * dz) @ self.area) \
+            - float((sol.contact_kpa * KPA * d2z) @ self.area)
 
     def _lattice_m1(self, w1: np.ndarray, slope: np.ndarray) -> np.ndarray:
         """What the lattice hands the deep sheet (N/mm^2) for a first-mode deflection w1: its

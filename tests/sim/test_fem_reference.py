@@ -129,7 +129,6 @@ def test_each_fem_metric_sees_the_error_it_names(error, fast_base, monkeypatch, 
 # The gate (validate) judges the count-CoP shear rows on their means over the alignments of cap,
 # walls and taxels (fem_reference.alignment.gate): which of those rows see each error
 ALIGNED_INJECTIONS = {
-    "flank pressure lost": ("superficial_asymmetry_counts",),
     # Not the superficial asymmetry since a0d51c9 (it moves 0.016 / 0.054 against bands of 0.056 /
     # 0.063): the superficial core reads half the contact and half the lattice, so the cover's part
     # is halved. The sheet's share of travel (fem_injections) and the deep CoP (0.33 mm) still see it.
@@ -191,13 +190,7 @@ def test_the_gate_judges_every_count_row_on_the_alignment_means(gate_base):
     assert others == [(r.metric, r.load, r.fem, r.fast, r.lo, r.hi) for r in rows if r.metric not in aligned]
 
 
-# Known blind spot of the gate: with the superficial core reading half the contact (the rest is the
-# lattice's), a lost flank pressure moves the aligned superficial asymmetry by 0.051 / 0.052 (bands
-# 0.056 / 0.063), the superficial offset by 0.09 / 0.16 (band 0.28) and the deep CoP by 0.09 / 0.15
-# (band 0.20): no aligned row sees it. The single-alignment asymmetry still does (fem_injections).
-# The bands are the reference issue's and stay. Strict: it fails once a row sees it again.
-_BLIND = {"flank pressure lost": "the gate's aligned rows no longer see a lost flank (the superficial "
-                                 "core reads half the contact); see the note above"}
+_BLIND: dict[str, str] = {}  # errors no aligned row sees, each xfailed (strict) with its measured figures
 
 
 @pytest.mark.parametrize("error", [pytest.param(e, marks=pytest.mark.xfail(strict=True, reason=_BLIND[e]))

@@ -589,14 +589,23 @@ LOAD_BRANCH_INJECTIONS = {"cover rigid in shear": ("tangential_stiffness", "shee
                           "sheet 100x too stiff in bending": ("line_load_at_depth",)}
 
 
-@pytest.mark.parametrize("error", list(LOAD_BRANCH_INJECTIONS))
-def test_each_load_branch_row_sees_an_error_of_the_fast_model(error, monkeypatch):
+# the cover's shear is the compliant link at 3 N (0.33 N/mm over its contact, the lattice 1.0), so
+# a lattice 10x too stiff moves the series stiffness by 1.27x only: the sheet's share sees it
+_LOAD_BRANCH_BLIND = {("lattice 10x too stiff in shear", "tangential_stiffness"): (
+    "measured: the fast tangential stiffness at the load branch moves 0.245 -> 0.310 N/mm (1.27x, band "
+    "[0.67, 1.5]) under a lattice 10x too stiff in shear: the cover's traction (0.33 N/mm) is in series")}
+
+
+@pytest.mark.parametrize("error,metric", [
+    pytest.param(e, m, marks=pytest.mark.xfail(strict=True, reason=_LOAD_BRANCH_BLIND[(e, m)]))
+    if (e, m) in _LOAD_BRANCH_BLIND else (e, m)
+    for e, metrics in LOAD_BRANCH_INJECTIONS.items() for m in metrics])
+def test_each_load_branch_row_sees_an_error_of_the_fast_model(error, metric, monkeypatch):
     from layerskin_exp.sim import skin
     from layerskin_exp.sim.fem_reference import compare as fc
     from tests.sim.fem_injections import INJECTIONS
 
     patch, hook, _ = INJECTIONS[error]
-    metrics = LOAD_BRANCH_INJECTIONS[error]
 
     tol = fc.load_tolerances()
     monkeypatch.setattr(skin, "_TABLE_CACHE", {})
@@ -605,10 +614,9 @@ def test_each_load_branch_row_sees_an_error_of_the_fast_model(error, monkeypatch
         patch(monkeypatch)
     monkeypatch.setattr(skin, "_TABLE_CACHE", {})
     got = {r.metric: r for r in s3.load_branch_rows(SimConfig(), tol, model_hook=hook)}
-    for metric in metrics:
-        b, g = base[metric], got[metric].fast
-        moved = abs(g - b.fast) > b.hi if b.kind == "difference" else not b.lo <= g / b.fast <= b.hi
-        assert moved, (error, metric, b.fast, g)
+    b, g = base[metric], got[metric].fast
+    moved = abs(g - b.fast) > b.hi if b.kind == "difference" else not b.lo <= g / b.fast <= b.hi
+    assert moved, (error, metric, b.fast, g)
 
 
 def test_the_sheets_squeeze_is_its_bending_couple_along_its_curvature():

@@ -39,16 +39,13 @@ def test_the_deep_count_cop_travels_as_the_3d_models_at_each_load(sides, label):
 
 @pytest.mark.parametrize("label", [
     "0.22 N",
-    pytest.param("0.83 N", marks=pytest.mark.xfail(strict=True, reason=(
-        "measured: fast -0.25 mm against the 3D model's +0.09 (band 0.30) at F_t / F_z 0.20: the fast "
-        "superficial count CoP travels 0.62 mm against 1.14 (the 3D faces' mean 0.78), the deep 0.86 "
-        "against 1.05"))),
+    "0.83 N",
     pytest.param("3 N", marks=pytest.mark.xfail(strict=True, reason=(
-        "measured: fast -0.12 mm against +0.90 at F_t / F_z 0.081 (the 3D branch's cover keeps its volume, "
-        "nu 0.499): the 3D superficial count CoP travels 1.52 mm (faces' mean 0.71), the fast one 0.26"))),
+        "measured: fast -0.07 mm against +0.90 at F_t / F_z 0.081 (the 3D branch's cover keeps its volume, "
+        "nu 0.499): the 3D superficial count CoP travels 1.52 mm (faces' mean 0.71), the fast one 0.59"))),
     pytest.param("stiff cover 3 N", marks=pytest.mark.xfail(strict=True, reason=(
-        "measured: fast -0.61 mm against +0.36 at F_t / F_z 1/3 (cover 1 MPa): the 3D superficial count CoP "
-        "travels 1.21 mm (faces' mean 0.40), the fast 0.47; the deep 0.85 against 1.08"))),
+        "measured: fast -0.62 mm against +0.36 at F_t / F_z 1/3 (cover 1 MPa): the 3D superficial count CoP "
+        "travels 1.21 mm (faces' mean 0.40), the fast 0.38; the deep 0.85 against 1.00"))),
 ])
 def test_the_interlayer_shift_agrees_with_the_3d_models_at_each_load(sides, label):
     fem, fast = sides[0][label]
@@ -74,7 +71,15 @@ def test_the_3d_deep_force_cop_meets_statics(sides, label):
     assert fem["deep_force_cop_mm"] == pytest.approx(fem["deep_force_cop_statics_mm"], abs=0.28)
 
 
-def test_dropping_the_tangential_loads_moment_fails_the_deep_rows(sides):
+@pytest.mark.parametrize("label", [
+    "0.22 N",
+    pytest.param("0.83 N", marks=pytest.mark.xfail(strict=True, reason=(
+        "measured: with the couple dropped the fast deep count CoP travels 0.76 mm against the 3D model's "
+        "1.05 (0.98 without the error; band 0.48) and the shift is -0.10 against +0.09 (band 0.30): at "
+        "F_t / F_z 0.20 the cap's own travel (1.0 mm, the cover's shear) carries most of the deep CoP's, "
+        "the couple's lever F_t H / F_z adds 0.5 mm of force CoP of which the counts see 0.2"))),
+])
+def test_dropping_the_tangential_loads_moment_fails_the_deep_rows(sides, label):
     """Injection: the couple of the shear about the deep plane removed from the fast model (its
     tables' couple responses and the lattice's route at the pad's sides zeroed): the deep count CoP
     then moves only with the cap's ground position, and the comparison must refuse it."""
@@ -83,21 +88,17 @@ def test_dropping_the_tangential_loads_moment_fails_the_deep_rows(sides):
     try:
         model._lk[..., 2:4] = 0.0
         model._edge[:] = 0.0
-        failed = []
-        for label in ("0.22 N", "0.83 N"):
-            fem = sides[0][label][0]
-            fast = y3.fast_side(model, fresh, fem["fz_n"], fem["ft_n"])
-            failed.append(abs(fast["deep_cop_counts_mm"] - fem["deep_cop_counts_mm"]) > TOL["deep_cop_counts_mm"]
-                          or abs(fast["interlayer_shift_counts_mm"] - fem["interlayer_shift_counts_mm"])
-                          > TOL["interlayer_shift_counts_mm"])
+        fem = sides[0][label][0]
+        fast = y3.fast_side(model, fresh, fem["fz_n"], fem["ft_n"])
     finally:
         model._lk[:], model._edge[:] = lk, edge
-    assert all(failed)
+    assert abs(fast["deep_cop_counts_mm"] - fem["deep_cop_counts_mm"]) > TOL["deep_cop_counts_mm"] \
+        or abs(fast["interlayer_shift_counts_mm"] - fem["interlayer_shift_counts_mm"]) > TOL["interlayer_shift_counts_mm"]
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "measured: with the pattern at the columns' feet the stiff cover's fast deep count CoP travels 0.47 mm "
-    "against the 3D model's 0.85 (1.08 without the error), 0.38 off in a band of 0.48: at the committed 3D "
+    "measured: with the pattern at the columns' feet the stiff cover's fast deep count CoP travels 0.39 mm "
+    "against the 3D model's 0.85 (1.00 without the error), 0.46 off in a band of 0.48: at the committed 3D "
     "states the deep row does not see this error"))
 def test_the_deep_pattern_at_the_columns_feet_fails_the_deep_rows(sides, monkeypatch):
     """Injection: the deep pattern left at the columns' feet (the sheet's travel not added to its

@@ -208,10 +208,13 @@ def fast_side(model: SkinModel, fresh: np.ndarray, fz_n: float, ft_n: float, tra
 
 def _deep_force_cop(model: SkinModel, rec: np.ndarray, step_mm: float = 0.05) -> float:
     """x of the force CoP of the fast model's signed pressure on the deep plane, over the whole
-    pad (the numpy reference's fields, `reference.ReferenceSkin.signed_fields`)."""
+    pad and the reach of what its sides carry (the numpy reference's fields,
+    `reference.ReferenceSkin.signed_fields`; the lattice's route at the sides is blurred across
+    them, so a grid cut at the sides loses part of its moment)."""
     from layerskin_exp.sim.reference import ReferenceSkin
 
-    half = 0.5 * model.sim.spacer.width_mm
+    tab = model.tab
+    half = max(float(np.abs(tab.edge_dist_mm).max()), 0.5 * model.sim.spacer.width_mm) + 2.0
     g = np.arange(-half, half + 1e-9, step_mm)
     x, y = np.meshgrid(g, g)
     _, base, _ = ReferenceSkin(model).signed_fields(rec, x, y)
