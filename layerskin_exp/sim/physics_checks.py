@@ -221,8 +221,7 @@ def friction_bound(sim: SimConfig, model_sim: SimConfig | None = None) -> tuple[
     """During stick |Fxy| <= mu_s Fz; while sliding |Fxy| ~ mu_k Fz (between the kinetic level
     less the overshoot and the static level)."""
     m = _model(model_sim or sim)
-    # from 0.5 N the cap slides after ~3 mm of the 8 (the soft cover holds it ~12 mm at 3 N)
-    _, recs = _slide(m, 0.5, 0.0, 0.0, shear_stop=1e9, fz_stop=1e9, travel_mm=8.0)
+    _, recs = _slide(m, 3.0, 0.0, 0.0, shear_stop=1e9, fz_stop=1e9, travel_mm=8.0)
     ratio = np.hypot(recs[:, 1], recs[:, 2]) / np.maximum(recs[:, 3], 1e-9)
     mu_s, mu_k = sim.cover.friction, sim.cover.kinetic
     # sliding: from the first slip on (the stick phase before it builds the shear up from zero)
