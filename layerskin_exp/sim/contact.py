@@ -214,11 +214,12 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         lattice_mm = h - comp[k, centre]
         resp = plate.couple(sol, lattice_mm / (sim.cover.thickness_mm + sim.fsr.layer_thickness_mm + lattice_mm))
         contact1[k], found1[k] = resp.contact_kpa, resp.foundation_kpa
-        # the cap moving relative to the sheet: its stiffness. Its response is the solved state
-        # moved with the cap (first moment F_z per unit travel: tests/sim/test_cover_shear.py), which
-        # the frame pipeline carries by placing the patterns about the cap's point in the sheet's
-        # frame; adding it to the couple's tables counted that travel twice
-        _, cover_shear[k] = plate.flank(sol)
+        # the cap moving relative to the sheet: its stiffness (`PlateOnFoundation.flank`). Its
+        # response is the solved state moved with the cap (first moment F_z per unit travel:
+        # tests/sim/test_cover_shear.py), which the frame pipeline carries by placing the patterns
+        # about the cap's point in the sheet's frame; adding it to the couple's tables counted that
+        # travel twice, so it is not solved here
+        cover_shear[k] = plate.traction_stiffness(sol)
         touching = sol.contact_kpa > 0.0
         g_c = plate.cover_shear_n_per_mm3
         cover_torsion[k] = g_c * float((x**2 * touching) @ plate.area) if kind == "hemisphere" \

@@ -471,8 +471,11 @@ class PlateOnFoundation:
         lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
         w1 = self._solve_m1(lin1 + sp.diags(slope + kc * touching), dp)
         dpc = dp - kc * touching * w1
-        stiffness = self.cover_shear_n_per_mm3 * float(touching @ self.area)
-        return CoupleResponse(w1, dpc / KPA, self._lattice_m1(w1, slope) / KPA), stiffness
+        return CoupleResponse(w1, dpc / KPA, self._lattice_m1(w1, slope) / KPA), self.traction_stiffness(sol)
+
+    def traction_stiffness(self, sol: LaminateSolution) -> float:
+        """The cover's tangential stiffness under the cap (`flank`): G_c / t_c over the contact."""
+        return self.cover_shear_n_per_mm3 * float((sol.contact_kpa > 0.0) @ self.area)
 
     def _cap_slope(self) -> tuple[np.ndarray, np.ndarray]:
         """The cap's slope dz/dx along a motion (the first mode's amplitude: cos(phi) for the

@@ -18,8 +18,7 @@ def _inject_rigid_cover(monkeypatch):
     """The cover's tangential path removed: the sheet follows the cap wholly."""
     from layerskin_exp.sim import laminate
 
-    flank = laminate.PlateOnFoundation.flank
-    monkeypatch.setattr(laminate.PlateOnFoundation, "flank", lambda self, sol: (flank(self, sol)[0], 0.0))
+    monkeypatch.setattr(laminate.PlateOnFoundation, "traction_stiffness", lambda self, sol: 0.0)
 
 
 def _inject_stiff_spacer_shear(monkeypatch):
