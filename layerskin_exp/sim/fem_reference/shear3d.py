@@ -452,11 +452,33 @@ class Stack3D:
             f += np.asarray(probe.assemble.vector(fld).todense()).ravel()
         return nodes, w, f.reshape(-1, 3)[nodes]
 
+    def plane_normals(self, nodes: np.ndarray) -> np.ndarray:
+        """Unit normals (n, 3, pointing up) of a node plane (`plane`) where its nodes are now:
+        the cross product of the deformed plane's tangents along x and y, by second-order
+        differences on its tensor grid, mirrored across the symmetry plane y = 0 (there the
+        tangent along y has no z part)."""
+        ref = self.points[nodes]
+        xs, ix = np.unique(np.round(ref[:, 0], 9), return_inverse=True)
+        ys, iy = np.unique(np.round(ref[:, 1], 9), return_inverse=True)
+        grid = np.full((len(xs), len(ys), 3), np.nan)
+        grid[ix, iy] = ref + self.u[nodes]
+        if np.isnan(grid).any():
+            raise ValueError("the plane's nodes do not form a tensor grid")
+        mirror = grid[:, :0:-1] * np.array([1.0, -1.0, 1.0])
+        full = np.concatenate([mirror, grid], axis=1)
+        yy = np.concatenate([-ys[:0:-1], ys])
+        n = np.cross(np.gradient(full, xs, axis=0, edge_order=2), np.gradient(full, yy, axis=1, edge_order=2))
+        n = n[:, len(ys) - 1:]
+        n /= np.linalg.norm(n, axis=2, keepdims=True)
+        return n[ix, iy]
+
     def line_z(self) -> dict:
         """The planes read: the sheets' mid-planes (what each layer's FSR reads), the lattice's
         base (interface), the model's base, and the superficial sheet's two faces (its top, under
-        the cover, and its bottom, on the lattice: the mid-plane reads their mean plus the squeeze
-        of the sheet's bending couple along its curvature, `squeeze3d`)."""
+        the cover, and its bottom, on the lattice: read along the sheet's normal, the mid-plane has
+        their mean plus the squeeze of the sheet's bending couple along its curvature; its z
+        component also has the sheet's transverse shear force where the sheet is tilted,
+        `squeeze3d`)."""
         mid = {k: 0.5 * sum(self.layer_z[k]) for k in ("sheet", "deep_sheet")}
         return {"superficial": mid["sheet"], "deep": mid["deep_sheet"], "interface": self.layer_z["lattice"][0], "base": 0.0,
                 "sheet_top": self.layer_z["sheet"][1], "sheet_bottom": self.layer_z["sheet"][0]}
@@ -487,6 +509,11 @@ class Stack3D:
             nodes, w, g = self.transmitted(z)
             out[f"{name}_kpa"] = g[:, 2] / w / KPA
             out[f"{name}_shear_kpa"] = g[:, 0] / w / KPA
+            # what an FSR lying in the plane reads: the traction along its normal where it is now.
+            # Where the plane is tilted the z component also carries part of the force along it
+            # (a bent sheet's transverse shear force: slope times Q)
+            out[f"{name}_normal_kpa"] = (g * self.plane_normals(nodes)).sum(axis=1) / w / KPA
+            out[f"{name}_u_mm"] = self.u[nodes].copy()  # where the plane's nodes have moved
             # statics of everything above the plane, its nodes where they are now: the first
             # moment of the normal force through it is the load's, F_z x_load + F_x h_load, plus
             # that of the tangential force through it, sum(z g_x) (model.StackFE.state's check)
@@ -644,6 +671,8 @@ def _pack(fe: Stack3D, states: list, sec: Section) -> dict:
         out[f"{name}_xy_mm"], out[f"{name}_w_mm2"] = fe.points[nodes, :2], w
         out[f"{name}_kpa"] = np.stack([s[f"{name}_kpa"] for s in states])
         out[f"{name}_shear_kpa"] = np.stack([s[f"{name}_shear_kpa"] for s in states]).astype(np.float32)
+        out[f"{name}_normal_kpa"] = np.stack([s[f"{name}_normal_kpa"] for s in states])
+        out[f"{name}_u_mm"] = np.stack([s[f"{name}_u_mm"] for s in states]).astype(np.float32)
     out["dof"] = np.array(len(fe.free))
     out["elements"] = json.dumps(fe.elements)
     out["factorisations"] = np.array(fe.factorisations)
@@ -1020,6 +1049,9 @@ def _sheet_squeeze(fe: Stack3D, u0: np.ndarray, u: np.ndarray) -> dict:
     sheet D is its bending rigidity and d = 2t / 3, the lever between its half-thickness stress
     blocks (a film/core/film laminate's is the films' separation, 0.143 mm against 0.124 here).
     By the divergence theorem the squeeze's first moment about x is int (M grad w)_x dA / d.
+    That is what the plane's z component carries: div(M grad w) = M : grad grad w + div(M) . grad w,
+    the films' squeeze along the curvature (which the core reads along its normal) and the sheet's
+    transverse shear force Q = div(M) tilted by the slope (which it does not: `Stack3D.plane_normals`).
     Finite differences on the mid-plane's node grid, mirrored across y = 0. Returns that moment
     (N mm, the half-model's) from the cross terms of the press's and the shear's deflections
     (the press's own term has none by symmetry), the same with the press's moment against the
@@ -1083,7 +1115,8 @@ def squeeze_branch3d(sim, depth: float, travels, log=print) -> dict:
     committed mesh pressed to `depth` (frictionless) and sheared sticking to each of `travels`
     (mm of cap travel); per state the force CoP (sheet's frame, x) of the mid-plane, of the faces'
     mean and of that mean plus the squeeze's first moment (`_sheet_squeeze`), and the share of the
-    squeeze's moment that the sheet's tilt across the pad gives."""
+    squeeze's moment that the sheet's tilt across the pad gives; beside them the mid-plane's and
+    the faces' mean read along the sheet's normal (what the FSR reads, `Stack3D.plane_normals`)."""
     sec = Section.from_sim(sim)
     fe = Stack3D(sec, x_edges=X_EDGES_MM, y_edges=Y_EDGES_MM)
     top = fe.height_mm + sec.radius_mm
@@ -1111,9 +1144,12 @@ def squeeze_branch3d(sim, depth: float, travels, log=print) -> dict:
 
         mid = maps["superficial"][2][:, 2]
         faces = 0.5 * (maps["sheet_top"][2][:, 2] + maps["sheet_bottom"][2][:, 2])
+        normal = {k: (maps[k][2] * fe.plane_normals(maps[k][0])).sum(axis=1) for k in maps}
         sq = _sheet_squeeze(fe, u0, fe.u)
         row = {"cap_travel_mm": travel, "fz_n": st["fz_n"], "fx_n": st["fx_n"], "cop_mid_plane_mm": cop(mid),
-               "cop_faces_mean_mm": cop(faces), "mid_plane_excess_mm": float((x * (mid - faces)).sum()) / fz_half,
+               "cop_faces_mean_mm": cop(faces), "cop_mid_plane_normal_mm": cop(normal["superficial"]),
+               "cop_faces_mean_normal_mm": cop(0.5 * (normal["sheet_top"] + normal["sheet_bottom"])),
+               "mid_plane_excess_mm": float((x * (mid - faces)).sum()) / fz_half,
                "squeeze_closed_form_mm": sq["cross_terms"] / fz_half,
                "squeeze_from_tilt_mm": sq["tilt_term"] / fz_half, "sheet_tilt_slope": sq["tilt_slope"]}
         row["cop_faces_mean_plus_squeeze_mm"] = row["cop_faces_mean_mm"] + row["squeeze_closed_form_mm"]
