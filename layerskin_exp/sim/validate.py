@@ -33,7 +33,8 @@ def report(sim) -> int:
     faces = _faces_lines(extra.get("yardstick3d_record", {}))
     if faces:
         print("\nReported, gating nothing: the 3D superficial reading from the mean of the sheet's two faces "
-              "(the core's reading less the films' squeeze) beside its mid-plane's (gated) and the fast model's")
+              "(the core's reading less the films' squeeze) beside its mid-plane's along the sheet's normal "
+              "(gated) and the fast model's")
         print("\n".join(faces))
     for k, v in extra.items():
         if k in ("fem_record", "section_checks", "yardstick3d_record"):

@@ -6,7 +6,9 @@ sheet). The 3D side is the committed half-model (`shear3d`): its branch pressed 
 (reference/shear3d.npz), and pressed sticking to 0.83 N and to 3 N with a cover that keeps its
 volume (shear3d_mid_branch.npz, shear3d_load_branch.npz), and the design at the stiff end of the cover's bracket pressed to 3 N the same way
 (shear3d_stiff_cover.npz, `--stiff-cover`), each sheared with the contact sticking, taken at F_t / F_z = 1/3 or at the last ratio the branch
-reached. The fast side is the simulator's own skin model (hemisphere mode, noise-free, uniform
+reached; each layer read as its FSR reads it, the pressure along the sheet's normal where it is
+now (a tilted, bent sheet's z component also carries its transverse shear force times its slope,
+which no FSR reads: shear3d.Stack3D.plane_normals). The fast side is the simulator's own skin model (hemisphere mode, noise-free, uniform
 gains, the sheet bonded as the 3D model's merged sheet is), pressed at the same spot to the same
 F_z and moved along +x while sticking until F_x reaches the same F_t. Every count row goes
 through the simulator's FSR law and readout (compare.Reader) and is averaged over 4 x 4 taxel
@@ -21,7 +23,7 @@ the change of the inter-layer count shift. Reported beside them, not gated: the 
 travel against its own statics, x_cap + F_x H / F_z - x_cap,0 on each side, and the effective
 height F_z dc / F_t; where the 3D data carry the superficial sheet's two faces, the superficial
 count-CoP travel and the inter-layer shift read from their mean (the bonded core's reading less
-the films' squeeze, which the mid-plane carries: shear3d.Stack3D.line_z, shear3d.squeeze3d)
+the films' squeeze along the sheet's curvature: shear3d.Stack3D.line_z, shear3d.squeeze3d)
 beside the fast superficial reading, which is that mean too (contact.build_tables).
 
 `python -m layerskin_exp.sim.fem_reference.yardstick3d` prints the table.
@@ -78,9 +80,10 @@ def _state(res: dict, depth: float | None) -> dict:
     else:
         k, t = len(idx) - 1, 1.0
     i1, i0 = idx[k], (idx[k - 1] if k > 0 else start)
+    maps = tuple(f"{plane}{reading}" for plane in ("superficial", "deep", "sheet_top", "sheet_bottom")
+                 for reading in ("_kpa", "_normal_kpa"))
     out = {key: (1 - t) * np.asarray(res[key][i0], float) + t * np.asarray(res[key][i1], float)
-           for key in ("cap_x_mm", "fx_n", "fz_n", "sheet_shift_mm", "sheet_x_under_cap_mm", "superficial_kpa",
-                       "deep_kpa", "sheet_top_kpa", "sheet_bottom_kpa") if key in res}
+           for key in ("cap_x_mm", "fx_n", "fz_n", "sheet_shift_mm", "sheet_x_under_cap_mm", *maps) if key in res}
     out["start"] = start
     return out
 
@@ -110,26 +113,31 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     res = load_fem(name, data)
     s = _state(res, depth)
     st = s["start"]
+    # each layer as its FSR reads it: the pressure along the sheet's normal where it is now
+    # (shear3d.Stack3D.plane_normals); data solved before that was recorded have the z component
+    reading = "_normal_kpa" if "superficial_normal_kpa" in res else "_kpa"
+    sup, deep = f"superficial{reading}", f"deep{reading}"
     counts, faces = [], []
     peak_deep = []
     # the superficial sheet's two faces where the data have them (shear3d.Stack3D.line_z): the
     # mean of the cover's and the lattice's pressure on it: the core's reading less the films' squeeze
-    has_faces = "sheet_top_kpa" in res
+    has_faces = f"sheet_top{reading}" in res
     if has_faces:
         on_faces = {**res, "superficial_xy_mm": res["sheet_top_xy_mm"], "superficial_w_mm2": res["sheet_top_w_mm2"]}
-        face_mean = 0.5 * (np.asarray(res["sheet_top_kpa"], float) + np.asarray(res["sheet_bottom_kpa"], float))
-        sheared_faces = 0.5 * (np.asarray(s["sheet_top_kpa"], float) + np.asarray(s["sheet_bottom_kpa"], float))
+        top, bottom = f"sheet_top{reading}", f"sheet_bottom{reading}"
+        face_mean = 0.5 * (np.asarray(res[top], float) + np.asarray(res[bottom], float))
+        sheared_faces = 0.5 * (np.asarray(s[top], float) + np.asarray(s[bottom], float))
     for tx, ty in _alignments():
         reader = Reader(model, shift_mm=-tx - _centre(), shift_y_mm=-ty - _centre())
-        press_maps = reader.maps(res, res["superficial_kpa"][st], res["deep_kpa"][st])
+        press_maps = reader.maps(res, res[sup][st], res[deep][st])
         peak_deep.append(float(press_maps[1].max()))
-        counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(res, s["superficial_kpa"],
-                                                                                        s["deep_kpa"]))))
+        counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(res, s[sup], s[deep]))))
         if has_faces:
-            faces.append(_count_rows(reader.counts(reader.maps(on_faces, face_mean[st], res["deep_kpa"][st])),
-                                     reader.counts(reader.maps(on_faces, sheared_faces, s["deep_kpa"]))))
+            faces.append(_count_rows(reader.counts(reader.maps(on_faces, face_mean[st], res[deep][st])),
+                                     reader.counts(reader.maps(on_faces, sheared_faces, s[deep]))))
     fz, fx = float(res["fz_n"][st]), float(s["fx_n"])
     travel = float(s["cap_x_mm"] - res["cap_x_mm"][st])
+    # (statics: the z component, the load's own)
     deep_cop = _force_cop(res["deep_xy_mm"], s["deep_kpa"], res["deep_w_mm2"]) - \
         _force_cop(res["deep_xy_mm"], res["deep_kpa"][st], res["deep_w_mm2"])
     sim = model.sim  # the 3D model is built from the same design's layers
@@ -137,7 +145,7 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     out = {"label": label, "fz_n": fz, "ft_n": fx, "shear_ratio": fx / float(s["fz_n"]),
            "depth_at_load": float(res["depth_mm"][st]),
            "contact_radius": float(res["contact_to_mm"][st]),
-           "peak_superficial_kpa": float(res["superficial_kpa"][st].max()),
+           "peak_superficial_kpa": float(res[sup][st].max()),
            "peak_deep_taxel_kpa": float(np.mean(peak_deep)),
            "tangential_stiffness": fx / travel,
            "sheet_travel_mm": float(s["sheet_shift_mm"] - res["sheet_shift_mm"][st]),
