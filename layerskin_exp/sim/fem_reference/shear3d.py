@@ -1049,9 +1049,11 @@ def _sheet_squeeze(fe: Stack3D, u0: np.ndarray, u: np.ndarray) -> dict:
     sheet D is its bending rigidity and d = 2t / 3, the lever between its half-thickness stress
     blocks (a film/core/film laminate's is the films' separation, 0.143 mm against 0.124 here).
     By the divergence theorem the squeeze's first moment about x is int (M grad w)_x dA / d.
-    That is what the plane's z component carries: div(M grad w) = M : grad grad w + div(M) . grad w,
-    the films' squeeze along the curvature (which the core reads along its normal) and the sheet's
-    transverse shear force Q = div(M) tilted by the slope (which it does not: `Stack3D.plane_normals`).
+    It is the z component's excess: div(M grad w) = M : grad grad w + div(M) . grad w, a squeeze
+    along the curvature and the sheet's transverse shear force Q = div(M) tilted by the slope, which
+    a reading along the sheet's normal does not have (`Stack3D.plane_normals`; at 0.3 mm the normal
+    reading of the mid-plane trails the faces' mean, so the curvature term alone does not describe
+    the merged sheet either).
     Finite differences on the mid-plane's node grid, mirrored across y = 0. Returns that moment
     (N mm, the half-model's) from the cross terms of the press's and the shear's deflections
     (the press's own term has none by symmetry), the same with the press's moment against the
