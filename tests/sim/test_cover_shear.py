@@ -47,7 +47,8 @@ def test_the_flank_gives_back_what_it_squeezes(states):
     """The flank's two terms cancel to within a fifth of either (each is about F_z / R), so the
     cover's stiffness is its traction's."""
     for plate, sol in states:
-        resp, _ = plate.flank(sol)
+        resp, k = plate.flank(sol)
+        assert k == pytest.approx(plate.cover_shear_n_per_mm3 * float((sol.contact_kpa > 0) @ plate.area))
         assert abs(plate.flank_force(sol, resp)) < 0.2 * plate.load(sol) / rig.INDENTER_RADIUS_MM
 
 
