@@ -97,7 +97,12 @@ class SheetConfig:
     lets each film stick where friction mu p can carry the sandwich's shear flow and slip where
     it cannot (`laminate.FrictionInterface`). The bounds: "bonded" (a glued sandwich, D = 5.7 N mm
     with the defaults) and "unbonded" (the films and core bend on their own, 0.11 N mm).
-    `interface_friction`: the film-Velostat friction coefficient."""
+    `interface_friction`: the film-Velostat friction coefficient.
+    `large_deflection`: the hemisphere's sheet also stretches as it sinks (a von Karman plate with
+    the films' membrane stiffness, `laminate`), which the 3D model of the study's geometry shows
+    carrying most of a 3 N press outwards. Off by default: the contact tables are solved about
+    the contact, and a membrane spreads a press over the whole pad (see the README's simulator
+    section for what it does to each row)."""
 
     film_modulus_mpa: float = 2500.0  # polyimide
     film_thickness_mm: float = 0.025
@@ -108,6 +113,7 @@ class SheetConfig:
     velostat_thickness_mm: float = 0.1
     interface: str = "friction"  # friction | bonded | unbonded
     interface_friction: float = 0.3  # copper / polyimide on carbon-loaded polyolefin
+    large_deflection: bool = False  # the sheet's membrane action (von Karman), hemisphere only
 
     def __post_init__(self) -> None:
         for key in ("film_modulus_mpa", "film_thickness_mm", "copper_modulus_mpa", "copper_thickness_mm",
@@ -119,6 +125,8 @@ class SheetConfig:
                 "must be 'friction', 'bonded' or 'unbonded'")
         require(self.interface_friction is not None and self.interface_friction >= 0, "sim.sheet.interface_friction",
                 self.interface_friction, "must be >= 0")
+        require(isinstance(self.large_deflection, bool), "sim.sheet.large_deflection", self.large_deflection,
+                "must be true or false")
 
     def _rigidity(self, bonded: bool) -> float:
         from layerskin_exp.sim.laminate import sheet_rigidity_n_mm
@@ -132,6 +140,15 @@ class SheetConfig:
         """Bending rigidity D of the sheet (N mm) where its films slip (friction, unbonded) or
         stick (bonded); see laminate.sheet_rigidity_n_mm."""
         return self._rigidity(self.interface == "bonded")
+
+    @property
+    def membrane_n_per_mm(self) -> float:
+        """The sheet's membrane stiffness in its plane (N/mm); see laminate.sheet_membrane_n_per_mm."""
+        from layerskin_exp.sim.laminate import sheet_membrane_n_per_mm
+
+        return sheet_membrane_n_per_mm(self.film_modulus_mpa, self.film_thickness_mm, self.copper_modulus_mpa,
+                                       self.copper_thickness_mm, self.electrode_fill, self.velostat_thickness_mm,
+                                       self.velostat_modulus_mpa)
 
     @property
     def sandwich_rigidity_n_mm(self) -> float:

@@ -150,7 +150,8 @@ def _solver(sim: SimConfig, kind: str, radius_mm: float | None = None) -> PlateO
     g_c = cover_shear_stiffness_n_per_mm3(sim.cover.modulus_kpa, sim.spacer.poisson, sim.cover.thickness_mm)
     return PlateOnFoundation(kind, law, sheet.rigidity_n_mm, g_p, k_c, radius,
                              pad_radius_mm(kind, sim.spacer.width_mm), step_mm=_PLATE_STEP_MM, interface=interface,
-                             cover_shear_n_per_mm3=g_c, rim_mm=sim.spacer.rim_width_mm)
+                             cover_shear_n_per_mm3=g_c, rim_mm=sim.spacer.rim_width_mm,
+                             membrane_n_per_mm=sheet.membrane_n_per_mm if sheet.large_deflection else 0.0)
 
 
 def contact_confinement_mm(kind: str, x_mm: np.ndarray, weight: np.ndarray, contact_kpa: np.ndarray) -> float:
@@ -193,7 +194,7 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
     cover_shear = np.zeros(n_delta)
     cover_kc = np.zeros(n_delta)
     cover_torsion = np.zeros(n_delta)
-    w = eta = None
+    w = eta = u = None
     centre = int(np.argmin(np.abs(x)))
     cover_e, cover_t = sim.cover.modulus_kpa, sim.cover.thickness_mm
     reach_mm = None
@@ -203,8 +204,8 @@ def build_tables(sim: SimConfig, kind: str, radius_mm: float | None = None) -> C
         if reach_mm is None:  # the cap's chord at this depth
             reach_mm = math.sqrt(max(2.0 * radius * dl - dl * dl, 0.0))
         plate.k_cover = cover_kc[k] = cover_stiffness_n_per_mm3(cover_e, cover_t, reach_mm)
-        sol = plate.solve(float(dl), w, eta_start=eta)
-        w, eta = sol.w_mm, sol.composite
+        sol = plate.solve(float(dl), w, eta_start=eta, u_start=u)
+        w, eta, u = sol.w_mm, sol.composite, sol.u_mm
         contact[k], found[k], comp[k] = sol.contact_kpa, sol.foundation_kpa, np.maximum(w, 0.0)
         reach_mm = max(contact_confinement_mm(kind, x, plate.area, sol.contact_kpa), 0.5 * plate.step)
         load[k] = plate.load(sol)

@@ -16,6 +16,17 @@ surface above its lowest point. The plate spreads the load: the contact and the 
 region grow with the load, and the lattice under the contact densifies only once the sheet's
 bending can no longer hand the load outwards. Beyond the pad the plate ends (a free edge).
 
+The sheet sinks by many times its own thickness (1.7 mm at 3 N against 0.19 mm), so for the
+hemisphere it bends as a plate in large deflection (von Karman): it also stretches, with
+membrane strains e_r = u' + w'^2 / 2, e_theta = u / r (u its radial displacement) and forces
+N = C (e + nu e_other), C the films' and core's tension stiffness per width
+(`sheet_membrane_n_per_mm`); the membrane's term -(1/r)(r N_r w')' joins the plate's equation
+and (r N_r)' = N_theta holds in the sheet's plane. Even with the pad's edge free (N_r = 0
+there) a dish-shaped sheet pulls its centre taut and squeezes its outer ring in hoop, which
+hands the load outwards further than bending alone (the 3D half-model's sheet carries more
+than half of 3 N this way, `fem_reference.shear3d`). A line contact bends the sheet into a
+cylinder whose free sides carry no membrane force, so the rod's plate stays linear.
+
 D is a field that follows the loaded state: the electrode films are held to the Velostat by
 friction only (`FrictionInterface`), so the sheet bends as a sandwich where friction can carry
 the sandwich's shear flow (the contact's centre, where the pressure is high and the flow small)
@@ -44,6 +55,7 @@ import scipy.sparse.linalg as spla
 from layerskin_exp.sim.spacer import SpacerLaw
 
 KPA = 1e-3  # N/mm^2 per kPa
+SHEET_POISSON = 0.34  # the films' polyimide (the sheet is taken as isotropic in its plane)
 # How fast a bonded layer's end effect dies away from a free side, as Re(lambda) h: the
 # eigenfunctions of a strip clamped on both faces decay as exp(-lambda s), s in from the side,
 # with w = lambda h the roots of (3 - 4 nu) sin w + w = 0 (plane strain). The slowest root has
@@ -110,6 +122,9 @@ class LaminateSolution:
     iterations: int
     rigidity_n_mm: np.ndarray | None = None  # (n,) the sheet's bending rigidity at this state
     composite: np.ndarray | None = None  # (n,) degree of sandwich action (1 bonded .. 0 slipping)
+    u_mm: np.ndarray | None = None  # (n,) the sheet's radial displacement (large deflection only)
+    # (n - 1,) radial and hoop membrane forces N_r, N_theta (N/mm) between neighbouring grid points
+    membrane_n_per_mm: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass
@@ -169,7 +184,8 @@ class PlateOnFoundation:
     def __init__(self, kind: str, law: SpacerLaw, rigidity_n_mm: float, pasternak_n_per_mm: float,
                  cover_n_per_mm3: float, indenter_radius_mm: float, pad_radius_mm: float,
                  step_mm: float = 0.05, interface: FrictionInterface | None = None,
-                 cover_shear_n_per_mm3: float = 0.0, rim_mm: float = 0.0):
+                 cover_shear_n_per_mm3: float = 0.0, rim_mm: float = 0.0, membrane_n_per_mm: float = 0.0,
+                 poisson: float = SHEET_POISSON):
         if kind not in ("hemisphere", "rod"):
             raise ValueError(f"kind={kind!r}: must be 'hemisphere' or 'rod'")
         self.kind, self.law = kind, law
@@ -202,6 +218,18 @@ class PlateOnFoundation:
         self._gp = np.where(on_pad, pasternak_n_per_mm, 0.0)
         self._linear, self._linear1 = self._operators(np.full(len(self.x), rigidity_n_mm))
         self._e_lat = law.e_lat_kpa * KPA / law.h_mm  # tension side: the bonded lattice, linear
+        if membrane_n_per_mm < 0.0:
+            raise ValueError(f"membrane_n_per_mm={membrane_n_per_mm!r}: the sheet's tension stiffness must be >= 0")
+        # large deflection: the hemisphere's sheet only (a cylindrical bend with free sides has none)
+        self.membrane = membrane_n_per_mm if kind == "hemisphere" else 0.0
+        self.poisson = poisson
+        if self.membrane > 0.0:
+            rm = (np.arange(len(self.x) - 1) + 0.5) * step_mm  # between neighbouring grid points
+            on = rm + 0.5 * step_mm <= pad_radius_mm + 1e-9  # the sheet ends at the pad's edge
+            self._seg_area = np.where(on, 2.0 * np.pi * rm * step_mm, 0.0)  # ring areas
+            self._seg_q = 0.5 / rm  # d(u / r) / du at either end (u at the midpoint, their mean)
+            self._u_free = np.zeros(len(self.x), bool)  # u(0) = 0 by symmetry; nothing beyond the sheet's edge
+            self._u_free[1:int(np.flatnonzero(on).max()) + 2] = True
 
     def _operators(self, rigidity: np.ndarray) -> tuple[sp.csc_matrix, sp.csc_matrix]:
         """lap (D lap w) - G_p lap w for a rigidity field D (axisymmetric and first angular mode).
@@ -262,20 +290,23 @@ class PlateOnFoundation:
         return p, slope
 
     def solve(self, delta_mm: float, w_start: np.ndarray | None = None, tol: float = 1e-9,
-              max_iter: int = 60, eta_start: np.ndarray | None = None) -> LaminateSolution:
-        """Equilibrium at indentation delta. With a `FrictionInterface` the rigidity field follows
-        the state: solve, update eta from the solved pressures (under-relaxed), solve again until
-        eta settles."""
+              max_iter: int = 60, eta_start: np.ndarray | None = None,
+              u_start: np.ndarray | None = None) -> LaminateSolution:
+        """Equilibrium at indentation delta (w_start, u_start: a nearby state's deflection and
+        radial displacement). With a `FrictionInterface` the rigidity field follows the state:
+        solve, update eta from the solved pressures (under-relaxed), solve again until eta
+        settles."""
         if self.interface is None:
             rig = np.full(len(self.x), self.rigidity)
-            return self._solve_fixed(delta_mm, self._linear, rig, w_start, tol, max_iter)
+            return self._solve_fixed(delta_mm, self._linear, rig, w_start, tol, max_iter, u_start)
         itf = self.interface
         eta = np.ones(len(self.x)) if eta_start is None else eta_start.copy()
         sol = None
         for _ in range(40):
             rig = itf.own_n_mm + eta * (itf.sandwich_n_mm - itf.own_n_mm)
             lin, _ = self._operators(rig)
-            sol = self._solve_fixed(delta_mm, lin, rig, w_start if sol is None else sol.w_mm, tol, max_iter)
+            sol = self._solve_fixed(delta_mm, lin, rig, w_start if sol is None else sol.w_mm, tol, max_iter,
+                                    u_start if sol is None else sol.u_mm)
             new = self.composite_degree(sol.w_mm, sol.contact_kpa * KPA, sol.foundation_kpa * KPA, rig)
             change = float(np.max(np.abs(new - eta)))
             eta = 0.5 * eta + 0.5 * new
@@ -286,36 +317,116 @@ class PlateOnFoundation:
         return sol
 
     def _solve_fixed(self, delta_mm: float, a, rigidity: np.ndarray, w_start: np.ndarray | None, tol: float,
-                     max_iter: int) -> LaminateSolution:
-        """Newton with backtracking on the residual, for a fixed rigidity field."""
-        w = np.zeros(len(self.x)) if w_start is None else w_start.copy()
+                     max_iter: int, u_start: np.ndarray | None = None) -> LaminateSolution:
+        """Newton with backtracking on the residual, for a fixed rigidity field. In large
+        deflection the unknowns are w and the radial u together; u's rows are its in-plane
+        equilibrium, per node area as w's are."""
+        n = len(self.x)
+        big = self.membrane > 0.0
+        w = np.zeros(n) if w_start is None else w_start.copy()
+        u = np.zeros(n) if (u_start is None or not big) else u_start.copy()
         kc = self.k_cover
 
-        def residual(w):
+        def residual(w, u):
             gap = delta_mm - self.z_ind - w
             pf, slope = self.foundation(w)
-            return a @ w + pf - kc * np.maximum(gap, 0.0), slope, gap
+            res = a @ w + pf - kc * np.maximum(gap, 0.0)
+            if not big:
+                return res, slope, gap, None
+            f, k_m, _ = self.membrane_forces(w, u)
+            res = np.concatenate([res + f[:n] / self.area, np.where(self._u_free, f[n:] / self.area, u)])
+            return res, slope, gap, k_m
 
-        res, slope, gap = residual(w)
+        res, slope, gap, k_m = residual(w, u)
         norm = np.linalg.norm(res)
         it = 0
         scale = max(kc * max(delta_mm, 1e-3), 1e-12)
         while it < max_iter and norm > tol * scale:
             it += 1
             jac = a + sp.diags(slope + kc * (gap > 0.0))
-            dw = spla.spsolve(jac.tocsc(), -res)
+            if big:
+                keep = np.concatenate([np.ones(n), self._u_free])
+                per_area = sp.diags(keep / np.concatenate([self.area, self.area]))
+                jac = sp.block_diag([jac, sp.diags(1.0 - self._u_free)]) + per_area @ k_m
+            step = spla.spsolve(jac.tocsc(), -res)
+            dw, du = step[:n], (step[n:] if big else 0.0)
             s = 1.0
             while True:
-                w_new = w + s * dw
-                r_new, sl_new, gap_new = residual(w_new)
+                w_new, u_new = w + s * dw, u + s * du
+                r_new, sl_new, gap_new, k_new = residual(w_new, u_new)
                 n_new = np.linalg.norm(r_new)
                 if n_new < (1.0 - 1e-4 * s) * norm or s < 1e-4:
                     break
                 s *= 0.5
-            w, res, slope, gap, norm = w_new, r_new, sl_new, gap_new, n_new
+            w, u, res, slope, gap, k_m, norm = w_new, u_new, r_new, sl_new, gap_new, k_new, n_new
         pf, _ = self.foundation(w)
         pc = kc * np.maximum(delta_mm - self.z_ind - w, 0.0)
-        return LaminateSolution(delta_mm, w, pc / KPA, pf / KPA, it, rigidity, None)
+        forces = self.membrane_forces(w, u)[2] if big else None
+        return LaminateSolution(delta_mm, w, pc / KPA, pf / KPA, it, rigidity, None, u if big else None, forces)
+
+    def membrane_forces(self, w_mm: np.ndarray, u_mm: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, tuple]:
+        """The sheet's membrane in large deflection (hemisphere): its strain energy's gradient
+        (N, on [w, u]), its Hessian, and (N_r, N_theta) between neighbouring grid points.
+
+        Between grid points j and j + 1 (ring area A, mid radius r_m): e_r = u' + w'^2 / 2,
+        e_theta = u / r_m (u the two's mean), U = A C / 2 (e_r^2 + 2 nu e_r e_theta + e_theta^2)."""
+        n, h, c, nu = len(self.x), self.step, self.membrane, self.poisson
+        b = np.diff(w_mm) / h
+        q = self._seg_q
+        e_r = np.diff(u_mm) / h + 0.5 * b * b
+        e_t = (u_mm[:-1] + u_mm[1:]) * q
+        area = self._seg_area
+        on = area > 0.0  # beyond the sheet's edge nothing stretches
+        n_r, n_t = np.where(on, c * (e_r + nu * e_t), 0.0), np.where(on, c * (e_t + nu * e_r), 0.0)
+        one = np.full(len(b), 1.0 / h)
+        zero = np.zeros(len(b))
+        g_r = np.stack([-one, one, -b / h, b / h], axis=1)  # d e_r / d [u_j, u_j+1, w_j, w_j+1]
+        g_t = np.stack([q, q, zero, zero], axis=1)
+        f_loc = area[:, None] * (n_r[:, None] * g_r + n_t[:, None] * g_t)
+        k_loc = (area * c)[:, None, None] * (np.einsum("si,sj->sij", g_r, g_r) + np.einsum("si,sj->sij", g_t, g_t)
+                                             + nu * (np.einsum("si,sj->sij", g_r, g_t) + np.einsum("si,sj->sij", g_t, g_r)))
+        geo = area * n_r / (h * h)  # N_r d2 e_r / dw2: the membrane force's pull on the sheet's slope
+        k_loc[:, 2, 2] += geo
+        k_loc[:, 3, 3] += geo
+        k_loc[:, 2, 3] -= geo
+        k_loc[:, 3, 2] -= geo
+        seg = np.arange(len(b))
+        idx = np.stack([n + seg, n + seg + 1, seg, seg + 1], axis=1)  # [w (n), u (n)]
+        f = np.zeros(2 * n)
+        np.add.at(f, idx, f_loc)
+        k = sp.csr_matrix((k_loc.ravel(), (np.repeat(idx, 4, axis=1).ravel(), np.tile(idx, (1, 4)).ravel())),
+                          shape=(2 * n, 2 * n))
+        return f, k, (n_r, n_t)
+
+    def _operator_m1(self, sol: LaminateSolution | None) -> sp.csr_matrix:
+        """The first angular mode's plate operator at a solved state (None: the unloaded sheet):
+        its rigidity field and, in large deflection, the state's membrane forces acting on the
+        mode's slope, -[(1/r)(r N_r w1')' - N_theta w1 / r^2] (zero for a rigid tilt w1 = r, by
+        the membrane's in-plane equilibrium). The mode's own stretching (N from w0' w1') is left
+        out: a first-order couple tilts the dish more than it stretches it."""
+        if sol is None:
+            return self._linear1
+        lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
+        if sol.membrane_n_per_mm is None:
+            return lin1
+        n_r, n_t = sol.membrane_n_per_mm
+        n, h = len(self.x), self.step
+        r = self.x
+        rm = (np.arange(n - 1) + 0.5) * h
+        n_t_node = np.zeros(n)
+        n_t_node[1:-1] = 0.5 * (n_t[:-1] + n_t[1:])
+        n_t_node[-1] = 0.5 * n_t[-1]
+        out = np.zeros(n)  # r_{j+1/2} N_{j+1/2}; the last point has none
+        out[1:-1] = rm[1:] * n_r[1:]
+        inn = np.zeros(n)
+        inn[1:] = rm * n_r
+        main = np.zeros(n)
+        main[1:] = (out[1:] + inn[1:]) / (r[1:] * h * h) + n_t_node[1:] / r[1:] ** 2
+        up = np.zeros(n - 1)
+        up[1:] = -out[1:-1] / (r[1:-1] * h * h)  # row j, column j + 1 (row 0 is the mode's w1(0) = 0)
+        lo = np.zeros(n - 1)
+        lo[1:] = -inn[2:] / (r[2:] * h * h)  # row j, column j - 1; the coupling to w1(0) = 0 dropped
+        return (lin1 + sp.diags([lo, main, up], [-1, 0, 1])).tocsr()
 
     def couple(self, sol: LaminateSolution, lattice_share: float) -> CoupleResponse:
         """Response to a unit couple of the shear about the deep plane, the cover's route only
@@ -344,9 +455,7 @@ class PlateOnFoundation:
         touching = pc > 0.0
         # the cover's part: -d/dx of (1 - s) p_c / F_z (sign: the deep pressure moves along the shear)
         load = -np.gradient((1.0 - lattice_share) * pc / fz, self.step)
-        # a fixed sheet reuses its operator; a friction-held one has its own field per state
-        lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
-        w1 = self._solve_m1(lin1 + sp.diags(slope + self.k_cover * touching), load)
+        w1 = self._solve_m1(self._operator_m1(sol) + sp.diags(slope + self.k_cover * touching), load)
         return CoupleResponse(w1, -self.k_cover * touching * w1 / KPA, self._lattice_m1(w1, slope) / KPA)
 
     def edge_couple(self, sol: LaminateSolution | None = None) -> CoupleResponse:
@@ -372,13 +481,9 @@ class PlateOnFoundation:
         sol, the state's tangent stiffness and rigidity (how `couple` carried it before the
         routes were split: their sum is that response)."""
         n = len(self.x)
-        if sol is None:
-            w = np.zeros(n)
-            lin1, touching = self._linear1, np.zeros(n, bool)
-        else:
-            w = sol.w_mm
-            lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
-            touching = sol.contact_kpa > 0.0
+        w = np.zeros(n) if sol is None else sol.w_mm
+        touching = np.zeros(n, bool) if sol is None else sol.contact_kpa > 0.0
+        lin1 = self._operator_m1(sol)
         _, slope = self.foundation(w)
         edge_term = self.side_load()
         w1 = self._solve_m1(lin1 + sp.diags(slope + self.k_cover * touching), 0.5 * edge_term)
@@ -468,8 +573,7 @@ class PlateOnFoundation:
         _, slope = self.foundation(sol.w_mm)
         kc = self.k_cover
         dp = kc * self._cap_slope()[0] * touching  # N/mm^2 per mm of v
-        lin1 = self._linear1 if self.interface is None else self._operators(sol.rigidity_n_mm)[1]
-        w1 = self._solve_m1(lin1 + sp.diags(slope + kc * touching), dp)
+        w1 = self._solve_m1(self._operator_m1(sol) + sp.diags(slope + kc * touching), dp)
         dpc = dp - kc * touching * w1
         return CoupleResponse(w1, dpc / KPA, self._lattice_m1(w1, slope) / KPA), self.traction_stiffness(sol)
 
@@ -518,7 +622,7 @@ class PlateOnFoundation:
 
 def sheet_rigidity_n_mm(film_modulus_mpa: float, film_mm: float, copper_modulus_mpa: float, copper_mm: float,
                         electrode_fill: float, core_mm: float, core_modulus_mpa: float, bonded: bool,
-                        poisson: float = 0.34) -> float:
+                        poisson: float = SHEET_POISSON) -> float:
     """Bending rigidity D (N mm) of one FSR sheet: two electrode films (polyimide + copper strips,
     strips of the two films crossed) around the Velostat core.
 
@@ -529,11 +633,7 @@ def sheet_rigidity_n_mm(film_modulus_mpa: float, film_mm: float, copper_modulus_
     width, d the distance between the films' mid-planes), plus each film's own bending. Not
     bonded, only the films' and the core's own bending add up. Crossed strips make x and y
     alike, so the sheet is taken as isotropic."""
-    pi_a = film_modulus_mpa * film_mm  # N/mm, polyimide tension stiffness per width
-    cu_a = copper_modulus_mpa * copper_mm
-    along = pi_a + electrode_fill * cu_a
-    gap = 1.0 - electrode_fill
-    across = 1.0 / (electrode_fill / (pi_a + cu_a) + gap / pi_a)
+    along, across = film_tension_n_per_mm(film_modulus_mpa, film_mm, copper_modulus_mpa, copper_mm, electrode_fill)
     t = film_mm + copper_mm
     # own bending of one film along its strips (two-layer beam about its neutral axis)
     e1, t1, e2, t2 = film_modulus_mpa, film_mm, electrode_fill * copper_modulus_mpa, copper_mm
@@ -546,6 +646,31 @@ def sheet_rigidity_n_mm(film_modulus_mpa: float, film_mm: float, copper_modulus_
         return own + core
     d = core_mm + t
     return along * across / (along + across) * d * d / (1 - poisson**2) + own + core
+
+
+def film_tension_n_per_mm(film_modulus_mpa: float, film_mm: float, copper_modulus_mpa: float, copper_mm: float,
+                          electrode_fill: float) -> tuple[float, float]:
+    """An electrode film's tension stiffness per width (N/mm) along its strips (copper over
+    `electrode_fill` of the width beside the polyimide) and across them (strips and polyimide gaps
+    in series)."""
+    pi_a = film_modulus_mpa * film_mm
+    cu_a = copper_modulus_mpa * copper_mm
+    along = pi_a + electrode_fill * cu_a
+    across = 1.0 / (electrode_fill / (pi_a + cu_a) + (1.0 - electrode_fill) / pi_a)
+    return along, across
+
+
+def sheet_membrane_n_per_mm(film_modulus_mpa: float, film_mm: float, copper_modulus_mpa: float, copper_mm: float,
+                            electrode_fill: float, core_mm: float, core_modulus_mpa: float,
+                            poisson: float = SHEET_POISSON) -> float:
+    """Membrane stiffness C = E t / (1 - nu^2) (N/mm) of one FSR sheet stretched in its plane.
+
+    Each film stretches with the sheet whether it sticks to the Velostat or slips on it (slip
+    frees the films' relative shear, not their own tension), so in either direction one film's
+    along-strip and the other's across-strip stiffness add, with the core's (E t = 2.0 kN/mm,
+    C = 2.3 kN/mm with the defaults), taken as isotropic as the sheet's bending is."""
+    along, across = film_tension_n_per_mm(film_modulus_mpa, film_mm, copper_modulus_mpa, copper_mm, electrode_fill)
+    return (along + across + core_modulus_mpa * core_mm) / (1.0 - poisson**2)
 
 
 def cover_stiffness_n_per_mm3(modulus_kpa: float, thickness_mm: float, confinement_mm: float) -> float:

@@ -1,0 +1,117 @@
+"""The sheet in large deflection (`sim.sheet.large_deflection`, laminate.PlateOnFoundation's
+membrane): its forces are its strain energy's gradient, it carries no net load of its own, it
+vanishes at a light touch and stiffens a deep press, and the first angular mode's operator gives a
+rigid tilt and the couple's moment back as statics requires."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from layerskin_exp.sim.config import load_sim
+from layerskin_exp.sim.contact import _solver
+
+SIM = load_sim(["sheet.interface=bonded", "sheet.large_deflection=true"])
+LINEAR = load_sim(["sheet.interface=bonded"])
+
+
+def _energy(plate, w, u):
+    """The membrane's strain energy written out afresh (laminate.PlateOnFoundation.membrane_forces)."""
+    h = plate.step
+    b = np.diff(w) / h
+    rm = (np.arange(len(w) - 1) + 0.5) * h
+    e_r = np.diff(u) / h + 0.5 * b * b
+    e_t = 0.5 * (u[:-1] + u[1:]) / rm
+    nu = plate.poisson
+    return float((plate._seg_area * 0.5 * plate.membrane * (e_r**2 + 2 * nu * e_r * e_t + e_t**2)).sum())
+
+
+def _state(plate, seed=0):
+    rng = np.random.default_rng(seed)
+    n = len(plate.x)
+    return 0.8 * np.exp(-plate.x**2 / 30.0) + 0.01 * rng.standard_normal(n), 2e-3 * rng.standard_normal(n)
+
+
+def _mismatch(plate, forces) -> float:
+    """Largest relative error of `forces(w, u)` -> (gradient, Hessian) against central differences
+    of the energy (gradient) and of the gradient (Hessian columns), at a few degrees of freedom."""
+    w, u = _state(plate)
+    n = len(w)
+    f, k = forces(w, u)
+    z, eps, worst = np.concatenate([w, u]), 1e-7, 0.0
+    for i in (0, 3, 40, 150, n + 2, n + 90):
+        zp, zm = z.copy(), z.copy()
+        zp[i] += eps
+        zm[i] -= eps
+        fd = (_energy(plate, zp[:n], zp[n:]) - _energy(plate, zm[:n], zm[n:])) / (2 * eps)
+        col = (forces(zp[:n], zp[n:])[0] - forces(zm[:n], zm[n:])[0]) / (2 * eps)
+        worst = max(worst, abs(fd - f[i]) / max(abs(f).max(), 1e-12),
+                    float(np.abs(col - k[:, i].toarray().ravel()).max() / abs(k).max()))
+    return worst
+
+
+@pytest.fixture(scope="module")
+def plate():
+    return _solver(SIM, "hemisphere")
+
+
+def test_the_membrane_forces_are_its_energy_gradient_and_hessian(plate):
+    def forces(w, u):
+        f, k, _ = plate.membrane_forces(w, u)
+        return f, k
+    assert _mismatch(plate, forces) < 1e-5
+
+
+def test_a_wrong_membrane_tangent_is_caught(plate):
+    """The check above fails on a tangent without the membrane force's pull on the slope."""
+    n = len(plate.x)
+
+    def forces(w, u):
+        f, k, (n_r, _) = plate.membrane_forces(w, u)
+        geo = plate._seg_area * n_r / plate.step**2  # the geometric term, taken out again
+        seg = np.arange(n - 1)
+        rows = np.concatenate([seg, seg + 1, seg, seg + 1])
+        cols = np.concatenate([seg, seg + 1, seg + 1, seg])
+        vals = np.concatenate([-geo, -geo, geo, geo])
+        return f, k + sp.csr_matrix((vals, (rows, cols)), shape=k.shape)
+    assert _mismatch(plate, forces) > 1e-3
+
+
+def test_the_membrane_carries_no_net_load_and_the_press_balances(plate):
+    w, u = _state(plate)
+    f, _, _ = plate.membrane_forces(w, u)
+    assert abs(f[: len(w)].sum()) < 1e-9 * np.abs(f).max()
+    sol = plate.solve(1.2)
+    load = plate.load(sol)
+    lattice = float(sol.foundation_kpa @ plate.area) * 1e-3
+    # within what the plate's finite-difference bending operator loses on its own (0.6 % linear)
+    assert lattice == pytest.approx(load, rel=0.01)
+    n_r, _ = sol.membrane_n_per_mm
+    assert n_r[0] > 0.0  # the dish's centre is pulled taut
+
+
+def test_a_light_touch_is_the_linear_plate_and_a_deep_press_is_stiffer(plate):
+    linear = _solver(LINEAR, "hemisphere")
+    light = plate.load(plate.solve(0.02)) / linear.load(linear.solve(0.02))
+    deep = plate.load(plate.solve(1.5)) / linear.load(linear.solve(1.5))
+    assert light == pytest.approx(1.0, abs=0.01)
+    assert deep > 1.2
+
+
+def test_the_first_mode_gives_a_rigid_tilt_and_the_couple_back(plate):
+    sol = plate.solve(1.5)
+    geometric = plate._operator_m1(sol) - plate._operator_m1(None)
+    tilt = geometric @ plate.x
+    bend = geometric @ (plate.x * np.exp(-plate.x / 3.0))
+    on = plate.on_pad & (plate.x > 0) & (plate.x < plate.pad_radius - 1.0)
+    assert np.abs(tilt[on]).max() < 1e-4 * np.abs(bend[on]).max()
+    share = 0.5
+    resp = plate.couple(sol, share)
+    moment = plate.first_moment(resp.foundation_kpa) - plate.first_moment(resp.contact_kpa)
+    assert moment == pytest.approx(1.0 - share, rel=0.02)
+
+
+def test_the_rod_stays_a_linear_plate():
+    assert _solver(SIM, "rod").membrane == 0.0
+    assert _solver(LINEAR, "hemisphere").membrane == 0.0
