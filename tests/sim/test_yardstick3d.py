@@ -55,6 +55,27 @@ def test_the_interlayer_shift_agrees_with_the_3d_models_at_each_load(sides, labe
         <= TOL["interlayer_shift_counts_mm"]
 
 
+def _unbalanced(label, superficial):
+    return pytest.param(label, marks=pytest.mark.xfail(strict=True, reason=(
+        f"measured: the gated superficial reading, the merged sheet's mid-plane along its normal, carries "
+        f"{superficial} of F_z too much at the press or the sheared state (the faces' mean: within 1 %; the deep "
+        "sheet's: exact): the nodal forces through a plane inside the sheet carry its membrane and bending "
+        "forces, which a tilted normal picks up")))
+
+
+@pytest.mark.parametrize("label", [_unbalanced("0.22 N", "0.47"), _unbalanced("0.83 N", "0.92"),
+                                   _unbalanced("3 N", "2.01"), _unbalanced("stiff cover 3 N", "1.94")])
+def test_each_gated_3d_reading_carries_the_load(sides, label):
+    """A reading is a yardstick only if it passes its own balance: the pressure the gate reads
+    from each 3D layer sums to F_z (twice the half-model's) within the solve's BALANCE_TOL, at the
+    press and at the sheared state."""
+    from layerskin_exp.sim.fem_reference.shear3d import BALANCE_TOL
+
+    fem = sides[0][label][0]
+    assert fem["deep_balance"] <= BALANCE_TOL
+    assert fem["superficial_balance"] <= BALANCE_TOL
+
+
 def test_the_fast_deep_force_cop_meets_statics(sides):
     # x_cap + F_x H / F_z over the whole pad and what its sides carry (0.03 mm at worst)
     for label, (_, fast) in sides[0].items():

@@ -58,7 +58,8 @@ STIFF_STATES = (("stiff cover 3 N", "shear3d_stiff_cover", None),)
 GATED_DIFFERENCE = ("deep_cop_counts_mm", "superficial_cop_counts_mm", "interlayer_shift_counts_mm", "sheet_travel_mm")
 GATED_RATIO = ("depth_at_load", "contact_radius", "peak_superficial_kpa", "peak_deep_taxel_kpa", "tangential_stiffness")
 REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "shear_ratio", "fz_n",
-            "superficial_cop_counts_faces_mm", "interlayer_shift_counts_faces_mm")
+            "superficial_cop_counts_faces_mm", "interlayer_shift_counts_faces_mm", "superficial_balance",
+            "superficial_faces_balance", "deep_balance")
 
 
 def _state(res: dict, depth: float | None) -> dict:
@@ -137,6 +138,10 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
                                      reader.counts(reader.maps(on_faces, sheared_faces, s[deep]))))
     fz, fx = float(res["fz_n"][st]), float(s["fx_n"])
     travel = float(s["cap_x_mm"] - res["cap_x_mm"][st])
+
+    def balance(start, now, w):  # worst |2 sum(p A) / F_z - 1| of a reading at the press and sheared
+        return max(abs(2e-3 * float(np.asarray(p, float) @ w) / f - 1.0) for p, f in ((start, fz), (now, float(s["fz_n"]))))
+
     # (statics: the z component, the load's own)
     deep_cop = _force_cop(res["deep_xy_mm"], s["deep_kpa"], res["deep_w_mm2"]) - \
         _force_cop(res["deep_xy_mm"], res["deep_kpa"][st], res["deep_w_mm2"])
@@ -152,6 +157,11 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
            "deep_force_cop_mm": deep_cop,
            "deep_force_cop_statics_mm": travel + fx * height / float(s["fz_n"]),
            **_mean_counts(counts)}
+    # a reading is a yardstick only if it carries the load it reads (the half-model's: twice its sum)
+    out["superficial_balance"] = balance(res[sup][st], s[sup], res["superficial_w_mm2"])
+    out["deep_balance"] = balance(res[deep][st], s[deep], res["deep_w_mm2"])
+    if has_faces:
+        out["superficial_faces_balance"] = balance(face_mean[st], sheared_faces, res["sheet_top_w_mm2"])
     dc = out["interlayer_shift_counts_mm"]
     out["effective_height_counts"] = -fz * dc / fx if fx > 0 else float("nan")
     if faces:
