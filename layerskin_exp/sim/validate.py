@@ -30,12 +30,12 @@ def report(sim) -> int:
         print(table(section))
     for line in extra.get("fem_record", {}).get("disjoint", []):
         print(f"no fast value passes both sections: {line}")
-    faces = _faces_lines(extra.get("yardstick3d_record", {}))
-    if faces:
-        print("\nReported, gating nothing: the 3D superficial reading from the mean of the sheet's two faces "
-              "(the core's reading less the films' squeeze) beside its mid-plane's along the sheet's normal "
-              "(gated) and the fast model's")
-        print("\n".join(faces))
+    mid = _mid_plane_lines(extra.get("yardstick3d_record", {}))
+    if mid:
+        print("\nReported, gating nothing: the 3D superficial reading from the merged sheet's mid-plane along "
+              "its normal, which does not carry the load it reads, beside the gated mean of the sheet's two "
+              "faces and the fast model's")
+        print("\n".join(mid))
     for k, v in extra.items():
         if k in ("fem_record", "section_checks", "yardstick3d_record"):
             continue
@@ -43,14 +43,15 @@ def report(sim) -> int:
     return 0 if all(c.passed for c in checks) else 1
 
 
-def _faces_lines(record: dict) -> list[str]:
+def _mid_plane_lines(record: dict) -> list[str]:
     lines = []
     for label, rec in record.items():
         fem, fast = rec.get("3d"), rec.get("fast")
-        if not fem or not fast or "superficial_cop_counts_faces_mm" not in fem:
+        if not fem or not fast or "superficial_cop_counts_mid_plane_mm" not in fem:
             continue
         for row in ("superficial_cop_counts", "interlayer_shift_counts"):
-            lines.append(f"3D: {row}_mm at {label}: faces' mean {fem[row + '_faces_mm']:.3g}, mid-plane "
+            lines.append(f"3D: {row}_mm at {label}: mid-plane {fem[row + '_mid_plane_mm']:.3g} "
+                         f"(carries {1 + fem['superficial_mid_plane_balance']:.2f} F_z), faces' mean "
                          f"{fem[row + '_mm']:.3g}, fast {fast[row + '_mm']:.3g}")
     return lines
 

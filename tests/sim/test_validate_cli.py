@@ -40,12 +40,14 @@ def test_bad_overrides_are_refused_before_any_check(arg, tmp_path, monkeypatch, 
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
-def test_the_faces_reading_is_printed_only_where_the_3d_data_carry_it():
-    fem = {"superficial_cop_counts_mm": 1.95, "superficial_cop_counts_faces_mm": 1.39,
-           "interlayer_shift_counts_mm": 0.25, "interlayer_shift_counts_faces_mm": -0.31}
+def test_the_mid_plane_reading_is_printed_only_where_the_3d_data_carry_it():
+    fem = {"superficial_cop_counts_mm": 1.39, "superficial_cop_counts_mid_plane_mm": 1.95,
+           "interlayer_shift_counts_mm": -0.31, "interlayer_shift_counts_mid_plane_mm": 0.25,
+           "superficial_mid_plane_balance": 0.92}
     fast = {"superficial_cop_counts_mm": 1.04, "interlayer_shift_counts_mm": -0.44}
-    old = {k: v for k, v in fem.items() if "faces" not in k}
-    lines = validate._faces_lines({"0.83 N": {"3d": fem, "fast": fast}, "3 N": {"3d": old, "fast": fast},
-                                   "stiff": {"3d": fem, "fast": None, "error": "did not reach"}})
-    assert lines == ["3D: superficial_cop_counts_mm at 0.83 N: faces' mean 1.39, mid-plane 1.95, fast 1.04",
-                     "3D: interlayer_shift_counts_mm at 0.83 N: faces' mean -0.31, mid-plane 0.25, fast -0.44"]
+    old = {k: v for k, v in fem.items() if "mid_plane" not in k}
+    lines = validate._mid_plane_lines({"0.83 N": {"3d": fem, "fast": fast}, "3 N": {"3d": old, "fast": fast},
+                                       "stiff": {"3d": fem, "fast": None, "error": "did not reach"}})
+    assert lines == [
+        "3D: superficial_cop_counts_mm at 0.83 N: mid-plane 1.95 (carries 1.92 F_z), faces' mean 1.39, fast 1.04",
+        "3D: interlayer_shift_counts_mm at 0.83 N: mid-plane 0.25 (carries 1.92 F_z), faces' mean -0.31, fast -0.44"]

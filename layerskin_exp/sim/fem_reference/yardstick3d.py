@@ -8,7 +8,10 @@ volume (shear3d_mid_branch.npz, shear3d_load_branch.npz), and the design at the 
 (shear3d_stiff_cover.npz, `--stiff-cover`), each sheared with the contact sticking, taken at F_t / F_z = 1/3 or at the last ratio the branch
 reached; each layer read as its FSR reads it, the pressure along the sheet's normal where it is
 now (a tilted, bent sheet's z component also carries its transverse shear force times its slope,
-which no FSR reads: shear3d.Stack3D.plane_normals). The fast side is the simulator's own skin model (hemisphere mode, noise-free, uniform
+which no FSR reads: shear3d.Stack3D.plane_normals), the superficial one as the mean of the
+pressures on the sheet's two faces (what the Velostat between two films that share the sheet's
+membrane force feels; the merged sheet's own mid-plane does not carry the load it reads, see
+`fem3d_side`). Each gated reading must carry F_z (`superficial_balance`, `deep_balance`). The fast side is the simulator's own skin model (hemisphere mode, noise-free, uniform
 gains, the sheet bonded as the 3D model's merged sheet is), pressed at the same spot to the same
 F_z and moved along +x while sticking until F_x reaches the same F_t. Every count row goes
 through the simulator's FSR law and readout (compare.Reader) and is averaged over 4 x 4 taxel
@@ -21,10 +24,9 @@ travel, secant from the press), the sheet's travel over the deep sheet under the
 superficial and the deep count-CoP travel from the press (each layer in its own taxel frame) and
 the change of the inter-layer count shift. Reported beside them, not gated: the deep force CoP's
 travel against its own statics, x_cap + F_x H / F_z - x_cap,0 on each side, and the effective
-height F_z dc / F_t; where the 3D data carry the superficial sheet's two faces, the superficial
-count-CoP travel and the inter-layer shift read from their mean (the bonded core's reading less
-the films' squeeze along the sheet's curvature: shear3d.Stack3D.line_z, shear3d.squeeze3d)
-beside the fast superficial reading, which is that mean too (contact.build_tables).
+height F_z dc / F_t; the superficial count-CoP travel and the inter-layer shift read from the
+merged sheet's mid-plane along its normal, with how far that reading misses F_z; each reading's
+load balance.
 
 `python -m layerskin_exp.sim.fem_reference.yardstick3d` prints the table.
 """
@@ -58,8 +60,8 @@ STIFF_STATES = (("stiff cover 3 N", "shear3d_stiff_cover", None),)
 GATED_DIFFERENCE = ("deep_cop_counts_mm", "superficial_cop_counts_mm", "interlayer_shift_counts_mm", "sheet_travel_mm")
 GATED_RATIO = ("depth_at_load", "contact_radius", "peak_superficial_kpa", "peak_deep_taxel_kpa", "tangential_stiffness")
 REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "shear_ratio", "fz_n",
-            "superficial_cop_counts_faces_mm", "interlayer_shift_counts_faces_mm", "superficial_balance",
-            "superficial_faces_balance", "deep_balance")
+            "superficial_cop_counts_mid_plane_mm", "interlayer_shift_counts_mid_plane_mm", "superficial_balance",
+            "superficial_mid_plane_balance", "deep_balance")
 
 
 def _state(res: dict, depth: float | None) -> dict:
@@ -118,24 +120,29 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     # (shear3d.Stack3D.plane_normals); data solved before that was recorded have the z component
     reading = "_normal_kpa" if "superficial_normal_kpa" in res else "_kpa"
     sup, deep = f"superficial{reading}", f"deep{reading}"
-    counts, faces = [], []
-    peak_deep = []
-    # the superficial sheet's two faces where the data have them (shear3d.Stack3D.line_z): the
-    # mean of the cover's and the lattice's pressure on it: the core's reading less the films' squeeze
+    # The superficial sheet is read from its two faces where the data have them
+    # (shear3d.Stack3D.line_z): the mean of the cover's and the lattice's pressure on it, what a
+    # soft core between films sharing the sheet's membrane force feels, and a reading that carries
+    # the load (within 1 %). The merged sheet's mid-plane does not (its nodal forces carry the
+    # sheet's membrane and bending forces, which a tilted normal picks up: 1.5 to 3 times F_z);
+    # it is reported beside, and gated only for data solved before the faces were read.
     has_faces = f"sheet_top{reading}" in res
     if has_faces:
-        on_faces = {**res, "superficial_xy_mm": res["sheet_top_xy_mm"], "superficial_w_mm2": res["sheet_top_w_mm2"]}
+        geometry = {**res, "superficial_xy_mm": res["sheet_top_xy_mm"], "superficial_w_mm2": res["sheet_top_w_mm2"]}
         top, bottom = f"sheet_top{reading}", f"sheet_bottom{reading}"
-        face_mean = 0.5 * (np.asarray(res[top], float) + np.asarray(res[bottom], float))
-        sheared_faces = 0.5 * (np.asarray(s[top], float) + np.asarray(s[bottom], float))
+        sup_press = 0.5 * (np.asarray(res[top], float) + np.asarray(res[bottom], float))[st]
+        sup_now = 0.5 * (np.asarray(s[top], float) + np.asarray(s[bottom], float))
+    else:
+        geometry, sup_press, sup_now = res, np.asarray(res[sup], float)[st], np.asarray(s[sup], float)
+    counts, mid_plane, peak_deep = [], [], []
     for tx, ty in _alignments():
         reader = Reader(model, shift_mm=-tx - _centre(), shift_y_mm=-ty - _centre())
-        press_maps = reader.maps(res, res[sup][st], res[deep][st])
+        press_maps = reader.maps(geometry, sup_press, res[deep][st])
         peak_deep.append(float(press_maps[1].max()))
-        counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(res, s[sup], s[deep]))))
+        counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(geometry, sup_now, s[deep]))))
         if has_faces:
-            faces.append(_count_rows(reader.counts(reader.maps(on_faces, face_mean[st], res[deep][st])),
-                                     reader.counts(reader.maps(on_faces, sheared_faces, s[deep]))))
+            mid_plane.append(_count_rows(reader.counts(reader.maps(res, res[sup][st], res[deep][st])),
+                                         reader.counts(reader.maps(res, s[sup], s[deep]))))
     fz, fx = float(res["fz_n"][st]), float(s["fx_n"])
     travel = float(s["cap_x_mm"] - res["cap_x_mm"][st])
 
@@ -150,7 +157,7 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     out = {"label": label, "fz_n": fz, "ft_n": fx, "shear_ratio": fx / float(s["fz_n"]),
            "depth_at_load": float(res["depth_mm"][st]),
            "contact_radius": float(res["contact_to_mm"][st]),
-           "peak_superficial_kpa": float(res[sup][st].max()),
+           "peak_superficial_kpa": float(sup_press.max()),
            "peak_deep_taxel_kpa": float(np.mean(peak_deep)),
            "tangential_stiffness": fx / travel,
            "sheet_travel_mm": float(s["sheet_shift_mm"] - res["sheet_shift_mm"][st]),
@@ -158,16 +165,16 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
            "deep_force_cop_statics_mm": travel + fx * height / float(s["fz_n"]),
            **_mean_counts(counts)}
     # a reading is a yardstick only if it carries the load it reads (the half-model's: twice its sum)
-    out["superficial_balance"] = balance(res[sup][st], s[sup], res["superficial_w_mm2"])
+    out["superficial_balance"] = balance(sup_press, sup_now, geometry["superficial_w_mm2"])
     out["deep_balance"] = balance(res[deep][st], s[deep], res["deep_w_mm2"])
     if has_faces:
-        out["superficial_faces_balance"] = balance(face_mean[st], sheared_faces, res["sheet_top_w_mm2"])
+        out["superficial_mid_plane_balance"] = balance(res[sup][st], s[sup], res["superficial_w_mm2"])
     dc = out["interlayer_shift_counts_mm"]
     out["effective_height_counts"] = -fz * dc / fx if fx > 0 else float("nan")
-    if faces:
-        mean_faces = _mean_counts(faces)
-        out["superficial_cop_counts_faces_mm"] = mean_faces["superficial_cop_counts_mm"]
-        out["interlayer_shift_counts_faces_mm"] = mean_faces["interlayer_shift_counts_mm"]
+    if mid_plane:
+        mean_mid = _mean_counts(mid_plane)
+        out["superficial_cop_counts_mid_plane_mm"] = mean_mid["superficial_cop_counts_mm"]
+        out["interlayer_shift_counts_mid_plane_mm"] = mean_mid["interlayer_shift_counts_mm"]
     return out
 
 
@@ -293,8 +300,8 @@ def table_text(comparisons: list[Comparison], record: dict) -> str:
             continue
         for metric in REPORTED:
             f3, ff = rec["3d"].get(metric), rec["fast"].get(metric)
-            if metric.endswith("_faces_mm"):  # the 3D sheet's faces' mean beside the fast superficial reading
-                ff = rec["fast"].get(metric.replace("_faces_mm", "_mm"))
+            if metric.endswith("_mid_plane_mm"):  # the 3D sheet's mid-plane beside the fast superficial reading
+                ff = rec["fast"].get(metric.replace("_mid_plane_mm", "_mm"))
             if f3 is None:
                 continue  # 3D data solved before the states recorded it
             lines.append(f"{label:15} {metric:28} {f3:10.4g} {'' if ff is None else format(ff, '10.4g'):>10}   (reported)")
