@@ -224,7 +224,7 @@ class PlateOnFoundation:
         self.membrane = membrane_n_per_mm if kind == "hemisphere" else 0.0
         self.poisson = poisson
         if self.membrane > 0.0:
-            rm = (np.arange(len(self.x) - 1) + 0.5) * step_mm  # between neighbouring grid points
+            self._seg_rm = rm = (np.arange(len(self.x) - 1) + 0.5) * step_mm  # between neighbouring grid points
             on = rm + 0.5 * step_mm <= pad_radius_mm + 1e-9  # the sheet ends at the pad's edge
             self._seg_area = np.where(on, 2.0 * np.pi * rm * step_mm, 0.0)  # ring areas
             self._seg_q = 0.5 / rm  # d(u / r) / du at either end (u at the midpoint, their mean)
@@ -411,8 +411,7 @@ class PlateOnFoundation:
             return lin1
         n_r, n_t = sol.membrane_n_per_mm
         n, h = len(self.x), self.step
-        r = self.x
-        rm = (np.arange(n - 1) + 0.5) * h
+        r, rm = self.x, self._seg_rm
         n_t_node = np.zeros(n)
         n_t_node[1:-1] = 0.5 * (n_t[:-1] + n_t[1:])
         n_t_node[-1] = 0.5 * n_t[-1]

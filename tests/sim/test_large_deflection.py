@@ -82,11 +82,14 @@ def test_the_membrane_carries_no_net_load_and_the_press_balances(plate):
     w, u = _state(plate)
     f, _, _ = plate.membrane_forces(w, u)
     assert abs(f[: len(w)].sum()) < 1e-9 * np.abs(f).max()
-    sol = plate.solve(1.2)
-    load = plate.load(sol)
-    lattice = float(sol.foundation_kpa @ plate.area) * 1e-3
-    # within what the plate's finite-difference bending operator loses on its own (0.6 % linear)
-    assert lattice == pytest.approx(load, rel=0.01)
+    # the press's lattice carries its load as well as the linear plate's does at the same depth
+    # (the finite-difference bending operator loses a little on its own): the membrane adds no loss
+    def loss(p):
+        sol = p.solve(1.2)
+        return abs(float(sol.foundation_kpa @ p.area) * 1e-3 / p.load(sol) - 1.0), sol
+
+    with_membrane, sol = loss(plate)
+    assert with_membrane <= loss(_solver(LINEAR, "hemisphere"))[0] + 1e-4
     n_r, _ = sol.membrane_n_per_mm
     assert n_r[0] > 0.0  # the dish's centre is pulled taut
 
