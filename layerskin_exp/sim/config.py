@@ -101,8 +101,8 @@ class SheetConfig:
     `large_deflection`: the hemisphere's sheet also stretches as it sinks (a von Karman plate with
     the films' membrane stiffness, `laminate`), which the 3D model of the study's geometry shows
     carrying most of a 3 N press outwards. Off by default: the contact tables are solved about
-    the contact, and a membrane spreads a press over the whole pad (see the README's simulator
-    section for what it does to each row)."""
+    the contact, and a membrane spreads a press over the whole pad (docs/simulator-validation.md says
+    what it does to each row)."""
 
     film_modulus_mpa: float = 2500.0  # polyimide
     film_thickness_mm: float = 0.025
