@@ -768,7 +768,7 @@ def plane_strain_shear(section: dict, res: dict) -> dict:
 
 # what the 3D check reads through the taxel grid (alignment.fem3d_signals), beside the section
 COUNT_SIGNALS = ("superficial_cop_counts_mm", "deep_cop_counts_mm", "interlayer_shift_counts_mm",
-                 "superficial_offset_counts_mm", "effective_height_counts")
+                 "superficial_offset_counts_mm", "effective_height_counts", "superficial_asymmetry_counts")
 
 
 def count_signals_vs_section(res: dict, sim, data: Path = DATA) -> dict:

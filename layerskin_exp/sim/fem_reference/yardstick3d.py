@@ -24,7 +24,9 @@ travel, secant from the press), the sheet's travel over the deep sheet under the
 superficial and the deep count-CoP travel from the press (each layer in its own taxel frame) and
 the change of the inter-layer count shift. Reported beside them, not gated: the deep force CoP's
 travel against its own statics, x_cap + F_x H / F_z - x_cap,0 on each side, and the effective
-height F_z dc / F_t; the superficial count-CoP travel and the inter-layer shift read from the
+height F_z dc / F_t; the superficial pressure's asymmetry about the sheet's point under the cap
+(its 3D value changes by 116 % with a second element through the cover: tolerances.yaml); the
+superficial count-CoP travel and the inter-layer shift read from the
 merged sheet's mid-plane along its normal, with how far that reading misses F_z; each reading's
 load balance.
 
@@ -37,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.config import SimConfig
 from layerskin_exp.sim.fem_reference.alignment import ALIGN_TAXEL_MM, _centre
 from layerskin_exp.sim.fem_reference.compare import (
@@ -45,6 +48,7 @@ from layerskin_exp.sim.fem_reference.compare import (
     SKIN,
     Comparison,
     Reader,
+    _asymmetry,
     _cop_x,
     line_sim,
     load_fem,
@@ -59,7 +63,8 @@ STATES = (("0.22 N", "shear3d", 0.3), ("0.83 N", "shear3d_mid_branch", None), ("
 STIFF_STATES = (("stiff cover 3 N", "shear3d_stiff_cover", None),)
 GATED_DIFFERENCE = ("deep_cop_counts_mm", "superficial_cop_counts_mm", "interlayer_shift_counts_mm", "sheet_travel_mm")
 GATED_RATIO = ("depth_at_load", "contact_radius", "peak_superficial_kpa", "peak_deep_taxel_kpa", "tangential_stiffness")
-REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "shear_ratio", "fz_n",
+REPORTED = ("deep_force_cop_mm", "deep_force_cop_statics_mm", "effective_height_counts", "superficial_asymmetry_counts",
+            "shear_ratio", "fz_n",
             "superficial_cop_counts_mid_plane_mm", "interlayer_shift_counts_mid_plane_mm", "superficial_balance",
             "superficial_mid_plane_balance", "deep_balance")
 
@@ -100,11 +105,14 @@ def _alignments():
     return [(tx, ty) for tx in ALIGN_TAXEL_MM for ty in ALIGN_TAXEL_MM]
 
 
-def _count_rows(press: np.ndarray, sheared: np.ndarray) -> dict:
-    """Count signals of one sheared state from its press, counts (2, 16, 16)."""
+def _count_rows(press: np.ndarray, sheared: np.ndarray, start_mm: float, under_mm: float) -> dict:
+    """Count signals of one sheared state from its press, counts (2, 16, 16) in the taxel grid's
+    frame: start_mm, where the cap pressed; under_mm, the superficial sheet's point under the cap
+    now (where the superficial taxels see the contact)."""
     return {"superficial_cop_counts_mm": _cop_x(sheared[0]) - _cop_x(press[0]),
             "deep_cop_counts_mm": _cop_x(sheared[1]) - _cop_x(press[1]),
-            "interlayer_shift_counts_mm": (_cop_x(sheared[0]) - _cop_x(sheared[1])) - (_cop_x(press[0]) - _cop_x(press[1]))}
+            "interlayer_shift_counts_mm": (_cop_x(sheared[0]) - _cop_x(sheared[1])) - (_cop_x(press[0]) - _cop_x(press[1])),
+            "superficial_asymmetry_counts": _asymmetry(sheared[0], under_mm) - _asymmetry(press[0], start_mm)}
 
 
 def _mean_counts(rows: list[dict]) -> dict:
@@ -137,12 +145,14 @@ def fem3d_side(label: str, name: str, depth: float | None, model: SkinModel, dat
     counts, mid_plane, peak_deep = [], [], []
     for tx, ty in _alignments():
         reader = Reader(model, shift_mm=-tx - _centre(), shift_y_mm=-ty - _centre())
+        # the cap's point on the superficial sheet at the press and now, in the taxel grid's frame
+        where = (float(res["cap_x_mm"][st]) - reader.shift_mm, float(s["sheet_x_under_cap_mm"]) - reader.shift_mm)
         press_maps = reader.maps(geometry, sup_press, res[deep][st])
         peak_deep.append(float(press_maps[1].max()))
-        counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(geometry, sup_now, s[deep]))))
+        counts.append(_count_rows(reader.counts(press_maps), reader.counts(reader.maps(geometry, sup_now, s[deep])), *where))
         if has_faces:
             mid_plane.append(_count_rows(reader.counts(reader.maps(res, res[sup][st], res[deep][st])),
-                                         reader.counts(reader.maps(res, s[sup], s[deep]))))
+                                         reader.counts(reader.maps(res, s[sup], s[deep])), *where))
     fz, fx = float(res["fz_n"][st]), float(s["fx_n"])
     travel = float(s["cap_x_mm"] - res["cap_x_mm"][st])
 
@@ -215,7 +225,9 @@ def fast_side(model: SkinModel, fresh: np.ndarray, fz_n: float, ft_n: float, tra
         maps0 = np.stack(model.pressure_maps([model.state_of(rec0)]))[:, 0]
         maps1 = np.stack(model.pressure_maps([model.state_of(rec)]))[:, 0]
         peak_deep.append(float(maps0[1].max()))
-        counts.append(_count_rows(reader.counts(maps0), reader.counts(maps1)))
+        # the cap's point on the superficial sheet (its frame is the superficial taxels') at the
+        # press and now
+        counts.append(_count_rows(reader.counts(maps0), reader.counts(maps1), float(rec0[mk.S_CX]), float(rec[mk.S_CX])))
         if rows is None:  # the mechanics do not depend on the alignment
             travel = float((1 - t) * (xs[k - 1] if k else 0.0) + t * xs[k])
             rows = {"depth_at_load": delta,
