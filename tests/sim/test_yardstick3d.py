@@ -98,6 +98,11 @@ def test_the_3d_deep_force_cop_meets_statics(sides, label):
         "1.06 (0.99 without the error; band 0.48) and the shift is -0.10 against -0.23 (band 0.30): at "
         "F_t / F_z 0.20 the cap's own travel (1.0 mm, the cover's shear) carries most of the deep CoP's, "
         "the couple's lever F_t H / F_z adds 0.5 mm of force CoP of which the counts see 0.2"))),
+    pytest.param("3 N", marks=pytest.mark.xfail(strict=True, reason=(
+        "measured: with the couple dropped the deep count CoP travels 0.61 mm against 0.66 with it and the "
+        "3D model's 0.62, the shift -0.06 against -0.07 and the 3D -0.12 mm (bands 0.48, 0.30): at F_t / F_z "
+        "0.082, the 3D branch's reach, the lever F_t H / F_z is 0.24 mm of force CoP and the counts of the "
+        "peak 8 times the 3D model's see almost none of it"))),
 ])
 def test_dropping_the_tangential_loads_moment_fails_the_deep_rows(sides, label):
     """Injection: the couple of the shear about the deep plane removed from the fast model (its
