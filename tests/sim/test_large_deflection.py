@@ -89,6 +89,8 @@ def test_the_membrane_carries_no_net_load_and_the_press_balances(plate):
         return abs(float(sol.foundation_kpa @ p.area) * 1e-3 / p.load(sol) - 1.0), sol
 
     with_membrane, sol = loss(plate)
+    # within what the plate's finite-difference bending operator loses on its own (0.6 % linear)
+    assert with_membrane <= 0.01
     assert with_membrane <= loss(_solver(LINEAR, "hemisphere"))[0] + 1e-4
     n_r, _ = sol.membrane_n_per_mm
     assert n_r[0] > 0.0  # the dish's centre is pulled taut

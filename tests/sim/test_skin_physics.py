@@ -167,14 +167,12 @@ def test_shear_stiffness_rises_with_compression():
     assert ks[0] < ks[1] < ks[2]
 
 
-def test_slide_friction_bound_and_stick_slip_events():
-    """Pressed light enough (1.2 mm, about 0.3 N) that the cap slips within the 8 mm slide; from
-    2.2 mm (2.3 N) the stack's shear over that travel stays below mu_s F_z."""
+def _slide_friction_bound_and_stick_slip_events(depth_mm: float):
     m = model()
     mu = m.sim.cover.friction
-    states = [m.step(k * 1e-3, np.array([0.0, 0.0, -1.2])) for k in range(50)]
+    states = [m.step(k * 1e-3, np.array([0.0, 0.0, -depth_mm])) for k in range(50)]
     for k in range(4000):  # 8 mm at 2 mm/s
-        states.append(m.step(0.05 + k * 1e-3, np.array([0.002 * k, 0.0, -1.2])))
+        states.append(m.step(0.05 + k * 1e-3, np.array([0.002 * k, 0.0, -depth_mm])))
     ft = np.array([np.hypot(*s.force_n[:2]) for s in states])
     fz = np.array([s.force_n[2] for s in states])
     assert np.all(ft <= mu * fz + 1e-9)
@@ -184,6 +182,19 @@ def test_slide_friction_bound_and_stick_slip_events():
     assert ft.max() > 0.9 * mu * fz.max()
     slip = states[-1].slip_mm
     assert slip[0] < -1.0 and abs(slip[1]) < 1e-9  # the cover slid back relative to the indenter
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured with the cover's traction stiffness (0.25 N/mm at 3 N): pressed to 2.2 mm (2.26 N) the cap "
+    "carries at most 0.83 of mu_s F_z over the 8 mm and never slips (0 onsets); pressed to 1.2 mm (0.3 N) "
+    "it slips seven times"))
+def test_slide_friction_bound_and_stick_slip_events():
+    _slide_friction_bound_and_stick_slip_events(2.2)
+
+
+def test_a_light_press_slides_within_the_friction_bound_in_stick_slip():
+    """Pressed light enough (1.2 mm, about 0.3 N) that the cap slips within the 8 mm slide."""
+    _slide_friction_bound_and_stick_slip_events(1.2)
 
 
 def _without_couple_responses(m):
