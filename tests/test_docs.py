@@ -165,3 +165,14 @@ def test_the_sessions_page_reads_a_session_as_written(tmp_path, monkeypatch, cap
         exec(compile(block, "docs/sessions.md", "exec"), {})
     out = capsys.readouterr().out
     assert "outcome:" in out and "phase press" in out
+
+
+def test_the_version_is_one_and_released_in_the_changelog():
+    import layerskin_exp
+
+    declared = re.search(r'^version = "([^"]+)"', (ROOT / "pyproject.toml").read_text(), flags=re.M).group(1)
+    assert declared == layerskin_exp.__version__
+    changelog = (ROOT / "CHANGELOG.md").read_text()
+    sections = re.findall(r"^## \[([^\]]+)\]", changelog, flags=re.M)
+    assert sections[:2] == ["Unreleased", declared], "an empty Unreleased section, then this version's"
+    assert re.search(rf"^## \[{re.escape(declared)}\] - \d{{4}}-\d{{2}}-\d{{2}}$", changelog, flags=re.M)
