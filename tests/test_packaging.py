@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from layerskin_exp import __version__
 from layerskin_exp.log import load_session
 from tests.protocols.conftest import TINY_GRIP
 
@@ -81,7 +82,7 @@ def test_console_script_runs_a_trial_outside_the_checkout(installed):
     assert str(venv) in _run([str(venv / "bin" / "python"), "-c", "import protocols; print(protocols.__file__)"],
                              cwd=work, env=env).stdout
     job_log = (work / "run" / "grip_depth.log").read_text()
-    assert "layerskin-exp 0.1.0" in job_log and "trial g6_translation_t0 |" in job_log
+    assert f"layerskin-exp {__version__}" in job_log and "trial g6_translation_t0 |" in job_log
 
 
 def test_module_entry_and_install_hint(installed):

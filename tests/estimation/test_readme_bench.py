@@ -1,4 +1,5 @@
-"""README's "use the estimator on your bench" block runs as written, on a demo-shaped folder."""
+"""The guide's "use the estimator on your bench" block (docs/estimation.md) runs as written, on a
+demo-shaped folder."""
 
 import re
 from pathlib import Path
@@ -8,16 +9,16 @@ import numpy as np
 from layerskin_exp.log import SessionWriter
 from layerskin_exp.types import TwoLayerFrame
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "estimation.md"
 
 
 def _bench_block() -> str:
-    text = README.read_text()
-    section = text[text.index("### Use the estimator on your bench"):]
+    text = PAGE.read_text()
+    section = text[text.index("## Use the estimator on your bench"):]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
-def test_readme_bench_block_runs_as_written(fitted_estimator, tmp_path, monkeypatch, capsys):
+def test_guide_bench_block_runs_as_written(fitted_estimator, tmp_path, monkeypatch, capsys):
     est, raw = fitted_estimator
     est.save(tmp_path / "demo_out/report/models/T-s5.pt")
     path = tmp_path / "demo_out/sessions/grip_depth/abc/g12_translation_t0.mcap"
@@ -29,7 +30,7 @@ def test_readme_bench_block_runs_as_written(fitted_estimator, tmp_path, monkeypa
             t = t0 + int(i * 2.36e6)
             w.write(TwoLayerFrame(c[0], c[1], i, t, t))
     monkeypatch.chdir(tmp_path)
-    exec(compile(_bench_block(), "README.md", "exec"), {})
+    exec(compile(_bench_block(), "docs/estimation.md", "exec"), {})
     out = capsys.readouterr().out
     last = re.search(r"last estimate: \[(.*)\] N", out)
     # the live estimate of the last complete frame matches the offline path on the same counts

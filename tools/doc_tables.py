@@ -1,0 +1,401 @@
+"""Tables of the user guide that are generated from the code, the configs and committed outputs.
+
+Each generated table sits in a page under docs/ between two markers:
+
+    <!-- generated: NAME -->
+    ...
+    <!-- end generated: NAME -->
+
+`python tools/doc_tables.py` rewrites every such section from its source; `--check` only
+compares and exits 1 naming the sections that differ (tests/test_docs.py runs the check, so a
+table edited by hand, or a config changed without regenerating the page, fails the suite).
+
+Sources:
+  protocol-keys:<app>      conf/<app>.yaml and the schemas in protocols/config.py; the allowed
+                           range of each key is the refusal the schema gives an out-of-range value
+  device-options:<device>  hardware/<device>/config.py (the driver's dataclass), same probing
+  device-faults:<device>   the fault-injection arguments the device's emulator declares
+  sim-params               conf/sim/default.yaml (value and the comment that gives its source)
+  brackets                 layerskin_exp/sim/brackets.yaml
+  campaign-force:<folder>  docs/<folder>/results.json (a report's force table)
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import json
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+SECTION = re.compile(r"(<!-- generated: (?P<name>[^ ]+) -->\n)(?P<body>.*?)(<!-- end generated: (?P=name) -->)", re.S)
+
+# Unit of a key, read from how its name ends (the project's keys carry their unit).
+UNITS = [
+    ("_mm_s2", "mm/s²"), ("_rad_s2", "rad/s²"), ("_m_s2", "m/s²"), ("_mm_s", "mm/s"), ("_deg_s", "deg/s"),
+    ("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_m_rad", "m, rad"), ("_mm", "mm"), ("_deg", "deg"), ("_kg", "kg"),
+    ("_m", "m"), ("_n", "N"), ("_ms", "ms"), ("_s", "s"), ("_hz", "Hz"), ("_pct", "%"), ("_kpa", "kPa"),
+    ("_mpa", "MPa"), ("_kohm", "kΩ"), ("_mohm", "MΩ"), ("_counts", "counts"), ("_frames", "frames"),
+    ("_bytes", "bytes"), ("_fraction", "fraction"), ("_port", "port"),
+]
+
+
+# Keys whose name does not carry their unit.
+UNIT_OF_KEY = {"grip_depth": "mm"}
+
+
+def unit_of(key: str) -> str:
+    if key in UNIT_OF_KEY:
+        return UNIT_OF_KEY[key]
+    name = key.rsplit(".", 1)[-1]
+    for suffix, unit in UNITS:
+        if name.endswith(suffix):
+            return unit
+    return ""
+
+
+def cell(text) -> str:
+    """A value or text as one Markdown table cell."""
+    if text is None:
+        return "null"
+    if isinstance(text, bool):
+        return str(text).lower()
+    s = str(text).replace("|", "\\|").replace("\n", " ").strip()
+    return s
+
+
+def code(value) -> str:
+    if isinstance(value, (list, tuple)):
+        value = "[" + ", ".join(cell(v) for v in value) + "]"
+    return f"`{cell(value)}`"
+
+
+def table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+# ---- comments of a YAML file, by dotted key -----------------------------------------------------
+
+def yaml_comments(path: Path) -> dict[str, str]:
+    """dotted key -> the comment on its line plus the comment-only lines that continue it."""
+    out: dict[str, str] = {}
+    stack: list[tuple[int, str]] = []
+    last: str | None = None
+    last_col = -1
+    for raw in path.read_text().splitlines():
+        stripped = raw.strip()
+        if not stripped:
+            last = None
+            continue
+        indent = len(raw) - len(raw.lstrip())
+        if stripped.startswith("#"):
+            if last is not None and indent > last_col:
+                out[last] = (out.get(last, "") + " " + stripped.lstrip("# ").strip()).strip()
+            continue
+        m = re.match(r"(\s*)([A-Za-z_][\w]*):(.*)$", raw)
+        if not m or stripped.startswith("- "):
+            last = None
+            continue
+        key, rest = m.group(2), m.group(3)
+        while stack and stack[-1][0] >= indent:
+            stack.pop()
+        dotted = ".".join([k for _, k in stack] + [key])
+        stack.append((indent, key))
+        comment = ""
+        if "#" in rest:
+            hash_at = rest.index("#")
+            comment = rest[hash_at + 1:].strip()
+            last_col = len(raw) - len(rest) + hash_at - 1
+        else:
+            last_col = indent
+        out[dotted] = comment
+        last = dotted
+    return out
+
+
+# ---- the refusals a schema gives -----------------------------------------------------------------
+
+def _probe_values(value):
+    if isinstance(value, bool):
+        return []
+    if isinstance(value, int):
+        return [-1, 10**9]
+    if isinstance(value, float) or value is None:
+        return [-1.0, 0.0, 1e9]
+    if isinstance(value, str):
+        return [""]
+    if isinstance(value, (list, tuple)) and value and all(isinstance(v, (int, float)) for v in value):
+        return [[-1e9] * len(value), [1e9] * len(value), [0] * len(value)]
+    return []
+
+
+def _refusal(key: str, err: Exception) -> str | None:
+    msg = str(err)
+    prefix = f"{key}="
+    if not msg.startswith(prefix):
+        return None
+    return msg.split(": ", 1)[1] if ": " in msg else None
+
+
+def _join(refusals: list[str]) -> str:
+    seen: list[str] = []
+    for r in refusals:
+        if r not in seen:
+            seen.append(r)
+    return "; ".join(seen)
+
+
+# ---- protocol keys --------------------------------------------------------------------------------
+
+def _compose_dict(app: str):
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    import protocols.config  # noqa: F401 - stores the schemas
+    from layerskin_exp.config import CONF_DIR, VERSION_BASE
+
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base=VERSION_BASE):
+            return hydra_compose(config_name=app)
+    finally:
+        GlobalHydra.instance().clear()
+
+
+def _leaves(node, prefix=""):
+    """(dotted key, value) of every leaf of a plain container tree."""
+    for k, v in node.items():
+        if isinstance(v, dict):
+            yield from _leaves(v, f"{prefix}{k}.")
+        else:
+            yield f"{prefix}{k}", v
+
+
+def protocol_keys(app: str) -> str:
+    from omegaconf import OmegaConf
+
+    from layerskin_exp.config import ConfigError, validate
+
+    cfg = _compose_dict(app)
+    comments = yaml_comments(ROOT / "conf" / f"{app}.yaml")
+    if app == "grip_depth":
+        for name in ("translation", "torsion"):
+            for k, c in yaml_comments(ROOT / "conf" / "trajectory" / f"{name}.yaml").items():
+                comments.setdefault(f"trajectory.{k}", c)
+    import protocols.config as schemas
+
+    root = {"force_calibration": schemas.ForceCalibrationConfig, "grip_depth": schemas.GripDepthConfig}[app]
+    for key, comment in _schema_comments(root).items():
+        if not comments.get(key):
+            comments[key] = comment
+    rows = []
+    for key, value in _leaves(OmegaConf.to_container(cfg, resolve=False)):
+        if key.split(".")[0] in ("hardware", "skin", "sim"):
+            continue
+        refusals = []
+        for probe in _probe_values(value):
+            trial = copy.deepcopy(cfg)
+            OmegaConf.update(trial, key, probe, merge=False)
+            try:
+                validate(trial)
+            except ConfigError as err:
+                r = _refusal(key, err)
+                if r:
+                    refusals.append(r)
+        rows.append([f"`{key}`", unit_of(key), code(value), cell(comments.get(key, "")), cell(_join(refusals))])
+    return table(["key", "unit", "default", "what it sets", "refused unless"], rows)
+
+
+# ---- device options -------------------------------------------------------------------------------
+
+DEVICES = {
+    "skin_board": ("hardware.skin_board.config", "SkinBoardConfig"),
+    "platform": ("hardware.platform.config", "GrblPlatformConfig"),
+    "netft": ("hardware.netft.config", "NetFTConfig"),
+    "ur5e": ("hardware.ur5e.config", "UR5eConfig"),
+    "hande": ("hardware.hande.config", "HandEConfig"),
+    "camera": ("hardware.camera.config", "CameraConfig"),
+}
+
+
+def _field_comments(cls) -> dict[str, str]:
+    """field -> the comment on its line in the class body (its own class or a base's)."""
+    import inspect
+
+    out: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            src = inspect.getsource(klass)
+        except (OSError, TypeError):
+            continue
+        for line in src.splitlines():
+            m = re.match(r"\s+(\w+): [^=]+=.*?#\s*(.*)$", line)
+            if m and "noqa" not in m.group(2):
+                out[m.group(1)] = m.group(2).strip()
+    return out
+
+
+def _schema_comments(cls, prefix: str = "") -> dict[str, str]:
+    """dotted key -> the inline comment of its field, through the nested dataclasses of `cls`."""
+    import typing
+
+    out = {f"{prefix}{k}": v for k, v in _field_comments(cls).items()}
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        kind = hints.get(f.name)
+        if dataclasses.is_dataclass(kind):
+            out.update(_schema_comments(kind, f"{prefix}{f.name}."))
+    return out
+
+
+def device_options(device: str) -> str:
+    import importlib
+
+    from layerskin_exp.config import ConfigError
+
+    module, name = DEVICES[device]
+    cls = getattr(importlib.import_module(module), name)
+    comments = _field_comments(cls)
+    base = f"hardware.{device}"
+    default = cls()
+    rows = []
+    for f in dataclasses.fields(cls):
+        value = getattr(default, f.name)
+        refusals = []
+        for probe in _probe_values(value):
+            if isinstance(value, tuple) and isinstance(probe, list):
+                probe = tuple(probe)
+            try:
+                cls(**{f.name: probe})
+            except ConfigError as err:
+                r = _refusal(f"{base}.{f.name}", err)
+                if r:
+                    refusals.append(r)
+            except (TypeError, ValueError):
+                pass
+        rows.append([f"`{base}.{f.name}`", unit_of(f.name), code(value), cell(comments.get(f.name, "")),
+                     cell(_join(refusals))])
+    return table(["key", "unit", "default", "note", "refused unless"], rows)
+
+
+def device_faults(device: str) -> str:
+    from hardware.config import fault_parameters
+
+    rows = [[f"`+hardware.faults.{device}.{k}`", code(v)] for k, v in sorted(fault_parameters(device).items())]
+    return table(["setting", "default"], rows)
+
+
+# ---- the simulator --------------------------------------------------------------------------------
+
+def sim_params() -> str:
+    import yaml
+
+    path = ROOT / "conf" / "sim" / "default.yaml"
+    data = yaml.safe_load(path.read_text())
+    comments = yaml_comments(path)
+    rows = []
+
+    def walk(node, prefix):
+        for k, v in node.items():
+            if k == "defaults":
+                continue
+            key = f"{prefix}{k}"
+            if isinstance(v, dict):
+                walk(v, key + ".")
+            else:
+                rows.append([f"`sim.{key}`", code(v), cell(comments.get(key, ""))])
+
+    walk(data, "")
+    return table(["key", "default", "source or reasoning (conf/sim/default.yaml)"], rows)
+
+
+def brackets() -> str:
+    import yaml
+
+    data = yaml.safe_load((ROOT / "layerskin_exp" / "sim" / "brackets.yaml").read_text())["parameters"]
+    rows = []
+    for key, e in data.items():
+        span = code(e["levels"]) if "levels" in e else f"{cell(e.get('low'))} – {cell(e.get('high'))}"
+        screened = "no: " + cell(e.get("why", "")) if e.get("screen") is False else "yes"
+        rows.append([f"`{key}`", code(e["nominal"]), span, screened, cell(e.get("source", ""))])
+    return table(["parameter", "nominal", "bracket", "screened", "source, and what would settle it"], rows)
+
+
+# ---- committed report outputs ---------------------------------------------------------------------
+
+def campaign_force(folder: str) -> str:
+    data = json.loads((DOCS / folder / "results.json").read_text())
+    force, study = data["force"], data.get("study", {}).get("force", {})
+    training = data.get("force_training", {})
+    rows = []
+    for model, axes in force.items():
+        r2 = [f"{axes[a]['r2']:.3f}" if isinstance(axes.get(a), dict) else "–" for a in ("Fx", "Fy", "Fz")]
+        ref = study.get(model, {})
+        ref_r2 = [f"{ref[a]['r2']:.3f}" if isinstance(ref.get(a), dict) and "r2" in ref[a] else "–"
+                  for a in ("Fx", "Fy", "Fz")]
+        t = training.get(model)
+        conv = "" if not t else (f"{t.get('epochs', '?')} epochs, "
+                                 + ("converged" if t.get("converged") else "not converged"))
+        rows.append([model, *r2, " / ".join(ref_r2), conv])
+    return table(["model", "R² Fx", "R² Fy", "R² Fz", "the study's R² (Fx / Fy / Fz)", "training"], rows)
+
+
+def render(name: str) -> str:
+    kind, _, arg = name.partition(":")
+    makers = {"protocol-keys": protocol_keys, "device-options": device_options, "device-faults": device_faults,
+              "sim-params": lambda _: sim_params(), "brackets": lambda _: brackets(),
+              "campaign-force": campaign_force}
+    if kind not in makers:
+        raise SystemExit(f"doc_tables: unknown generated section {name!r}")
+    return makers[kind](arg)
+
+
+def pages() -> list[Path]:
+    return sorted(p for p in DOCS.rglob("*.md") if "<!-- generated: " in p.read_text())
+
+
+def update(path: Path, write: bool) -> list[str]:
+    """The names of the sections of `path` that differ from their source (rewritten if `write`)."""
+    text = path.read_text()
+    stale: list[str] = []
+
+    def repl(m: re.Match) -> str:
+        body = render(m.group("name"))
+        if body != m.group("body"):
+            stale.append(m.group("name"))
+        return m.group(1) + body + m.group(4)
+
+    new = SECTION.sub(repl, text)
+    if write and new != text:
+        path.write_text(new)
+    return stale
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--check", action="store_true", help="compare only; exit 1 naming stale sections")
+    args = parser.parse_args(argv)
+    stale = {str(p.relative_to(ROOT)): s for p in pages() if (s := update(p, write=not args.check))}
+    for page, names in stale.items():
+        print(f"{page}: {'stale' if args.check else 'regenerated'}: {', '.join(names)}")
+    if args.check and stale:
+        print("regenerate with: python tools/doc_tables.py", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
