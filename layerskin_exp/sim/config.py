@@ -100,9 +100,10 @@ class SheetConfig:
     `interface_friction`: the film-Velostat friction coefficient.
     `large_deflection`: the hemisphere's sheet also stretches as it sinks (a von Karman plate with
     the films' membrane stiffness, `laminate`), which the 3D model of the study's geometry shows
-    carrying most of a 3 N press outwards. Off by default: the contact tables are solved about
-    the contact, and a membrane spreads a press over the whole pad (docs/simulator-validation.md says
-    what it does to each row)."""
+    carrying most of a 3 N press outwards. Off by default: it spreads a press over the whole pad
+    and takes most of the inter-layer count shift out of the skin (docs/simulator-validation.md says
+    what it does to each row); where a profile reaches past the pad's sides the frame pipeline adds
+    that load back as the sheet's rigid-body pressure (frame_kernels._pad_fold)."""
 
     film_modulus_mpa: float = 2500.0  # polyimide
     film_thickness_mm: float = 0.025

@@ -168,6 +168,72 @@ def _fill_edges(edge, q, half_pad, cx, cy, kk, base, top):
             top[r, c] = edge[1, c] * across_x + et_r * across_y
 
 
+# the grid the load beyond the pad's sides is summed on (`_pad_fold`): cells of about this size,
+# their edges on the pad's sides
+FOLD_STEP_MM = 0.5
+
+
+@_jit
+def _pad_fold(lk_row, t32, cx, cy, mx32, my32, reach, half_pad, origin32, scale32, out):
+    """The rigid-body answer of the sheet to the load its axisymmetric profile about (cx, cy)
+    (and couple response times (mx32, my32)) puts beyond the pad's sides, within `reach`:
+    out[:] = (a, b, c) of the pressure a + b x + c y (kPa, x and y about the pad's centre) that,
+    spread over the pad, carries that load's force and first moments. The tables are solved for
+    a pad centred on the contact; on a real pad the sheet rests on the lattice only inside its
+    sides, and a sheet whose load would reach past them translates and tilts on the lattice
+    instead (its rigid-body modes on a foundation: pressure k (w0 + tx x + ty y)), so that the
+    deep layer carries F_z, and its moment, where statics puts them. Zero where the reach stays
+    inside the pad (every press of the small-deflection sheet but at the pad's rim)."""
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+    L = half_pad
+    if abs(cx) + reach <= L and abs(cy) + reach <= L:
+        return False
+    n_in = max(int(math.ceil(L / FOLD_STEP_MM)), 1)
+    h = L / n_in  # cell size: the pad's sides are cell edges
+    k0x, k1x = int(math.floor((cx - reach) / h)), int(math.ceil((cx + reach) / h))
+    k0y, k1y = int(math.floor((cy - reach) / h)), int(math.ceil((cy + reach) / h))
+    r2max = reach * reach
+    f = 0.0
+    fx = 0.0
+    fy = 0.0
+    for ky in range(k0y, k1y):
+        y = (ky + 0.5) * h
+        dy = np.float32(y - cy)
+        out_y = abs(y) > L
+        for kx in range(k0x, k1x):
+            x = (kx + 0.5) * h
+            if not out_y and abs(x) <= L:
+                continue
+            dx = np.float32(x - cx)
+            r2 = dx * dx + dy * dy
+            if r2 > r2max:
+                continue
+            v0, v1 = _lookup(lk_row, t32, r2, origin32, scale32)
+            v = np.float64(v0 + (mx32 * dx + my32 * dy) * v1)
+            f += v
+            fx += v * x
+            fy += v * y
+    two_l = 2.0 * L
+    area = h * h
+    out[0] = f * area / (two_l * two_l)
+    out[1] = fx * area / (two_l**4 / 12.0)
+    out[2] = fy * area / (two_l**4 / 12.0)
+    return out[0] != 0.0 or out[1] != 0.0 or out[2] != 0.0
+
+
+@_jit
+def _add_fold(field, q, ab):
+    """field (m, m) [y, x] += ab[0] + ab[1] x + ab[2] y at the quadrature points."""
+    m = q.shape[0]
+    a, b, c = np.float32(ab[0]), np.float32(ab[1]), np.float32(ab[2])
+    for r in range(m):
+        row = a + c * q[r]
+        for cc in range(m):
+            field[r, cc] += row + b * q[cc]
+
+
 @_jit
 def _window(cx, cy, reach, prm, win, at):
     """Taxel rows/cols [r0, r1] x [c0, c1] (inclusive) whose electrode comes within `reach` of
@@ -323,12 +389,25 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
     mx32, my32 = np.float32(fx * h_eff), np.float32(fy * h_eff)
     dx2 = np.empty(m, np.float32)
     mdx = np.empty(m, np.float32)
-    # deep: the lattice's pressure around the contact's deep-frame position
-    _window(cdx, cdy, bounds[i, 1], prm, win, 0)
-    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
     # the lattice's top carries the same profile and couple about the cap's point in the sheet's
     # frame: the same points as the base's where the sheet has not travelled (a press)
     same = st[S_UX] == 0.0 and st[S_UY] == 0.0
+    # what the profile puts beyond the pad's sides comes back as the sheet's rigid-body pressure
+    # over the pad (`_pad_fold`), for the base about the cap's ground position and for the top
+    # about its point in the sheet's frame
+    fold = np.empty(3)
+    if _pad_fold(lk_deep, t32, cdx, cdy, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32, scale_d32, fold):
+        _add_fold(base, q, fold)
+        if same:
+            _add_fold(top, q, fold)
+        edges = True
+    if not same and _pad_fold(lk_deep, t32, ax, ay, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32,
+                              scale_d32, fold):
+        _add_fold(top, q, fold)
+        edges = True
+    # deep: the lattice's pressure around the contact's deep-frame position
+    _window(cdx, cdy, bounds[i, 1], prm, win, 0)
+    r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
     _disc_pattern(base, top, same, lk_deep, t32, q, cdx, cdy, mx32, my32, r0, r1, c0, c1, dx2, mdx,
                   origin_d32, scale_d32)
     tr0, tr1, tc0, tc1 = r0, r1, c0, c1
@@ -338,7 +417,7 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
         tr0, tr1, tc0, tc1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq
         _disc_pattern(top, top, False, lk_deep, t32, q, ax, ay, mx32, my32, tr0, tr1, tc0, tc1, dx2, mdx,
                       origin_d32, scale_d32)
-    if edges:  # the route covers the grid: one pass gives both their cell pattern
+    if edges:  # the route (or the fold) covers the grid: one pass gives both their cell pattern
         _deep_pass(base, top, True, lattice, 0, m, 0, m, quad, n, nq, store, f_deep, colsum, tax[1])
     else:
         _deep_pass(base, top, same, lattice, r0, r1, c0, c1, quad, n, nq, store, f_deep, colsum, tax[1])

@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from layerskin_exp.sim import mechanics as mk
+from layerskin_exp.sim.frame_kernels import FOLD_STEP_MM
 from layerskin_exp.sim.spacer import hex_cell_pattern
 
 
@@ -80,6 +81,23 @@ class ReferenceSkin:
 
         return side(tab.edge_deep_kpa), side(tab.edge_top_kpa)
 
+    def pad_fold(self, field, cx: float, cy: float, reach_mm: float) -> tuple[float, float, float]:
+        """(a, b, c) of the pressure a + b x + c y over the pad (kPa, about its centre) that carries
+        the force and first moments of what field(x, y) (an axisymmetric profile about (cx, cy))
+        puts beyond the pad's sides within reach_mm: the sheet's rigid-body answer on the lattice
+        (frame_kernels._pad_fold), summed on cells whose edges lie on the pad's sides."""
+        half = 0.5 * self.sim.spacer.width_mm
+        if abs(cx) + reach_mm <= half and abs(cy) + reach_mm <= half:
+            return 0.0, 0.0, 0.0
+        h = half / max(math.ceil(half / FOLD_STEP_MM), 1)
+        gx = (np.arange(math.floor((cx - reach_mm) / h), math.ceil((cx + reach_mm) / h)) + 0.5) * h
+        gy = (np.arange(math.floor((cy - reach_mm) / h), math.ceil((cy + reach_mm) / h)) + 0.5) * h
+        px, py = np.meshgrid(gx, gy)
+        beyond = ((np.abs(px) > half) | (np.abs(py) > half)) & (np.hypot(px - cx, py - cy) <= reach_mm)
+        v = np.where(beyond, field(px, py), 0.0) * h * h
+        two_l = 2.0 * half
+        return float(v.sum()) / two_l**2, float((v * px).sum()) / (two_l**4 / 12), float((v * py).sum()) / (two_l**4 / 12)
+
     def signed_fields(self, rec: np.ndarray, x: np.ndarray, y: np.ndarray,
                       cells: np.ndarray | float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The contact's pressure on the sheet (kPa, in the sheet's frame, where the superficial
@@ -100,17 +118,24 @@ class ReferenceSkin:
         gx, gy = ax + rec[mk.S_UX], ay + rec[mk.S_UY]  # the cap over the deep sheet
         dist = tab.dist_mm
         if self.tab.kind == "hemisphere":
-            def layer(profile, couple, cx, cy):
-                dx, dy = x - cx, y - cy
+            def layer(profile, couple, cx, cy, px=x, py=y):
+                dx, dy = px - cx, py - cy
                 r = np.hypot(dx, dy)
                 p0 = _row_interp(profile, i, t, r, dist)
                 p1 = _row_interp(couple, i, t, r, dist)
                 cos_m = np.where(r > 0, (mx * dx + my * dy) / np.maximum(r, 1e-12), 0.0)
                 return p0 + cos_m * p1
 
+            half = 0.5 * self.sim.spacer.width_mm
+            on_pad = (np.abs(x) <= half) & (np.abs(y) <= half)
+
+            def folded(cx, cy):  # the lattice's profile about (cx, cy) on the pad, and the sheet's rigid-body answer
+                a, b, c = self.pad_fold(lambda px, py: layer(tab.deep_kpa, tab.deep_couple_kpa, cx, cy, px, py),
+                                        cx, cy, float(dist[-1]))
+                return np.where(on_pad, layer(tab.deep_kpa, tab.deep_couple_kpa, cx, cy) + a + b * x + c * y, 0.0)
+
             base, top = self.edge_fields(rec, x, y, h_lat)
-            deep = layer(tab.deep_kpa, tab.deep_couple_kpa, gx, gy)
-            under = layer(tab.deep_kpa, tab.deep_couple_kpa, ax, ay)
+            deep, under = folded(gx, gy), folded(ax, ay)
             return layer(tab.cover_kpa, tab.cover_couple_kpa, ax, ay), (deep + base) * cells, (under + top) * cells
         # rod: line load across the axis, per unit length (frame_kernels._rod_fields): the contact
         # and the lattice top about the cap's line in the sheet's frame, the deep plane about the
