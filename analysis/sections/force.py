@@ -15,8 +15,8 @@ from analysis.metrics import mae, r2_score
 from analysis.report_run import ReportRun
 from analysis.run_info import convergence_caveats, force_ranges, training_state
 from layerskin_exp.estimation.artifact import Estimator
-from layerskin_exp.estimation.cnn import CnnGruForceModel
-from layerskin_exp.estimation.linear import LinearForceModel, linear_features
+from layerskin_exp.estimation.cnn import CnnGruForceModel, parse_configuration
+from layerskin_exp.estimation.linear import LinearForceModel, layer_features, linear_features
 from layerskin_exp.estimation.splits import split_trials
 from layerskin_exp.features import two_layer_features
 
@@ -68,6 +68,21 @@ def calibration_arrays(run: ReportRun):
     return X, y, trial, progress
 
 
+def _same_inputs_baseline(name: str, f: dict, y: np.ndarray, m_tr: np.ndarray, m_te: np.ndarray,
+                          linear_r2: dict) -> tuple[str, dict]:
+    """The linear model a CNN's convergence is judged against (run_info.convergence_caveats): the
+    study's two-layer baseline for a two-layer CNN, the linear model of its own layer's moments
+    (estimation.linear.layer_features) for a single-layer one; (its name, axis -> test R²)."""
+    layers, _ = parse_configuration(name)
+    if layers == "T":
+        return "the linear baseline", linear_r2
+    key = {"S": "s", "D": "d"}[layers]
+    phi = layer_features(f[f"cop_{key}"], f[f"p_{key}"])
+    r2 = r2_score(y[m_te], LinearForceModel().fit(phi[m_tr], y[m_tr]).predict(phi[m_te]))
+    layer = {"S": "superficial", "D": "deep"}[layers]
+    return f"the linear model of the {layer} layer's moments", {ax: r2[i] for i, ax in enumerate(AXES)}
+
+
 def force(run: ReportRun) -> None:
     if not run.camp.calibration:
         run.skip("force", "no complete force_calibration sessions")
@@ -114,8 +129,10 @@ def force(run: ReportRun) -> None:
     training = {}
     for k, h in history.items():
         st = training_state(h, a.cnn.max_epochs, a.cnn.patience)
-        st["caveats"] = convergence_caveats(
-            st, {ax: v["r2"] for ax, v in results["force"][k].items()}, linear_r2)
+        r2_k = {ax: v["r2"] for ax, v in results["force"][k].items()}
+        baseline, own_r2 = _same_inputs_baseline(k, f, y, m_tr, m_te, linear_r2)
+        st["baseline"], st["baseline_r2"] = baseline, own_r2
+        st["caveats"] = convergence_caveats(st, r2_k, own_r2, baseline)
         st["converged"] = not st["caveats"]
         training[k] = st
         log.info("%s: %d/%d epochs, early stopping %s%s", k, st["epochs"], st["max_epochs"],

@@ -16,6 +16,15 @@ def linear_features(dc_mm: np.ndarray, p_s: np.ndarray, p_d: np.ndarray) -> np.n
     return np.column_stack([dc_mm[:, 0], dc_mm[:, 1], p_s, p_d, dc_mm[:, 0] * pbar, dc_mm[:, 1] * pbar])
 
 
+def layer_features(cop_mm: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """One layer's own moments in the baseline's form: φ = [c_x, c_y, p, c_x·p, c_y·p].
+
+    cop_mm (N, 2) the layer's CoP in its own taxel frame, p (N,) its total -> (N, 5). What a linear
+    model can read from a single layer's map, the baseline a single-layer CNN (S-, D-) is held to:
+    without the other layer it has no inter-layer shift to read."""
+    return np.column_stack([cop_mm[:, 0], cop_mm[:, 1], p, cop_mm[:, 0] * p, cop_mm[:, 1] * p])
+
+
 class LinearForceModel(RegressorMixin, BaseEstimator):
     """Per-axis least squares with an intercept on the six features (numpy.linalg.lstsq).
 
