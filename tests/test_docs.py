@@ -174,7 +174,7 @@ def test_the_version_is_one_and_released_in_the_changelog():
     assert declared == layerskin_exp.__version__
     changelog = (ROOT / "CHANGELOG.md").read_text()
     sections = re.findall(r"^## \[([^\]]+)\]", changelog, flags=re.M)
-    assert sections[:2] == ["Unreleased", declared], "an empty Unreleased section, then this version's"
+    assert sections[:2] == ["Unreleased", declared], "an Unreleased section, then this version's"
     assert re.search(rf"^## \[{re.escape(declared)}\] - \d{{4}}-\d{{2}}-\d{{2}}$", changelog, flags=re.M)
 
 
