@@ -169,6 +169,36 @@ def interface_record(sim: SimConfig) -> dict:
             "peak_contact_pressure_at_3n_kpa": round(contact, 1)}
 
 
+def membrane_record(sim: SimConfig, fz_n: float = 3.0) -> dict:
+    """For the record: the large-deflection sheet's hoop membrane force at a 3 N press against the
+    compressive membrane force at which a plate on a Winkler foundation wrinkles, 2 sqrt(D k)
+    (D the sheet's rigidity there, k the open lattice's E / h; Hetenyi's infinite plate), for the
+    design's films and glued.
+
+    Beyond a few mm from the cap the stretched sheet's rim is pulled inwards and its hoop force
+    turns compressive; where it passes that threshold a real sheet wrinkles and carries (almost) no
+    hoop compression (a tension field). The axisymmetric plate, and the 3D model's merged sheet on
+    its coarse outer mesh, stay smooth and keep it, so the membrane's spreading of a deep press is
+    an upper bound where the threshold is passed."""
+    out = {}
+    for label, design in (("films", sim), ("glued", _bounds(sim)[0])):
+        ld = replace(design, sheet=replace(design.sheet, large_deflection=True))
+        plate = _solver(ld, "hemisphere")
+        sol = plate.solve(_depth_for(_model(ld), fz_n))
+        n_r, n_t = sol.membrane_n_per_mm
+        mid = 0.5 * (plate.x[:-1] + plate.x[1:])
+        d = np.interp(mid, plate.x, sol.rigidity_n_mm) if sol.rigidity_n_mm is not None else ld.sheet.rigidity_n_mm
+        k = plate.law.e_lat_kpa * 1e-3 / plate.law.h_mm
+        over = -n_t > 2.0 * np.sqrt(d * k)
+        out[label] = {"hoop_min_n_per_mm": round(float(n_t.min()), 3),
+                      "wrinkling_threshold_n_per_mm": round(float(2.0 * np.sqrt(np.median(d) * k)), 3),
+                      # that wrinkle's wavelength, 2 pi (D / k)^(1/4): a hoop wave must fit the rim's circumference
+                      "wrinkle_wavelength_mm": round(float(2.0 * math.pi * (np.median(d) / k) ** 0.25), 1),
+                      "over_threshold_from_to_mm": [round(float(mid[over].min()), 1), round(float(mid[over].max()), 1)]
+                      if over.any() else None}
+    return {"membrane_hoop_at_3n_large_deflection": out}
+
+
 def moment_equilibrium(sim: SimConfig, model_sim: SimConfig | None = None) -> Check:
     """The shear's couple about the deep plane is taken by the lattice and the indenter together:
     the cover's lever under the contact (the hemisphere at 3 N) and the lattice's at the pad's
@@ -408,6 +438,7 @@ def run(sim: SimConfig | None = None, fem: bool = True) -> tuple[list[Check], di
         extra["section_checks"] = fem_rows
         extra["fem_record"] = fem_record
     extra.update(interface_record(sim))
+    extra.update(membrane_record(sim))
     extra.update(slide_record(sim))
     extra.update(shift_and_height_record(sim))
     extra.update(spread_record(sim))

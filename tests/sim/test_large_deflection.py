@@ -174,3 +174,17 @@ def test_the_kernel_folds_as_the_reference_does(wide_model, xy):
     want = ReferenceSkin(wide_model).maps(rec[None, :])[0]
     for layer in range(2):
         assert np.abs(got[layer] - want[layer]).max() <= 1e-3 * want[layer].max()
+
+
+def test_the_stretched_sheets_rim_is_in_hoop_compression_past_the_wrinkling_load():
+    """validate's record of the membrane at 3 N: the rim's hoop force is compressive, beyond the
+    glued sheet's wrinkling load 2 sqrt(D k) (Hetenyi), written out here from the design."""
+    import math
+
+    from layerskin_exp.sim.physics_checks import membrane_record
+
+    rec = membrane_record(LINEAR)["membrane_hoop_at_3n_large_deflection"]["glued"]
+    k = LINEAR.spacer.lattice_modulus_kpa * 1e-3 / LINEAR.spacer.thickness_mm
+    assert rec["wrinkling_threshold_n_per_mm"] == pytest.approx(2 * math.sqrt(LINEAR.sheet.rigidity_n_mm * k), rel=0.01)
+    assert rec["hoop_min_n_per_mm"] < -rec["wrinkling_threshold_n_per_mm"] < 0
+    assert rec["over_threshold_from_to_mm"][1] > rec["over_threshold_from_to_mm"][0] > 2.0
