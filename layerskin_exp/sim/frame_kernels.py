@@ -58,8 +58,9 @@ PARAMS = np.dtype([
     # first taxel centre, the pitch and half the electrode's side (mm), half the pad's side (mm)
     ("n_taxels", np.float64), ("quad_points", np.float64), ("rod", np.float64), ("first_centre_mm", np.float64),
     ("pitch_mm", np.float64), ("half_electrode_mm", np.float64), ("half_pad_mm", np.float64),
-    # how far inside the pad's sides their load's moment acts (ContactTables.side_inset_mm, mm)
-    ("side_inset_mm", np.float64),
+    # how far inside the pad's sides their load's moment acts (ContactTables.side_inset_mm, mm);
+    # whether the sheet answers load past the sides as a rigid body (1/0, `_pad_fold`)
+    ("side_inset_mm", np.float64), ("fold_sides", np.float64),
     # the contact tables: indentation step and last row index; the fine lookups' origin and scale
     # (superficial, deep: r^2 or signed distance to bin)
     ("delta_step_mm", np.float64), ("last_delta_row", np.float64), ("lk_origin", np.float64), ("lk_scale", np.float64),
@@ -183,7 +184,12 @@ def _pad_fold(lk_row, t32, cx, cy, mx32, my32, reach, half_pad, origin32, scale3
     sides, and a sheet whose load would reach past them translates and tilts on the lattice
     instead (its rigid-body modes on a foundation: pressure k (w0 + tx x + ty y)), so that the
     deep layer carries F_z, and its moment, where statics puts them. Zero where the reach stays
-    inside the pad (every press of the small-deflection sheet but at the pad's rim)."""
+    inside the pad. A rigid-body answer needs a sheet whose reach spans the pad: the stretched
+    sheet's (large deflection), whose membrane spreads a deep press over all of it. The bending
+    plate's influence length, (D / k)^(1/4) = 2-6 mm, is a fraction of the 26 mm pad: near a side
+    it answers locally, which a pad-wide tilt is not, so its profile is not folded (`fold_sides`
+    off, SkinModel). What that leaves: a 3 N press 2 mm from a side puts 6.5 % of its load past
+    it (deep force CoP 0.21 mm inwards); 5 mm or more from the sides, under 1 %."""
     out[0] = 0.0
     out[1] = 0.0
     out[2] = 0.0
@@ -396,13 +402,15 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
     # over the pad (`_pad_fold`), for the base about the cap's ground position and for the top
     # about its point in the sheet's frame
     fold = np.empty(3)
-    if _pad_fold(lk_deep, t32, cdx, cdy, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32, scale_d32, fold):
+    folds = prm.fold_sides != 0.0
+    if folds and _pad_fold(lk_deep, t32, cdx, cdy, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32, scale_d32,
+                           fold):
         _add_fold(base, q, fold)
         if same:
             _add_fold(top, q, fold)
         edges = True
-    if not same and _pad_fold(lk_deep, t32, ax, ay, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32,
-                              scale_d32, fold):
+    if folds and not same and _pad_fold(lk_deep, t32, ax, ay, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32,
+                                        scale_d32, fold):
         _add_fold(top, q, fold)
         edges = True
     # deep: the lattice's pressure around the contact's deep-frame position

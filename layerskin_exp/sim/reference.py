@@ -129,10 +129,15 @@ class ReferenceSkin:
             half = 0.5 * self.sim.spacer.width_mm
             on_pad = (np.abs(x) <= half) & (np.abs(y) <= half)
 
-            def folded(cx, cy):  # the lattice's profile about (cx, cy) on the pad, and the sheet's rigid-body answer
+            def folded(cx, cy):
+                """The lattice's profile about (cx, cy); the stretched sheet's on the pad only, with its
+                rigid-body answer to what lay past the sides (frame_kernels._pad_fold)."""
+                p = layer(tab.deep_kpa, tab.deep_couple_kpa, cx, cy)
+                if not self.sim.sheet.large_deflection:
+                    return p
                 a, b, c = self.pad_fold(lambda px, py: layer(tab.deep_kpa, tab.deep_couple_kpa, cx, cy, px, py),
                                         cx, cy, float(dist[-1]))
-                return np.where(on_pad, layer(tab.deep_kpa, tab.deep_couple_kpa, cx, cy) + a + b * x + c * y, 0.0)
+                return np.where(on_pad, p + a + b * x + c * y, 0.0)
 
             base, top = self.edge_fields(rec, x, y, h_lat)
             deep, under = folded(gx, gy), folded(ax, ay)

@@ -346,6 +346,8 @@ class SkinModel:
         prm["first_centre_mm"], prm["pitch_mm"] = self._centres[0], skin.pitch_mm
         prm["half_electrode_mm"], prm["half_pad_mm"] = self._half_electrode, self._half
         prm["side_inset_mm"] = float(tab.side_inset_mm)
+        # the stretched sheet's reach spans the pad, so it answers load past the sides as a rigid body
+        prm["fold_sides"] = float(self.kind == "hemisphere" and s.sheet.large_deflection)
         prm["delta_step_mm"], prm["last_delta_row"] = tab.d_delta, len(tab.delta_mm) - 1.000001
         prm["lk_origin"], prm["lk_scale"] = self._lk_origin, self._lk_scale
         prm["lk_origin_deep"], prm["lk_scale_deep"] = self._lk_origin_deep, self._lk_scale_deep
