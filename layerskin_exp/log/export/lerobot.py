@@ -173,13 +173,18 @@ class _Probe:
 
 
 def _why_not_complete(s: Session) -> str:
-    if s.damaged:
-        n = sum(sum(x.messages.values()) for x in s.lost if x.messages)
-        return (f"damaged ({len(s.lost)} lost range(s), {n} message(s) lost"
-                + (f", metadata {', '.join(s.damaged_fields)}" if s.damaged_fields else "") + ")")
+    parts = []
     if s.outcome is None:
-        return "not closed by its writer (no outcome recorded: a crash or a kill?)"
-    return f"outcome {s.outcome!r}"
+        parts.append("not closed by its writer (no outcome recorded: cut off, a crash or a kill?)")
+    elif not (s.outcome == "complete" or s.outcome.startswith("complete (")):
+        parts.append(f"outcome {s.outcome!r}")
+    if s.damaged:
+        known = [x for x in s.lost if x.messages is not None]
+        n = sum(sum(x.messages.values()) for x in known)
+        lost = f"{n} message(s) lost" + (" and an unknown number more" if len(known) < len(s.lost) else "")
+        parts.append(f"damaged ({len(s.lost)} lost range(s), {lost}"
+                     + (f"; metadata {', '.join(s.damaged_fields)}" if s.damaged_fields else "") + ")")
+    return "; ".join(parts) or "not complete"
 
 
 def _probe(path: Path) -> _Probe | str:
