@@ -133,6 +133,10 @@ def test_the_complete_trials_become_a_dataset_the_checker_accepts(dataset):
     assert hf["observation.tactile.deep"] == {"shape": [16, 16], "dtype": "float32", "_type": "Array2D"}
     assert hf["observation.wrench"] == {"feature": {"dtype": "float32", "_type": "Value"}, "length": 6,
                                         "_type": "List"}
+    # the 16 x 16 columns are datasets' Array2D extension (its reader gets Array2D back without features)
+    assert data.schema.field("observation.tactile.deep").metadata == {
+        b"ARROW:extension:name": b"datasets.features.features.Array2DExtensionType",
+        b"ARROW:extension:metadata": b'[[16, 16], "float32"]'}
 
 
 def test_episodes_carry_the_task_the_labels_and_the_source(dataset):

@@ -289,7 +289,35 @@ def _arrow_column(pa, values: np.ndarray, shape: tuple):
     n, h, w = values.shape
     inner = pa.ListArray.from_arrays(pa.array(np.arange(0, n * h * w + 1, w, dtype=np.int32)),
                                      pa.array(values.reshape(-1)))
-    return pa.ListArray.from_arrays(pa.array(np.arange(0, n * h + 1, h, dtype=np.int32)), inner)
+    outer = pa.ListArray.from_arrays(pa.array(np.arange(0, n * h + 1, h, dtype=np.int32)), inner)
+    return pa.ExtensionArray.from_storage(_array_type(pa, shape, str(values.dtype)), outer)
+
+
+_EXT_TYPES: dict = {}
+
+
+def _array_type(pa, shape: tuple, dtype: str):
+    """datasets' ArrayND extension type (features.Array2DExtensionType ...): nested lists of the
+    values, named and described as `datasets` does, so its reader gets the Array2D back."""
+    if "cls" not in _EXT_TYPES:
+        class ArrayXD(pa.ExtensionType):
+            def __init__(self, shape, dtype):
+                self.shape, self.value_type = tuple(shape), dtype
+                storage = pa.from_numpy_dtype(np.dtype(dtype))
+                for _ in shape:
+                    storage = pa.list_(storage)
+                pa.ExtensionType.__init__(self, storage,
+                                          f"datasets.features.features.Array{len(shape)}DExtensionType")
+
+            def __arrow_ext_serialize__(self):
+                return json.dumps((self.shape, self.value_type)).encode()
+
+            @classmethod
+            def __arrow_ext_deserialize__(cls, storage_type, serialized):
+                return cls(*json.loads(serialized))
+
+        _EXT_TYPES["cls"] = ArrayXD
+    return _EXT_TYPES["cls"](shape, dtype)
 
 
 def _hf_feature(spec: dict) -> dict:
@@ -303,15 +331,14 @@ def _hf_feature(spec: dict) -> dict:
     return {"shape": list(shape), "dtype": spec["dtype"], "_type": f"Array{len(shape)}D"}
 
 
-def _arrow_type(pa, spec: dict):
+def _arrow_type(pa, spec: dict, *, storage: bool = False):
+    """The parquet type of a feature's column (storage: of the extension type's storage)."""
     shape, t = tuple(spec["shape"]), pa.from_numpy_dtype(np.dtype(spec["dtype"]))
     if shape == (1,):
         return t
     if len(shape) == 1:
         return pa.list_(t, shape[0])
-    for _ in shape:
-        t = pa.list_(t)
-    return t
+    return _array_type(pa, shape, spec["dtype"]).storage_type if storage else _array_type(pa, shape, spec["dtype"])
 
 
 def _tasks_table(pa, tasks: list[str]):
