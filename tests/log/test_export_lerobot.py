@@ -311,3 +311,14 @@ def test_the_command_line(campaign, tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "1 episode(s)" in r.stdout and "at 20 fps" in r.stdout and check_lerobot(out) == []
+
+
+def test_block_mean_and_latest_on_a_small_timeline():
+    """Samples at 0, 10, 20, ... ns: periods of 25 ns average what falls in them; a period of 5 ns
+    with no sample holds the latest earlier one; `latest` is the last sample at or before the end."""
+    t = np.arange(0, 100, 10, dtype=np.int64)
+    v = np.arange(10, dtype=np.float64)[:, None] * [1.0, -1.0]
+    np.testing.assert_allclose(L._block_mean(t, v, np.array([0, 25, 50, 75])), [[1, -1], [3.5, -3.5], [6, -6]])
+    np.testing.assert_allclose(L._block_mean(t, v, np.array([20, 25, 30, 35])), [[2, -2], [2, -2], [3, -3]])
+    assert L._latest_index(t, np.array([0, 25, 50, 75])).tolist() == [2, 5, 7]
+    assert L._edges(1000, 3, 85).tolist() == [1000, 1000 + 11764706, 1000 + 23529412, 1000 + 35294118]
