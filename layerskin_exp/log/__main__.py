@@ -1,4 +1,5 @@
-"""python -m layerskin_exp.log inspect FILE | recover IN OUT | layout platform|gripper|FILE"""
+"""python -m layerskin_exp.log inspect FILE | recover IN OUT | layout platform|gripper|FILE |
+export lerobot SESSIONS OUT [--fps N]"""
 
 import sys
 

@@ -1,4 +1,5 @@
-"""Command line: inspect a session file, recover one whose writer died, print a Foxglove layout."""
+"""Command line: inspect a session file, recover one whose writer died, print a Foxglove layout,
+export a folder of sessions as a LeRobot dataset."""
 
 from __future__ import annotations
 
@@ -132,6 +133,19 @@ def _emit(text: str) -> None:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
+def _export(args) -> int:
+    """export lerobot: the report on stdout; bad input one line on stderr, exit 2."""
+    from layerskin_exp.log.export.lerobot import ExportError, export_lerobot
+
+    try:
+        report = export_lerobot(args.sessions, args.out, fps=args.fps)
+    except (ExportError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_UNREADABLE
+    _emit(report.describe())
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m layerskin_exp.log", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -148,7 +162,19 @@ def main(argv=None) -> int:
     p_layout.add_argument("target", help="platform | gripper | a session file")
     p_layout.add_argument("--estimate", action="store_true", help="with the live estimator's panels")
     p_layout.add_argument("--camera", action="store_true", help="with the camera image (gripper rig)")
+    p_export = sub.add_parser("export", help="write a folder of sessions in another format")
+    export_sub = p_export.add_subparsers(dest="format", required=True)
+    p_lerobot = export_sub.add_parser(
+        "lerobot", help="one LeRobot v3.0 dataset, one episode per complete trial (docs/export.md); damaged, "
+        "cut-off, incomplete or aborted trials are left out and listed")
+    p_lerobot.add_argument("sessions", help="a folder of session files (searched recursively), or one .mcap")
+    p_lerobot.add_argument("out", help="the dataset's folder: new, or empty")
+    p_lerobot.add_argument("--fps", type=int, default=None,
+                           help="the dataset's frame rate (default: the skin's frame rate / 5, the study's "
+                           "downsampling, rounded: 85 for the study's skin)")
     args = parser.parse_args(argv)
+    if args.command == "export":
+        return _export(args)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # damage is listed in the report itself
