@@ -52,6 +52,38 @@ def require(ok: bool, key: str, value, what: str) -> None:
         raise ConfigError(f"{key}={value!r}: {what}")
 
 
+_HOST_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
+
+
+def host_problem(value) -> str | None:
+    """What is wrong with `value` as an address to listen on or connect to (an IPv4 or IPv6
+    address, or a host name of letters, digits and hyphens in dot-separated labels), or None."""
+    import ipaddress
+
+    if not isinstance(value, str) or not value:
+        return "must be an IP address or a host name"
+    try:
+        ipaddress.ip_address(value)
+        return None
+    except ValueError:
+        pass
+    if value.startswith("[") and value.endswith("]"):
+        return "must be an IPv6 address without brackets, e.g. ::1"
+    labels = value.removesuffix(".").split(".")
+    if len(value) > 253 or not all(_HOST_LABEL.match(label) for label in labels):
+        return ("must be an IP address (127.0.0.1, ::1) or a host name of letters, digits and hyphens "
+                "(localhost, lab-pc.local)")
+    if all(label.isdigit() for label in labels):
+        return "is not a valid IPv4 address"
+    return None
+
+
+def require_host(key: str, value) -> None:
+    """An address setting: an IP address or a host name (host_problem)."""
+    problem = host_problem(value)
+    require(problem is None, key, value, problem or "")
+
+
 # Seeds reach numpy's generators 32 bits wide (`seed & 0xFFFFFFFF`): a larger seed would silently
 # repeat the draws of a smaller one.
 SEED_MAX = 2**32 - 1
