@@ -532,8 +532,13 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     health0 = device_health(rig)
     t0_ns = rig.clock.now_ns()
     offset, how = rig.log_time() or (None, "given")
-    writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True, epoch_offset_ns=offset,
-                           epoch_how=how)
+    try:
+        writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True, epoch_offset_ns=offset,
+                               epoch_how=how)
+    except OSError:  # a full disk as the trial starts: its file is there, cut short
+        if tmp.exists():
+            RUN_FILES.record(tmp, "interrupted")
+        raise
     writer.live = live
     trial = TrialLog(writer, rig, save_images)
     try:
@@ -554,7 +559,11 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
             trial.event("error", reason, **detail)
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
-        writer.close(f"aborted: {reason}", stream_health=trial_health(health0, device_health(rig)))
+        try:
+            writer.close(f"aborted: {reason}", stream_health=trial_health(health0, device_health(rig)))
+        except OSError as closing:  # a full disk: what reached it stays, without its summary
+            log.warning("trial %s: its file could not be closed (%s); what was written is kept as %s",
+                        name, closing, tmp)
         RUN_FILES.record(tmp, "interrupted")
         log.warning("trial %s aborted: %s (kept as %s)", name, reason, tmp)
         raise
