@@ -3,6 +3,7 @@ reason, and carries on; a trial present twice is used once; sessions= may be one
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -150,3 +151,75 @@ def test_an_empty_or_missing_sessions_folder_is_refused_naming_it(tmp_path):
         assert r.returncode == 2, r.stderr[-2000:]
         assert r.stderr.strip().count("\n") == 0 and r.stderr.startswith(f"error: {folder}:"), r.stderr
         assert not list(tmp_path.rglob("report.md")) and not list(tmp_path.rglob("results.json"))
+
+
+def _load_in_a_thread(root, timeout_s: float = 30.0):
+    """load_campaign(root) in a thread; None if it did not return within timeout_s (a hang)."""
+    import threading
+
+    out = {}
+    th = threading.Thread(target=lambda: out.setdefault("camp", load_campaign(root, progress=False, workers=1)),
+                          daemon=True)
+    th.start()
+    th.join(timeout_s)
+    return out.get("camp")
+
+
+def test_a_fifo_named_like_a_session_is_skipped_by_type_without_opening_it(tmp_path):
+    root = tmp_path / "sessions"
+    root.mkdir()
+    _campaign(root, n=1)
+    fifo = root / "pipe.mcap"
+    os.mkfifo(fifo)
+    try:
+        camp = _load_in_a_thread(root)
+    finally:  # a reader blocked on the FIFO (the old behaviour) gets its end of file
+        try:
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:
+            pass
+    assert camp is not None, "load_campaign hung on a FIFO"
+    assert [t.name for t in camp.calibration] == ["cal0.mcap"]
+    (skip,) = camp.skipped_files
+    assert (skip.name, skip.reason, skip.detail) == ("pipe.mcap", "not a regular file",
+                                                     "a FIFO (named pipe); skipped without opening it")
+
+
+def test_an_unreadable_subfolder_is_reported_as_skipped(tmp_path, monkeypatch):
+    # Tests run as root, whom chmod does not stop: the listing of one folder fails as it would
+    # without the permission.
+    root = tmp_path / "sessions"
+    (root / "locked").mkdir(parents=True)
+    _campaign(root, n=1)
+    _campaign(root / "locked", n=1)
+    scandir = os.scandir
+
+    def refusing(path="."):
+        if Path(path).name == "locked":
+            raise PermissionError(13, "Permission denied", str(path))
+        return scandir(path)
+
+    monkeypatch.setattr(os, "scandir", refusing)
+    camp = load_campaign(root, progress=False, workers=1)
+    assert [t.name for t in camp.calibration] == ["cal0.mcap"]
+    assert [(f.name, f.reason, f.detail) for f in camp.skipped_files] == [
+        ("locked/", "folder not read", "Permission denied; its session files are not in the report")]
+
+
+def test_a_file_name_that_is_not_utf8_is_printed_escaped(tmp_path):
+    from analysis.config import AnalysisConfig, ReportConfig
+    from analysis.report_run import ReportRun
+
+    root = tmp_path / "sessions"
+    root.mkdir()
+    (good,) = _campaign(root, n=1)
+    odd = Path(os.fsdecode(bytes(root) + b"/caf\xe9.mcap"))
+    odd.write_bytes(b"not a session")
+    run = ReportRun(ReportConfig(sessions=str(root), out=str(tmp_path / "out"),
+                                 analysis=AnalysisConfig(progress=False)))
+    run.out.mkdir()
+    run.load()
+    run.write()
+    md = (run.out / "report.md").read_text()
+    assert "- `caf\\xe9.mcap`: unreadable file" in md
+    assert json.loads((run.out / "results.json").read_text())["inputs"]["skipped_files"][0]["file"] == "caf\\xe9.mcap"
