@@ -36,7 +36,7 @@ from analysis.sections import slip as slip_section
 from analysis.sections import streams as streams_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import sessions_problem
-from layerskin_exp.cli import EXIT_CONFIG, hydra_main, refuse, run_command
+from layerskin_exp.cli import EXIT_CONFIG, hydra_main, override_values, refuse, run_command
 from layerskin_exp.config import SkinConfig, validate
 from layerskin_exp.estimation.cnn import default_torch_threads
 from layerskin_exp.provenance import provenance
@@ -170,10 +170,12 @@ def main(cfg: DictConfig) -> None:
 
 def _check_command_line(argv: list[str]) -> None:
     """sessions=/out= given on the command line are checked before Hydra starts (Hydra makes
-    its run folder under out= first and would fail there with a traceback)."""
-    for arg in argv:
-        key, _, value = arg.partition("=")
-        problem = {"sessions": _sessions_problem, "out": _out_problem}.get(key.lstrip("+"), lambda v: "")(value)
+    its run folder under out= first and would fail there with a traceback), as Hydra reads them
+    (a quoted path with spaces without its quotes); a command line Hydra cannot parse is refused
+    first, before out= is made."""
+    values = override_values(argv)
+    for key, check in (("sessions", _sessions_problem), ("out", _out_problem)):
+        problem = check(values[key]) if key in values else ""
         if problem:
             print(f"error: {problem}", file=sys.stderr)
             sys.exit(EXIT_CONFIG)

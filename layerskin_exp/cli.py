@@ -42,7 +42,8 @@ from layerskin_exp.config import (
     one_line,
 )
 
-__all__ = ["CONF_DIR", "EXIT_CONFIG", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "RefuseBadConfig", "exit_now", "answer_help", "expand_sweep", "hydra_main", "one_line", "preflight", "refuse",
+__all__ = ["CONF_DIR", "EXIT_CONFIG", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "RefuseBadConfig", "exit_now", "answer_help", "command_overrides", "expand_sweep", "hydra_main", "one_line", "override_problem",
+           "override_values", "preflight", "refuse",
            "run_command"]
 
 
@@ -160,6 +161,51 @@ def _is_multirun(argv: list[str]) -> bool:
     return "-m" in argv or "--multirun" in argv
 
 
+def command_overrides(argv: list[str]) -> list[str]:
+    """The key=value overrides of a command line (not its options, not Hydra's own keys)."""
+    return [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+
+
+def override_values(argv: list[str]) -> dict[str, str]:
+    """key (without +/~) -> value as Hydra reads it (quotes removed, `'out="/a b"'` -> `/a b`) of
+    each single-valued override of the command line. An override Hydra cannot parse is refused
+    here in one line (exit 2), saying how to quote a value with spaces (override_problem)."""
+    parser = OverridesParser.create()
+    values: dict[str, str] = {}
+    for arg in (a for a in argv if not a.startswith("-")):
+        problem = override_problem(arg, argv)
+        if problem:
+            refuse(ConfigError(problem))
+        o = parser.parse_override(arg)
+        if not o.is_sweep_override() and isinstance(o.value(), str):
+            values[o.get_key_element().lstrip("+~")] = o.value()
+    return values
+
+
+def override_problem(arg: str, argv: list[str]) -> str:
+    """Why Hydra cannot parse the override `arg` of command line argv ('' if it can), in one line:
+    an argument without '=' that is the rest of a value the shell split at a space, a value with
+    characters Hydra reads as syntax, each with the quoting Hydra documents
+    (`'key="/path/with space"'`)."""
+    key, sep, value = arg.partition("=")
+    if not sep:
+        i = argv.index(arg)
+        before = next((a for a in reversed(argv[:i]) if "=" in a and not a.startswith("-")), None)
+        if before is not None:
+            k, _, v = before.partition("=")
+            return (f"{arg!r} is not key=value: the shell split a value at a space; quote it for the shell and for "
+                    f"Hydra: '{k}=\"{v} {arg}\"'")
+        return f"{arg!r} is not key=value"
+    try:
+        OverridesParser.create().parse_override(arg)
+    except HydraException as e:
+        why = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        if value[:1] not in ("'", '"'):
+            return f"{arg}: {why}; quote a value with spaces or brackets for Hydra: '{key}=\"{value}\"'"
+        return f"{arg}: {why}"
+    return ""
+
+
 def expand_sweep(overrides: list[str]) -> list[list[str]]:
     """The override lists of every job a basic-sweeper multirun would launch (cartesian product)."""
     parsed = OverridesParser.create().parse_overrides(overrides)
@@ -188,7 +234,7 @@ def answer_help(config_name: str, argv: list[str]) -> None:
     from hydra.core.global_hydra import GlobalHydra
     from omegaconf import OmegaConf, open_dict
 
-    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    overrides = command_overrides(argv)
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base=VERSION_BASE):
@@ -216,7 +262,11 @@ def preflight(config_name: str, argv: list[str]) -> None:
         return  # Hydra's own modes and alternative configs: let Hydra handle them
     _check_launcher(argv)
     _refuse_schema_options(argv)
-    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    overrides = command_overrides(argv)
+    for arg in overrides:
+        problem = override_problem(arg, argv)
+        if problem:
+            refuse(ConfigError(problem))
     multirun = _is_multirun(argv)
     try:
         check_retired(overrides)

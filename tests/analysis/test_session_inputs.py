@@ -223,3 +223,36 @@ def test_a_file_name_that_is_not_utf8_is_printed_escaped(tmp_path):
     md = (run.out / "report.md").read_text()
     assert "- `caf\\xe9.mcap`: unreadable file" in md
     assert json.loads((run.out / "results.json").read_text())["inputs"]["skipped_files"][0]["file"] == "caf\\xe9.mcap"
+
+
+def _report_cli(args, cwd):
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])}
+    return subprocess.run([sys.executable, "-m", "analysis.report", *args, "analysis=demo"], capture_output=True,
+                          text=True, cwd=cwd, env=env, timeout=600)
+
+
+def test_paths_with_spaces_work_quoted_as_hydra_documents(tmp_path):
+    spaced = tmp_path / "my data"
+    _campaign(spaced / "sessions", n=1)
+    out = spaced / "the report"
+    r = _report_cli([f'sessions="{spaced / "sessions"}"', f"out='{out}'"], tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (out / "report.md").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["my data"]  # no tree named after the quoted path
+    data = json.loads((out / "results.json").read_text())
+    assert data["inputs"]["sessions_dir"] == str(spaced / "sessions") and data["data"]["sessions_used"] == 1
+
+
+def test_a_path_with_spaces_left_unquoted_says_how_to_quote_it(tmp_path):
+    spaced = tmp_path / "my data"
+    _campaign(spaced, n=1)
+    # the shell split it: two arguments
+    r = _report_cli([f"sessions={tmp_path}/my", "data", f"out={tmp_path}/o"], tmp_path)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr == (f"configuration error: 'data' is not key=value: the shell split a value at a space; quote it "
+                        f"for the shell and for Hydra: 'sessions=\"{tmp_path}/my data\"'\n")
+    # one argument Hydra cannot read as it stands
+    r = _report_cli([f"sessions={spaced}", f"out={tmp_path}/a b(1)"], tmp_path)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.endswith(f"quote a value with spaces or brackets for Hydra: 'out=\"{tmp_path}/a b(1)\"'\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["my data"]  # nothing made
