@@ -28,6 +28,7 @@ import os
 import sys
 from collections.abc import Callable, Iterable
 
+import yaml
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
@@ -37,6 +38,7 @@ from layerskin_exp.config import (
     CONF_DIR,
     VERSION_BASE,
     ConfigError,
+    check_group_options,
     check_retired,
     format_config_error,
     one_line,
@@ -99,7 +101,7 @@ def run_command(config_name: str, load_main: Callable[[], Callable[[], object]],
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises a refused composition instead of printing it
     try:
         main()
-    except HydraException as e:
+    except (HydraException, yaml.YAMLError) as e:  # the composition refused, or a config file unreadable
         if RefuseBadConfig.started or full_error == "1":
             raise
         refuse(ConfigError(one_line(e)))
@@ -235,12 +237,16 @@ def answer_help(config_name: str, argv: list[str]) -> None:
     from omegaconf import OmegaConf, open_dict
 
     overrides = command_overrides(argv)
+    try:
+        check_group_options(overrides)
+    except ConfigError as e:
+        refuse(e)
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base=VERSION_BASE):
             cfg = compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
         template = cfg.hydra.help.template  # the header's ${...} resolve against this command line
-    except HydraException as e:
+    except (HydraException, yaml.YAMLError) as e:
         refuse(ConfigError(one_line(e)))
     finally:
         GlobalHydra.instance().clear()
@@ -270,6 +276,7 @@ def preflight(config_name: str, argv: list[str]) -> None:
     multirun = _is_multirun(argv)
     try:
         check_retired(overrides)
+        check_group_options(overrides)
     except ConfigError as e:
         refuse(e)
     try:
