@@ -16,6 +16,7 @@ refused (exit 2), naming it.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import sys
@@ -164,8 +165,20 @@ def main(cfg: DictConfig) -> None:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         sys.exit(EXIT_CONFIG)
-    res = Analysis(rc, _hydra_preset()).run()
+    try:
+        res = Analysis(rc, _hydra_preset()).run()
+    except OSError as e:
+        if e.errno not in DISK_FULL:
+            raise
+        where = f": {e.filename}" if e.filename else ""
+        print(f"error: out={rc.out}: the report could not be written ({e.strerror or e}{where}); free space "
+              "there or point out= at another disk", file=sys.stderr)
+        sys.exit(1)
     print(f"report written to {Path(rc.out) / 'report.md'} ({counted(len(res['skipped']), 'section')} skipped)")
+
+
+# A disk that takes no more: full, over quota, too large a file, read-only (out= and its job log).
+DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
 
 
 def _check_command_line(argv: list[str]) -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import logging
 import os
 import sys
 from collections.abc import Callable, Iterable
@@ -59,6 +60,34 @@ HYDRA_MODES = ("--help", "-h", "--hydra-help", "--info", "-i", "--cfg", "-c", "-
 LAUNCHER_EXTRAS = {"slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
                    "submitit_slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
                    "submitit_local": ("hydra_plugins.hydra_submitit_launcher", "slurm")}
+
+
+class JobLogFile(logging.FileHandler):
+    """The job log's file handler (conf/hydra/job_logging/*.yaml). Where the file cannot be
+    written (a full disk), it says so once, in one line on stderr, and stops writing to it: the
+    run goes on with its console, instead of a logging traceback for every record after."""
+
+    _failed = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self._failed:
+            super().emit(record)
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        exc = sys.exc_info()[1]
+        if not isinstance(exc, OSError):
+            super().handleError(record)
+            return
+        if not self._failed:
+            self._failed = True
+            print(f"warning: the job log {self.baseFilename} cannot be written ({exc.strerror or exc}); "
+                  "the run goes on without it", file=sys.stderr, flush=True)
+            with contextlib.suppress(OSError):
+                self.close()
+
+    def flush(self) -> None:
+        with contextlib.suppress(OSError):
+            super().flush()
 
 
 def refuse(err: Exception) -> None:

@@ -256,3 +256,44 @@ def test_a_path_with_spaces_left_unquoted_says_how_to_quote_it(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert r.stderr.endswith(f"quote a value with spaces or brackets for Hydra: 'out=\"{tmp_path}/a b(1)\"'\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["my data"]  # nothing made
+
+
+FULL_DISK = r"""
+import errno, logging, sys
+import analysis.report as report
+from analysis.report_run import ReportRun
+
+class Full:  # the job log's file on a full disk
+    def write(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    def flush(self):
+        pass
+    def close(self):
+        pass
+
+def write(self):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+logging.FileHandler._open = lambda self: Full()
+ReportRun.write = write
+sys.argv = ["analysis.report", *sys.argv[1:]]
+report.run_command("report", lambda: report.main, before=[report._check_command_line])
+"""
+
+
+def test_the_report_on_a_full_disk_stops_with_one_line(tmp_path):
+    root = tmp_path / "sessions"
+    _campaign(root, n=1)
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])}
+    r = subprocess.run([sys.executable, "-c", FULL_DISK, f"sessions={root}", f"out={out}", "analysis=demo",
+                        "analysis.progress=false"],
+                       capture_output=True, text=True, cwd=tmp_path, env=env, timeout=600)
+    assert r.returncode == 1, r.stderr[-3000:]
+    assert "Traceback" not in r.stderr and "Logging error" not in r.stderr, r.stderr[-3000:]
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert lines == [
+        f"warning: the job log {out}/.hydra/report.log cannot be written (No space left on device); the run goes "
+        "on without it",
+        f"error: out={out}: the report could not be written (No space left on device); free space there or "
+        "point out= at another disk"], r.stderr[-3000:]
