@@ -16,6 +16,7 @@ refused (exit 2), naming it.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import sys
@@ -36,7 +37,7 @@ from analysis.sections import slip as slip_section
 from analysis.sections import streams as streams_section
 from analysis.sections import tracking as tracking_section
 from analysis.sessions import sessions_problem
-from layerskin_exp.cli import EXIT_CONFIG, hydra_main, refuse, run_command
+from layerskin_exp.cli import EXIT_CONFIG, hydra_main, override_values, refuse, run_command
 from layerskin_exp.config import SkinConfig, validate
 from layerskin_exp.estimation.cnn import default_torch_threads
 from layerskin_exp.provenance import provenance
@@ -164,16 +165,30 @@ def main(cfg: DictConfig) -> None:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         sys.exit(EXIT_CONFIG)
-    res = Analysis(rc, _hydra_preset()).run()
+    try:
+        res = Analysis(rc, _hydra_preset()).run()
+    except OSError as e:
+        if e.errno not in DISK_FULL:
+            raise
+        where = f": {e.filename}" if e.filename else ""
+        print(f"error: out={rc.out}: the report could not be written ({e.strerror or e}{where}); free space "
+              "there or point out= at another disk", file=sys.stderr)
+        sys.exit(1)
     print(f"report written to {Path(rc.out) / 'report.md'} ({counted(len(res['skipped']), 'section')} skipped)")
+
+
+# A disk that takes no more: full, over quota, too large a file, read-only (out= and its job log).
+DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
 
 
 def _check_command_line(argv: list[str]) -> None:
     """sessions=/out= given on the command line are checked before Hydra starts (Hydra makes
-    its run folder under out= first and would fail there with a traceback)."""
-    for arg in argv:
-        key, _, value = arg.partition("=")
-        problem = {"sessions": _sessions_problem, "out": _out_problem}.get(key.lstrip("+"), lambda v: "")(value)
+    its run folder under out= first and would fail there with a traceback), as Hydra reads them
+    (a quoted path with spaces without its quotes); a command line Hydra cannot parse is refused
+    first, before out= is made."""
+    values = override_values(argv)
+    for key, check in (("sessions", _sessions_problem), ("out", _out_problem)):
+        problem = check(values[key]) if key in values else ""
         if problem:
             print(f"error: {problem}", file=sys.stderr)
             sys.exit(EXIT_CONFIG)

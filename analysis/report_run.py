@@ -13,7 +13,7 @@ from omegaconf import OmegaConf
 from analysis import study
 from analysis.config import ReportConfig
 from analysis.markdown import json_safe, write_markdown
-from analysis.sessions import Campaign, load_campaign
+from analysis.sessions import Campaign, load_campaign, shown
 from layerskin_exp.estimation.cnn import CnnGruForceModel
 from layerskin_exp.estimation.preprocess import Preprocessor
 from layerskin_exp.features import two_layer_features
@@ -50,7 +50,7 @@ class ReportRun:
         camp = load_campaign(self.cfg.sessions, self.a.preprocess, self.a.progress)
         self.camp = camp
         n_press = sum(t.labels.get("kind") == "press" for t in camp.calibration)
-        self.results["inputs"] = {"sessions_dir": str(self.cfg.sessions), "files": camp.n_files,
+        self.results["inputs"] = {"sessions_dir": shown(self.cfg.sessions), "files": camp.n_files,
                                   "calibration_trials": len(camp.calibration), "press_trials": n_press,
                                   "slide_trials": len(camp.calibration) - n_press, "grip_trials": len(camp.grip),
                                   "skipped": dict(camp.skipped),

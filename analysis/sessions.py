@@ -24,6 +24,7 @@ from analysis.config import PreprocessConfig
 from analysis.tracking import torsion_reference_deg, translation_reference_mm
 from layerskin_exp.estimation.preprocess import preprocess_counts, smooth_downsample
 from layerskin_exp.log import SessionFileError, SessionWarning, load_session
+from layerskin_exp.log.container.scan import special_file_kind
 
 
 @dataclass
@@ -76,6 +77,9 @@ class Skipped:
     reason: str
     detail: str = ""
 
+    def __post_init__(self) -> None:  # names and reader messages as the report prints them
+        self.name, self.detail = shown(self.name), shown(self.detail)
+
 
 @dataclass
 class Campaign:
@@ -89,11 +93,21 @@ class Campaign:
     n_files: int = 0
 
 
+def shown(name) -> str:
+    """A file name as the report prints it: bytes that are not UTF-8 (kept by the file system as
+    surrogate escapes) written as \\xNN, so any terminal, report.md and results.json take it."""
+    return os.fsencode(str(name)).decode("utf-8", "backslashreplace")
+
+
 def sessions_problem(sessions) -> str:
     """Why `sessions=` cannot be read ('' if it can): a folder of .mcap files, or one .mcap file."""
     p = Path(sessions)
+    kind = special_file_kind(p)
+    if kind is not None:
+        return f"sessions={shown(p)}: a {kind}, not a folder or a .mcap file; point sessions= at a folder of .mcap files"
     if not p.exists():
-        return f"sessions={p}: no such file or folder; point sessions= at a folder of .mcap files or one .mcap file"
+        return (f"sessions={shown(p)}: no such file or folder; point sessions= at a folder of .mcap files or one "
+                ".mcap file")
     if p.is_file() and p.suffix != ".mcap":
         return f"sessions={p}: a file that is not a .mcap session; point sessions= at a folder or a .mcap file"
     if not os.access(p, os.R_OK):
@@ -101,15 +115,47 @@ def sessions_problem(sessions) -> str:
     return ""
 
 
-def discover(root) -> list[Path]:
-    """Every *.mcap under root, recursively, sorted; root itself if it is a .mcap file."""
+def discover(root) -> tuple[list[Path], list[Skipped]]:
+    """Every *.mcap regular file under root, recursively (not through links to folders, as
+    rglob), sorted; root itself if it is a .mcap file. Also what was left out on the way, each with
+    why: a folder that could not be listed (permissions, a vanished mount), a special file named
+    *.mcap (a FIFO, socket or device: told by type, never opened, since reading a FIFO blocks)."""
     root = Path(root)
     problem = sessions_problem(root)
     if problem:
         raise FileNotFoundError(problem)
     if root.is_file():
-        return [root]
-    return sorted(root.rglob("*.mcap"))
+        return [root], []
+    found: list[Path] = []
+    left_out: list[Skipped] = []
+    folders = [root]
+    while folders:
+        folder = folders.pop()
+        try:
+            with os.scandir(folder) as it:
+                entries = list(it)
+        except OSError as exc:
+            left_out.append(Skipped(f"{folder.relative_to(root)}/", "folder not read",
+                                    f"{exc.strerror or exc}; its session files are not in the report"))
+            continue
+        for entry in entries:
+            path = Path(entry.path)
+            try:
+                is_dir = entry.is_dir(follow_symlinks=False)
+            except OSError:
+                is_dir = False
+            if is_dir:
+                folders.append(path)
+                if entry.name.endswith(".mcap"):  # named like a session: reported as not one
+                    found.append(path)
+            elif entry.name.endswith(".mcap"):
+                kind = special_file_kind(path)
+                if kind is None:
+                    found.append(path)
+                else:
+                    left_out.append(Skipped(str(path.relative_to(root)), "not a regular file",
+                                            f"a {kind}; skipped without opening it"))
+    return sorted(found), sorted(left_out, key=lambda f: f.name)
 
 
 def trial_identity(metadata: dict, labels: dict) -> str:
@@ -222,7 +268,7 @@ def load_trial(path, root, pp: PreprocessConfig) -> CalibrationTrial | GripTrial
     a bad file: one bad input must not stop a whole report."""
     path = Path(path)
     root = Path(root)
-    name = str(path.relative_to(root if root.is_dir() else root.parent))
+    name = shown(path.relative_to(root if root.is_dir() else root.parent))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SessionWarning)
@@ -286,8 +332,11 @@ def load_campaign(root, pp: PreprocessConfig | None = None, progress: bool = Tru
     """
     pp = pp or PreprocessConfig()
     root = Path(root)
-    paths = discover(root)
-    camp = Campaign(n_files=len(paths))
+    paths, left_out = discover(root)
+    camp = Campaign(n_files=len(paths) + sum(f.reason == "not a regular file" for f in left_out))
+    for f in left_out:
+        camp.skipped[f.reason] += 1
+        camp.skipped_files.append(f)
     n_workers = _pool_workers(workers, len(paths))
     bar = tqdm(total=len(paths), desc="sessions", leave=False, disable=not progress)
     if n_workers == 1:

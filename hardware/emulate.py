@@ -23,6 +23,7 @@ import signal
 import sys
 import threading
 
+from hardware.interfaces import DeviceError
 from hardware.loopback import EMULATORS, emulator_class
 
 
@@ -59,10 +60,20 @@ def _start(emulator, cls) -> str:
     return where if http is None else f"{where} (calibration page http://{http}/netftapi2.xml)"
 
 
+def _host(value: str) -> str:
+    from layerskin_exp.config import host_problem
+
+    problem = host_problem(value)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(f"{value!r} {problem}")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hardware.emulate", description=__doc__.split("\n\n")[0])
     parser.add_argument("device", choices=sorted(EMULATORS))
-    parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    parser.add_argument("--host", default="127.0.0.1", type=_host,
+                        help="address to listen on: an IP address or a host name (default 127.0.0.1)")
     parser.add_argument("--port", type=int, default=None,
                         help="port for TCP/UDP emulators (default: the device's usual port: netft 49152 with "
                              "its calibration page on HTTP 80, hande 63352; ur5e uses the controller's fixed ports)")
@@ -83,7 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     rt.start()
     try:
-        where = _start(emulator, cls)
+        try:
+            where = _start(emulator, cls)
+        except (OSError, DeviceError) as e:  # an address this machine has not, a port in use
+            print(f"error: {args.device} emulator cannot listen on --host {args.host}: {e}", file=sys.stderr)
+            return 1
         gc.freeze()  # keep full collections (which stop every thread) short while serving
         print(f"{args.device} emulator listening on {where} (simulated {setup} rig, seed {sim_cfg.seed}); "
               "Ctrl-C to stop", flush=True)

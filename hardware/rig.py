@@ -43,9 +43,14 @@ class Rig:
     arm: Arm | None = None
     gripper: Gripper | None = None
     camera: MarkerCamera | None = None
-    # Why motion was stopped by a guard (the first reason since the last clear_trip), or None.
+    # Why motion was stopped by a guard (the first reason since the last clear_trip, or the first
+    # ceiling trip that came after a latched stop condition), or None.
     tripped: str | None = None
     _guards: dict[str, list[Guard]] = field(default_factory=dict, init=False, repr=False)
+    _ceilings: dict[str, list[Guard]] = field(default_factory=dict, init=False, repr=False)
+    # (reason, host receive ns) of every sample a ceiling guard flagged, not yet taken
+    _ceiling_events: list[tuple[str, int]] = field(default_factory=list, init=False, repr=False)
+    _ceiling_tripped: bool = field(default=False, init=False, repr=False)  # `tripped` is a ceiling's
     _faults: list[tuple[str, int]] = field(default_factory=list, init=False, repr=False)
     # how late (ns) the watchdog's check that latched the first fault ran behind its period (the
     # host's scheduling, not the device: a stall is caught within a period of its rule firing plus this)
@@ -73,48 +78,80 @@ class Rig:
         return None
 
     # ---- guards --------------------------------------------------------------------------------
-    def add_guard(self, guard: Guard, stream: str = "ft") -> None:
+    def add_guard(self, guard: Guard, stream: str = "ft", ceiling: bool = False) -> None:
         """Watch every sample of `stream` ("ft", "skin", ...) as it is acquired: guard(sample)
-        returns None or a reason, and must not act itself (the rig stops motion on a reason)."""
+        returns None or a reason, and must not act itself (the rig stops motion on a reason).
+
+        ceiling: a safety limit. It is checked on every sample whatever trip is latched (a stop
+        condition latched first does not hide it), every sample it flags is kept as a safety event
+        (take_ceiling_events), and its trip replaces a latched stop condition, so whoever
+        acknowledges that stop condition does not clear the ceiling's trip with it."""
         with self._lock:
-            self._guards.setdefault(stream, []).append(guard)
+            (self._ceilings if ceiling else self._guards).setdefault(stream, []).append(guard)
 
     def remove_guard(self, guard: Guard, stream: str = "ft") -> None:
         with self._lock:
-            guards = self._guards.get(stream, [])
-            if guard in guards:
-                guards.remove(guard)
+            for registry in (self._ceilings, self._guards):
+                guards = registry.get(stream, [])
+                if guard in guards:
+                    guards.remove(guard)
 
     def guards(self, stream: str = "ft") -> tuple[Guard, ...]:
+        """Every guard of `stream`, the ceilings first."""
         with self._lock:
-            return tuple(self._guards.get(stream, ()))
+            return tuple(self._ceilings.get(stream, ())) + tuple(self._guards.get(stream, ()))
 
     def watches(self, stream: str) -> bool:
         """Whether any guard watches `stream` (backends skip the per-sample call otherwise)."""
-        return bool(self._guards.get(stream))
+        return bool(self._ceilings.get(stream) or self._guards.get(stream))
 
     def check_frames(self, frames, stream: str = "skin") -> bool:
         """Run the guards of `stream` on a batch as it is acquired (a skin reader's on_frames);
-        True when one tripped. Nothing is called when no guard watches the stream."""
-        return self.watches(stream) and any(self.check_guards(f, stream) for f in frames)
+        True when one tripped. Every frame is checked (a ceiling sees each one); nothing is called
+        when no guard watches the stream."""
+        if not self.watches(stream):
+            return False
+        return any([self.check_guards(f, stream) for f in frames])
 
-    def guard_reason(self, sample, stream: str = "ft") -> str | None:
-        """What check_guards would trip on for this sample (None if nothing, or if already
-        tripped), without acting. Guards are pure functions of the sample."""
-        if self.tripped is not None:
-            return None
-        for g in self.guards(stream):
+    def _first_reason(self, registry: dict[str, list[Guard]], sample, stream: str) -> str | None:
+        with self._lock:
+            guards = tuple(registry.get(stream, ()))
+        for g in guards:
             reason = g(sample)
             if reason:
                 return reason
         return None
 
+    def guard_reason(self, sample, stream: str = "ft") -> str | None:
+        """What check_guards would trip on for this sample, without acting: a ceiling's reason
+        unless a ceiling trip is latched already, any guard's when nothing is latched, else None.
+        Guards are pure functions of the sample."""
+        if self._ceiling_tripped:
+            return None
+        reason = self._first_reason(self._ceilings, sample, stream)
+        if reason or self.tripped is not None:
+            return reason
+        return self._first_reason(self._guards, sample, stream)
+
     def check_guards(self, sample, stream: str = "ft") -> str | None:
         """Run the guards of `stream` on one sample; stop motion on the first trip. Backends
-        call this for every sample as it is acquired, from whatever thread acquires it."""
+        call this for every sample as it is acquired, from whatever thread acquires it.
+
+        The ceilings run on every sample: each sample one flags is kept (take_ceiling_events), and
+        the first such trip stops motion from this thread at once, whatever else is latched."""
+        reason = self._first_reason(self._ceilings, sample, stream)
+        if reason:
+            with self._lock:
+                self._ceiling_events.append((reason, int(getattr(sample, "host_t_ns", 0))))
+                first = not self._ceiling_tripped
+                if first:
+                    self.tripped, self._ceiling_tripped = reason, True
+            if first:  # later samples over the limit find the motion stopped and every move refused
+                self.stop_motion()
+            return self.tripped
         if self.tripped is not None:
             return self.tripped
-        reason = self.guard_reason(sample, stream)
+        reason = self._first_reason(self._guards, sample, stream)
         if reason:
             with self._lock:
                 if self.tripped is not None:  # another thread tripped first
@@ -123,11 +160,21 @@ class Rig:
             self.stop_motion()
         return reason
 
-    def clear_trip(self) -> str | None:
-        """Acknowledge a trip (after it was logged) so motion may resume; returns the reason."""
+    def take_ceiling_events(self) -> list[tuple[str, int]]:
+        """(reason, host receive ns) of every sample a ceiling guard flagged since the last call."""
         with self._lock:
-            reason, self.tripped = self.tripped, None
-        return reason
+            events, self._ceiling_events = self._ceiling_events, []
+        return events
+
+    def clear_trip(self, reason: str | None = None) -> str | None:
+        """Acknowledge a trip (after it was logged) so motion may resume; returns what was cleared.
+        reason: the trip being acknowledged; a different one latched since (a ceiling's, which
+        replaces a stop condition) is kept, and None is returned."""
+        with self._lock:
+            if reason is not None and self.tripped != reason:
+                return None
+            cleared, self.tripped, self._ceiling_tripped = self.tripped, None, False
+        return cleared
 
     # ---- faults --------------------------------------------------------------------------------
     def report_fault(self, reason: str) -> None:

@@ -24,10 +24,12 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import logging
 import os
 import sys
 from collections.abc import Callable, Iterable
 
+import yaml
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
 from hydra.experimental.callback import Callback
@@ -37,12 +39,14 @@ from layerskin_exp.config import (
     CONF_DIR,
     VERSION_BASE,
     ConfigError,
+    check_group_options,
     check_retired,
     format_config_error,
     one_line,
 )
 
-__all__ = ["CONF_DIR", "EXIT_CONFIG", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "RefuseBadConfig", "exit_now", "answer_help", "expand_sweep", "hydra_main", "one_line", "preflight", "refuse",
+__all__ = ["CONF_DIR", "EXIT_CONFIG", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "RefuseBadConfig", "exit_now", "answer_help", "command_overrides", "expand_sweep", "hydra_main", "one_line", "override_problem",
+           "override_values", "preflight", "refuse",
            "run_command"]
 
 
@@ -56,6 +60,34 @@ HYDRA_MODES = ("--help", "-h", "--hydra-help", "--info", "-i", "--cfg", "-c", "-
 LAUNCHER_EXTRAS = {"slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
                    "submitit_slurm": ("hydra_plugins.hydra_submitit_launcher", "slurm"),
                    "submitit_local": ("hydra_plugins.hydra_submitit_launcher", "slurm")}
+
+
+class JobLogFile(logging.FileHandler):
+    """The job log's file handler (conf/hydra/job_logging/*.yaml). Where the file cannot be
+    written (a full disk), it says so once, in one line on stderr, and stops writing to it: the
+    run goes on with its console, instead of a logging traceback for every record after."""
+
+    _failed = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self._failed:
+            super().emit(record)
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        exc = sys.exc_info()[1]
+        if not isinstance(exc, OSError):
+            super().handleError(record)
+            return
+        if not self._failed:
+            self._failed = True
+            print(f"warning: the job log {self.baseFilename} cannot be written ({exc.strerror or exc}); "
+                  "the run goes on without it", file=sys.stderr, flush=True)
+            with contextlib.suppress(OSError):
+                self.close()
+
+    def flush(self) -> None:
+        with contextlib.suppress(OSError):
+            super().flush()
 
 
 def refuse(err: Exception) -> None:
@@ -98,7 +130,7 @@ def run_command(config_name: str, load_main: Callable[[], Callable[[], object]],
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises a refused composition instead of printing it
     try:
         main()
-    except HydraException as e:
+    except (HydraException, yaml.YAMLError) as e:  # the composition refused, or a config file unreadable
         if RefuseBadConfig.started or full_error == "1":
             raise
         refuse(ConfigError(one_line(e)))
@@ -160,6 +192,51 @@ def _is_multirun(argv: list[str]) -> bool:
     return "-m" in argv or "--multirun" in argv
 
 
+def command_overrides(argv: list[str]) -> list[str]:
+    """The key=value overrides of a command line (not its options, not Hydra's own keys)."""
+    return [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+
+
+def override_values(argv: list[str]) -> dict[str, str]:
+    """key (without +/~) -> value as Hydra reads it (quotes removed, `'out="/a b"'` -> `/a b`) of
+    each single-valued override of the command line. An override Hydra cannot parse is refused
+    here in one line (exit 2), saying how to quote a value with spaces (override_problem)."""
+    parser = OverridesParser.create()
+    values: dict[str, str] = {}
+    for arg in (a for a in argv if not a.startswith("-")):
+        problem = override_problem(arg, argv)
+        if problem:
+            refuse(ConfigError(problem))
+        o = parser.parse_override(arg)
+        if not o.is_sweep_override() and isinstance(o.value(), str):
+            values[o.get_key_element().lstrip("+~")] = o.value()
+    return values
+
+
+def override_problem(arg: str, argv: list[str]) -> str:
+    """Why Hydra cannot parse the override `arg` of command line argv ('' if it can), in one line:
+    an argument without '=' that is the rest of a value the shell split at a space, a value with
+    characters Hydra reads as syntax, each with the quoting Hydra documents
+    (`'key="/path/with space"'`)."""
+    key, sep, value = arg.partition("=")
+    if not sep:
+        i = argv.index(arg)
+        before = next((a for a in reversed(argv[:i]) if "=" in a and not a.startswith("-")), None)
+        if before is not None:
+            k, _, v = before.partition("=")
+            return (f"{arg!r} is not key=value: the shell split a value at a space; quote it for the shell and for "
+                    f"Hydra: '{k}=\"{v} {arg}\"'")
+        return f"{arg!r} is not key=value"
+    try:
+        OverridesParser.create().parse_override(arg)
+    except HydraException as e:
+        why = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        if value[:1] not in ("'", '"'):
+            return f"{arg}: {why}; quote a value with spaces or brackets for Hydra: '{key}=\"{value}\"'"
+        return f"{arg}: {why}"
+    return ""
+
+
 def expand_sweep(overrides: list[str]) -> list[list[str]]:
     """The override lists of every job a basic-sweeper multirun would launch (cartesian product)."""
     parsed = OverridesParser.create().parse_overrides(overrides)
@@ -188,13 +265,17 @@ def answer_help(config_name: str, argv: list[str]) -> None:
     from hydra.core.global_hydra import GlobalHydra
     from omegaconf import OmegaConf, open_dict
 
-    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    overrides = command_overrides(argv)
+    try:
+        check_group_options(overrides)
+    except ConfigError as e:
+        refuse(e)
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base=VERSION_BASE):
             cfg = compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
         template = cfg.hydra.help.template  # the header's ${...} resolve against this command line
-    except HydraException as e:
+    except (HydraException, yaml.YAMLError) as e:
         refuse(ConfigError(one_line(e)))
     finally:
         GlobalHydra.instance().clear()
@@ -216,10 +297,15 @@ def preflight(config_name: str, argv: list[str]) -> None:
         return  # Hydra's own modes and alternative configs: let Hydra handle them
     _check_launcher(argv)
     _refuse_schema_options(argv)
-    overrides = [a for a in argv if not a.startswith("-") and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
+    overrides = command_overrides(argv)
+    for arg in overrides:
+        problem = override_problem(arg, argv)
+        if problem:
+            refuse(ConfigError(problem))
     multirun = _is_multirun(argv)
     try:
         check_retired(overrides)
+        check_group_options(overrides)
     except ConfigError as e:
         refuse(e)
     try:

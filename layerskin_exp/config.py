@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -52,6 +53,38 @@ def require(ok: bool, key: str, value, what: str) -> None:
         raise ConfigError(f"{key}={value!r}: {what}")
 
 
+_HOST_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
+
+
+def host_problem(value) -> str | None:
+    """What is wrong with `value` as an address to listen on or connect to (an IPv4 or IPv6
+    address, or a host name of letters, digits and hyphens in dot-separated labels), or None."""
+    import ipaddress
+
+    if not isinstance(value, str) or not value:
+        return "must be an IP address or a host name"
+    try:
+        ipaddress.ip_address(value)
+        return None
+    except ValueError:
+        pass
+    if value.startswith("[") and value.endswith("]"):
+        return "must be an IPv6 address without brackets, e.g. ::1"
+    labels = value.removesuffix(".").split(".")
+    if len(value) > 253 or not all(_HOST_LABEL.match(label) for label in labels):
+        return ("must be an IP address (127.0.0.1, ::1) or a host name of letters, digits and hyphens "
+                "(localhost, lab-pc.local)")
+    if all(label.isdigit() for label in labels):
+        return "is not a valid IPv4 address"
+    return None
+
+
+def require_host(key: str, value) -> None:
+    """An address setting: an IP address or a host name (host_problem)."""
+    problem = host_problem(value)
+    require(problem is None, key, value, problem or "")
+
+
 # Seeds reach numpy's generators 32 bits wide (`seed & 0xFFFFFFFF`): a larger seed would silently
 # repeat the draws of a smaller one.
 SEED_MAX = 2**32 - 1
@@ -85,6 +118,44 @@ def check_retired(overrides: Sequence[str]) -> None:
         msg = retired_message(o.split("=", 1)[0].lstrip("+~"))
         if msg:
             raise ConfigError(msg)
+
+
+def check_group_options(overrides: Sequence[str]) -> None:
+    """ConfigError for the first override whose config-group option (`trajectory=NAME`: the file
+    conf/trajectory/NAME.yaml) names a file outside its group's folder (`../../elsewhere/x`):
+    a group option is one of the files there, never a path that leads out of conf/."""
+    for o in overrides:
+        key, sep, value = o.partition("=")
+        key = key.lstrip("+~")
+        group = CONF_DIR / key
+        if not sep or "." in key or not value or not group.is_dir():
+            continue
+        base = group.resolve()
+        for option in value.split(","):  # a sweep's options
+            option = option.strip().strip("'\"")
+            if option and base not in (group / option).resolve().parents:
+                names = sorted(p.stem for p in group.glob("*.yaml") if not p.stem.endswith("_schema"))
+                raise ConfigError(f"{key}={option}: a {key} option is a file in conf/{key}/ "
+                                  f"({', '.join(names) or 'none there'}); it may not lead out of that folder")
+
+
+def yaml_error_line(err) -> str | None:
+    """One line for a YAML syntax error: the file (under conf/ as conf/...), line, column and
+    the problem; None if err is not one."""
+    import yaml
+
+    if not isinstance(err, yaml.YAMLError):
+        return None
+    mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
+    problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+    if mark is None:
+        return f"YAML syntax error: {problem}"
+    name = Path(mark.name)
+    try:
+        name = Path("conf") / name.resolve().relative_to(CONF_DIR.resolve())
+    except (ValueError, OSError):
+        pass
+    return f"{name}: YAML syntax error at line {mark.line + 1}, column {mark.column + 1}: {problem}"
 
 
 @dataclass
@@ -147,6 +218,9 @@ def one_line(err: Exception) -> str:
     line of its cause (the explanation: "Key 'x' not in 'Schema'", "could not be converted")."""
     from hydra.errors import HydraException
 
+    for e in (err, err.__cause__):  # a YAML file with a syntax error, however Hydra passed it on
+        if yaml_error_line(e):
+            return yaml_error_line(e)
     lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
     text = lines[0] if lines else type(err).__name__
     # A retired key set in a yaml file (a user's design, material or lattice file): Hydra names the
@@ -181,11 +255,12 @@ def compose(config_name: str, overrides: Sequence[str] = ()):
     from hydra.errors import HydraException
 
     check_retired(overrides)
+    check_group_options(overrides)
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base=VERSION_BASE):
             cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
-    except HydraException as e:
+    except (HydraException, yaml.YAMLError) as e:
         raise ConfigError(one_line(e)) from None
     finally:
         GlobalHydra.instance().clear()

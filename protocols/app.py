@@ -264,7 +264,8 @@ def _run_connected(cfg: DictConfig, setup: str, rig, typed, body):
     if getattr(typed, "live", False):
         from layerskin_exp.log.view.live import LiveView
 
-        live = LiveView(setup, port=typed.live_port)
+        allowed = {} if typed.live_allowed_hosts is None else {"allowed_hosts": typed.live_allowed_hosts}
+        live = LiveView(setup, host=typed.live_host, port=typed.live_port, token=typed.live_token, **allowed)
         print(f"live view: open {live.url} in Foxglove (Open connection > Foxglove WebSocket)", flush=True)
     finished = False
     try:

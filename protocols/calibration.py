@@ -43,6 +43,7 @@ from protocols.stops import (
     SKIN_EDGE,
     SLOW_ZONE,
     TARGET_REACHED,
+    is_safety_trip,
     trip_name,
 )
 
@@ -145,7 +146,11 @@ class PlatformControl:
         """Move to target; returns None when it got there, or why it stopped early.
 
         stop_when(wrenches) -> reason | None is checked each tick on the new F/T samples.
-        A guard trip returns FORCE_LIMIT (the backend has already stopped the motion).
+        A safety trip, during the move or while the stage stopped, returns its name (FORCE_LIMIT;
+        the backend has already stopped the motion) and stays latched for the retract. Every
+        other trip (a stop condition checked per sample) is acknowledged before this returns,
+        whichever way the move ended, and the stage counts as standing (platform_speed_mm_s 0):
+        the next move starts from a clear guard.
         """
         target_mm = np.asarray(target_mm, float)
         self.safety.check_platform_move(target_mm, speed_mm_s)
@@ -168,23 +173,26 @@ class PlatformControl:
 
         kind, reason = self.loop.until(step, 1.5 * distance_mm / speed_mm_s + 2.0,
                                        f"platform move to {np.round(target_mm, 3).tolist()} mm")
+        # From here the stage stands or brakes, so no fast move is under way: samples it reads while
+        # braking or late (the load goes on rising meanwhile, a busy host reads them late) must not
+        # trip the slow zone or a press's stage stop (seen under load: SafetyError before the next
+        # move; on loopback a "slow_zone" stop during every hold). Only a safety limit still trips.
+        self.safety.platform_speed_mm_s = 0.0
         if kind == "stop":
             self.platform.stop()
         if kind != "arrived":
             self.wait_stopped()
-        # The stage stands, so no fast move is under way: samples still in flight from before the
-        # stop (the load goes on rising while the stage brakes, and a busy host reads them late)
-        # must not trip the slow zone before the next move (seen under load: SafetyError), nor
-        # during a hold at the target (seen on loopback: a "slow_zone" stop after every press).
-        self.safety.platform_speed_mm_s = 0.0
-        if kind == "trip":
-            if trip_name(reason) == FORCE_LIMIT:
-                return FORCE_LIMIT
-            rig.clear_trip()  # a stop condition checked per sample, not a fault
-            if trip_name(reason) == SLOW_ZONE:  # near the limit: go on at a crawl
-                return self.move(target_mm, min(speed_mm_s, self.cfg.safety.slow_zone_speed_mm_s), stop_when)
-        elif kind == "zone_stop":
-            rig.clear_trip()
+        if self.safety.unloading:  # a retract ignores trips; lift acknowledges the one it started from
+            return reason
+        latched = rig.tripped
+        if is_safety_trip(latched):  # kept latched: the retract (lift) acknowledges it
+            return trip_name(latched)
+        if latched is not None:
+            # a stop condition checked per sample, not a fault: the move's own trip, or one that landed
+            # while the stage braked; cleared whichever path ended the move, so the next move may start
+            rig.clear_trip(latched)
+        if kind == "trip" and trip_name(reason) == SLOW_ZONE:  # near the limit: go on at a crawl
+            return self.move(target_mm, min(speed_mm_s, self.cfg.safety.slow_zone_speed_mm_s), stop_when)
         return reason
 
     def wait_stopped(self) -> None:

@@ -22,7 +22,7 @@ from omegaconf import MISSING
 import hardware.config  # noqa: F401
 import layerskin_exp.sim.config  # noqa: F401
 from layerskin_exp import rig
-from layerskin_exp.config import SkinConfig, require, require_seed
+from layerskin_exp.config import SkinConfig, require, require_host, require_seed
 
 # Hard ceilings no config can raise: what the skin, the platform, the UR5e and the Hand-E can do
 # safely on this rig. Checked when the config is validated, before any device connects.
@@ -115,9 +115,19 @@ def _check_lost_frames(value: int) -> None:
                  "skin frames one trial may lose and still be complete; 0: none")
 
 
-def _check_live_port(port: int) -> None:
+def _check_live(cfg) -> None:
+    """The live view's port, address and who it lets in."""
+    port = cfg.live_port
     require(port == 0 or 1024 <= port <= 65535, "live_port", port,
             "must be a TCP port in [1024, 65535] (lower ones need root), or 0 for any free port")
+    require_host("live_host", cfg.live_host)
+    require(cfg.live_token is None or (isinstance(cfg.live_token, str) and len(cfg.live_token) >= 8),
+            "live_token", "<hidden>", "must be at least 8 characters, or null")
+    loopback = cfg.live_host in ("127.0.0.1", "::1", "localhost")
+    require(loopback or cfg.live_token is not None, "live_host", cfg.live_host,
+            "serves the run beyond this machine: set live_token too (remote viewers add ?token=<it> to the URL)")
+    for name in cfg.live_allowed_hosts or ():
+        require_host("live_allowed_hosts", name)
 
 
 def _check_motion_time(key: str, speed: float, waypoints: list[float], unit: str, timeout_s: float) -> None:
@@ -304,6 +314,12 @@ class ForceCalibrationConfig:
     live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
     live_port: int = 8765
     live_hold: bool = False  # with live: keep serving after the run until Ctrl-C
+    # Where the live view listens (another address than loopback needs live_token); the host names
+    # a client's Host and Origin headers may give (null: this machine and the Foxglove web app);
+    # live_token: a client adding ?token=<it> to the URL is let in whatever it sends (a remote viewer)
+    live_host: str = "127.0.0.1"
+    live_allowed_hosts: list[str] | None = None
+    live_token: str | None = None
 
     def __post_init__(self) -> None:
         s = self.safety
@@ -342,7 +358,7 @@ class ForceCalibrationConfig:
         _check_duration("press.hold_s", self.press.hold_s, self.trial_timeout_s)
         require_seed("seed", self.seed)
         _check_lost_frames(self.max_lost_skin_frames)
-        _check_live_port(self.live_port)
+        _check_live(self)
         _check_finite(self)
         _check_fault_devices(self.hardware, "platform")
         _check_data_root(self.data_root)
@@ -466,6 +482,12 @@ class GripDepthConfig:
     live: bool = False  # serve the run to Foxglove over WebSocket on 127.0.0.1:live_port
     live_port: int = 8765
     live_hold: bool = False  # with live: keep serving after the run until Ctrl-C
+    # Where the live view listens (another address than loopback needs live_token); the host names
+    # a client's Host and Origin headers may give (null: this machine and the Foxglove web app);
+    # live_token: a client adding ?token=<it> to the URL is let in whatever it sends (a remote viewer)
+    live_host: str = "127.0.0.1"
+    live_allowed_hosts: list[str] | None = None
+    live_token: str | None = None
     # An estimator artifact (the report's out/models/T-s5.pt): when set, every skin frame goes
     # through the online estimator and the session logs /estimate/force and /estimate/slip.
     estimator: str | None = None
@@ -542,7 +564,7 @@ class GripDepthConfig:
                                self.trial_timeout_s)
         require_seed("seed", self.seed)
         _check_lost_frames(self.max_lost_skin_frames)
-        _check_live_port(self.live_port)
+        _check_live(self)
         _check_finite(self)
         _check_fault_devices(self.hardware, "gripper")
         _check_data_root(self.data_root)

@@ -6,12 +6,13 @@ either complete under its final name or not there at all (an interrupted attempt
 `.partial` file, readable and marked aborted, until the rerun overwrites it). Whether a trial is
 complete is read back from the file itself.
 
-Outcomes: "complete" (the trial ran as planned); "complete (safety stop: <trip>)" (a safety
-limit stopped the motion, the protocol retracted and finished the trial: its data are kept and
-analysed, and a rerun does not repeat it); "incomplete: <n> skin frames lost (...)" (the trial ran
-to its end, but its skin stream lost more frames than `max_lost_skin_frames` allows: kept as
-`.partial`, run again by a rerun, the run goes on with the next trial); "aborted: <reason>" (kept
-as `.partial`, run again by a rerun). Every trial's file stores what each device's driver counted
+Outcomes: "complete" (the trial ran as planned, no sample over a safety limit); "complete
+(safety stop: <trip>; <n> samples over the limit)" (a safety limit stopped the motion, the
+protocol retracted and finished the trial: its data are kept and analysed, and a rerun does not
+repeat it; every sample over the limit is a "safety" event in the file); "incomplete: <n> skin
+frames lost (...)" (the trial ran to its end, but its skin stream lost more frames than
+`max_lost_skin_frames` allows: kept as `.partial`, run again by a rerun, the run goes on with
+the next trial); "aborted: <reason>" (kept as `.partial`, run again by a rerun). Every trial's file stores what each device's driver counted
 over the trial (received, lost, duplicate, out of order, corrupt, reconnects; `trial_health`).
 A complete file is never replaced: a rerun skips it when its identity matches and refuses
 (`TrialConflictError`) when the same path holds a trial of another identity, read from the parts
@@ -82,14 +83,20 @@ class TrialConflictError(ProtocolError):
     """The trial's file holds a complete trial of another identity; it is left untouched."""
 
 
-def outcome_after(safety_trip: str | None, health: dict | None = None, max_lost_skin_frames: int | None = None) -> str:
-    """The outcome of a trial that ran to its end: plain complete, or complete with the trip;
-    incomplete when the skin lost more frames than max_lost_skin_frames (None: no limit) by the
-    trial's stream health (trial_health): sequence gaps plus frames a full driver buffer let go."""
+def outcome_after(safety_trip: str | None, health: dict | None = None, max_lost_skin_frames: int | None = None,
+                  safety_samples: int = 1) -> str:
+    """The outcome of a trial that ran to its end: plain complete only when no sample went over a
+    safety limit, else complete with the first trip and how many samples were over
+    ("complete (safety stop: <trip>; <n> samples over the limit)"); incomplete when the skin lost
+    more frames than max_lost_skin_frames (None: no limit) by the trial's stream health
+    (trial_health): sequence gaps plus frames a full driver buffer let go."""
     lost = lost_skin_frames(health)
     if over_the_limit(lost, max_lost_skin_frames):
         return f"incomplete: {lost} skin frames lost (limit max_lost_skin_frames={max_lost_skin_frames})"
-    return COMPLETE if safety_trip is None else f"{COMPLETE} (safety stop: {safety_trip})"
+    if safety_trip is None:
+        return COMPLETE
+    count = f"{safety_samples} sample{'' if safety_samples == 1 else 's'} over the limit"
+    return f"{COMPLETE} (safety stop: {safety_trip}; {count})"
 
 
 def lost_skin_frames(health: dict | None) -> int:
@@ -357,6 +364,7 @@ class TrialLog:
         self.last_gripper: GripperState | None = None
         self.stop_reason: str | None = None
         self.safety_trip: str | None = None  # the first safety limit that tripped in this trial
+        self.safety_samples = 0  # samples over a safety limit in this trial (each a "safety" event)
         self.derive: list[Callable[[list[TwoLayerFrame]], list]] = []
         self._drained_ns: int | None = None  # rig time of the last drain
         self._carried: tuple[list, list] = ([], [])  # drained for an event, not yet returned
@@ -417,14 +425,21 @@ class TrialLog:
                 shear_max = float(np.hypot(force_n[:, 0], force_n[:, 1]).max())
                 self.peak_fz_n = fz_max if self.peak_fz_n is None else max(self.peak_fz_n, fz_max)
                 self.peak_shear_n = shear_max if self.peak_shear_n is None else max(self.peak_shear_n, shear_max)
+        # Every sample over a safety limit is a safety event (warning), at the sample's time, whatever
+        # else was latched then; a per-sample stop condition (a press on its target, the slow zone)
+        # is a normal stop (info), noted once per trip.
+        over = rig.take_ceiling_events()
+        if over:
+            self.safety_trip = self.safety_trip or over[0][0]
+            self.safety_samples += len(over)
+            log.warning("%s: safety: %s%s", self.writer.path.name.removesuffix(".mcap" + PARTIAL_SUFFIX),
+                        over[0][0], f" (and {len(over) - 1} more samples over the limit)" if len(over) > 1 else "")
+            floor_ns = self._drained_ns or 0  # a sample read late is written after what is written already
+            put([ProtocolEvent(kind="safety", message=reason, host_t_ns=max(t_ns, floor_ns),
+                               device_t_ns=max(t_ns, floor_ns), detail={}) for reason, t_ns in over])
         if rig.tripped is not None and rig.tripped is not self._noted_trip:  # whenever it happened
             self._noted_trip = rig.tripped
-            # A limit trip is a safety event (warning); a per-sample stop condition (a press on
-            # its target, the slow zone) is a normal stop (info).
-            if is_safety_trip(rig.tripped):
-                self.safety_trip = self.safety_trip or rig.tripped
-                put([self._event("safety", rig.tripped)])
-            else:
+            if not is_safety_trip(rig.tripped):
                 put([self._event("sample_stop", rig.tripped)])
         for dev in (rig.platform, rig.arm, rig.gripper):
             if dev is None:
@@ -517,8 +532,13 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
     health0 = device_health(rig)
     t0_ns = rig.clock.now_ns()
     offset, how = rig.log_time() or (None, "given")
-    writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True, epoch_offset_ns=offset,
-                           epoch_how=how)
+    try:
+        writer = SessionWriter(tmp, metadata=metadata, labels=labels, overwrite=True, epoch_offset_ns=offset,
+                               epoch_how=how)
+    except OSError:  # a full disk as the trial starts: its file is there, cut short
+        if tmp.exists():
+            RUN_FILES.record(tmp, "interrupted")
+        raise
     writer.live = live
     trial = TrialLog(writer, rig, save_images)
     try:
@@ -539,12 +559,16 @@ def run_trial(rig: Rig, path: Path, labels: dict, metadata: dict, body: Callable
             trial.event("error", reason, **detail)
         except BaseException:  # noqa: BLE001 - the device may be gone; the file must still close
             pass
-        writer.close(f"aborted: {reason}", stream_health=trial_health(health0, device_health(rig)))
+        try:
+            writer.close(f"aborted: {reason}", stream_health=trial_health(health0, device_health(rig)))
+        except OSError as closing:  # a full disk: what reached it stays, without its summary
+            log.warning("trial %s: its file could not be closed (%s); what was written is kept as %s",
+                        name, closing, tmp)
         RUN_FILES.record(tmp, "interrupted")
         log.warning("trial %s aborted: %s (kept as %s)", name, reason, tmp)
         raise
     health = trial_health(health0, device_health(rig))
-    outcome = outcome_after(trial.safety_trip, health, max_lost_skin_frames)
+    outcome = outcome_after(trial.safety_trip, health, max_lost_skin_frames, trial.safety_samples)
     if outcome.startswith(COMPLETE):
         writer.close(outcome, move_to=path, stream_health=health)  # renamed under the writer's lock, fsynced
         RUN_FILES.record(path, "written")

@@ -1,7 +1,9 @@
 """Safety limits enforced by the framework, on every backend.
 
-- Normal force: a guard on the rig, so the backend checks every F/T sample as it is acquired
-  and stops motion on the first one over the limit (the protocol loop is far coarser).
+- Normal force: a ceiling guard on the rig, so the backend checks every F/T sample as it is
+  acquired, whatever stop condition is latched (a press target, the slow zone), stops motion on
+  the first one over the limit (the protocol loop is far coarser) and keeps every sample over it
+  as a safety event.
 - Workspace bounds and speed caps: checked before each motion command; a command outside them
   is refused (`SafetyError`) and never reaches the device.
 - Grip depth: capped, and a closure may not command the jaws below their minimum opening.
@@ -34,12 +36,13 @@ class Safety:
         # skin is what makes it safe, so the guards let that one kind of move run.
         self.unloading = False
         self.platform_speed_mm_s = 0.0  # speed of the platform move in progress (0: the stage stands)
+        # The limits are ceilings: checked on every sample whatever stop condition is latched.
         if rig.ft is not None:
-            rig.add_guard(self._normal_force_guard)
+            rig.add_guard(self._normal_force_guard, ceiling=True)
             rig.add_guard(self._slow_zone_guard)
         else:  # no F/T sensor (the grip rig): the skin itself guards the load, on every frame
             self._skin_full_scale = 2 * 256 * 4095
-            rig.add_guard(self._skin_load_guard, "skin")
+            rig.add_guard(self._skin_load_guard, "skin", ceiling=True)
 
     # ---- per-sample guard -----------------------------------------------------------------
     def _normal_force_guard(self, sample: Wrench) -> str | None:

@@ -128,3 +128,66 @@ def test_an_old_key_in_a_user_written_design_file_is_refused_in_one_line(tmp_pat
         assert len(err.splitlines()) == 1 and "sim.spacer.wall_mm" in err and "lattice/mine" in err, err
     (conf / "lattice" / "mine.yaml").write_text("# @package sim.spacer\nthickness_mm: 3.0\ncell_mm: 2.5\nwall_mm: 0.6\n")
     assert compose("world", ["+design=mine"]).sim.spacer.wall_mm == 0.6  # the same file with the new key runs
+
+
+@pytest.fixture
+def own_conf(tmp_path, monkeypatch):
+    """A copy of conf/ in tmp_path that the apps and compose() use."""
+    import shutil
+
+    from layerskin_exp import cli, config
+
+    conf = tmp_path / "conf"
+    shutil.copytree(config.CONF_DIR, conf)
+    monkeypatch.setattr(config, "CONF_DIR", conf)
+    monkeypatch.setattr(cli, "CONF_DIR", conf)
+    monkeypatch.chdir(tmp_path)
+    return conf
+
+
+def _refused(monkeypatch, capsys, argv) -> str:
+    """The one line a grip_depth command line is refused with (exit 2, before the app runs)."""
+    import sys
+
+    import protocols.config  # noqa: F401 - the protocols' schemas
+    from layerskin_exp import cli
+
+    @cli.hydra_main("grip_depth")
+    def app(cfg):
+        pytest.fail("ran despite a bad config")
+
+    monkeypatch.setattr(sys, "argv", ["app", *argv])
+    with pytest.raises(SystemExit) as e:
+        cli.run_command("grip_depth", lambda: app)
+    assert e.value.code == cli.EXIT_CONFIG
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    return err.strip()
+
+
+@pytest.mark.parametrize("content", ["motion: torsion\n", "motion: torsion\n  bad: [unclosed\n"])
+def test_a_group_option_may_not_lead_out_of_conf(own_conf, monkeypatch, capsys, content):
+    import protocols.config  # noqa: F401
+
+    (own_conf.parent / "elsewhere").mkdir()
+    (own_conf.parent / "elsewhere" / "evil.yaml").write_text(content)
+    line = ("configuration error: trajectory=../../elsewhere/evil: a trajectory option is a file in "
+            "conf/trajectory/ (torsion, translation); it may not lead out of that folder")
+    for argv in (["trajectory=../../elsewhere/evil"], ["-m", "trajectory=torsion,../../elsewhere/evil"],
+                 ["trajectory=../../elsewhere/evil", "--help"]):
+        assert _refused(monkeypatch, capsys, argv) == line
+    with pytest.raises(ConfigError, match=r"^trajectory=\.\./\.\./elsewhere/evil: a trajectory option is a file"):
+        compose("grip_depth", ["trajectory=../../elsewhere/evil"])
+
+
+def test_a_yaml_syntax_error_is_one_line_naming_the_file_and_line(own_conf, monkeypatch, capsys):
+    import protocols.config  # noqa: F401
+
+    (own_conf / "trajectory" / "broken.yaml").write_text("motion: torsion\n  bad: [unclosed\n")
+    line = ("configuration error: conf/trajectory/broken.yaml: YAML syntax error at line 2, column 6: "
+            "mapping values are not allowed here")
+    for argv in (["trajectory=broken"], ["-m", "trajectory=torsion,broken"]):
+        assert _refused(monkeypatch, capsys, argv) == line
+    with pytest.raises(ConfigError) as e:
+        compose("grip_depth", ["trajectory=broken"])
+    assert f"configuration error: {e.value}" == line

@@ -7,6 +7,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 
+import numpy as np
+
 from hardware.interfaces import DeviceError
 from hardware.rig import Rig
 from hardware.sim.arm import SimArm
@@ -19,6 +21,7 @@ from hardware.sim.skin import SimSkinReader
 from layerskin_exp.config import SkinConfig
 from layerskin_exp.rig import R_TCP_SKIN
 from layerskin_exp.sim import compile_notice
+from layerskin_exp.sim import mechanics as mk
 from layerskin_exp.sim.clocks import device_rng
 from layerskin_exp.sim.grip_scene import GripScene
 from layerskin_exp.sim.platform_scene import PlatformScene
@@ -145,7 +148,26 @@ def build_sim_rig(sim_cfg, skin_cfg: SkinConfig, setup: str, skin_model_factory:
             "translation_axis_tcp": [1.0, 0.0, 0.0],
             "torsion_axis_tcp": [0.0, 1.0, 0.0],
         }
+    warm_kernels(rig)
     return rig
+
+
+def warm_kernels(rig: SimRig) -> None:
+    """Load from numba's disk cache (on a fresh install: compile) the kernels a trial calls that
+    building the rig did not, now, before any trial: the stage's motion planner runs only once
+    something moves, and the F/T and clock kernels only at the first world advance. Inside a
+    trial that took the realtime world's lock for as long as the compile (seen on loopback after a
+    fresh install: "skin stalled: no frame for 57 ms"). Each runs on a copy, so the rig's state
+    and random draws are those it would have without this."""
+    world = rig.extras["world"]
+    scene = copy.deepcopy(world.scene)
+    if isinstance(scene, PlatformScene):
+        scene.command_move(np.asarray(scene.stage.position, float) + [0.0, 0.0, 0.1], 1.0)
+    scene.plan(2, world.mech_dt_s)
+    scene.indenter_pose()
+    if rig.ft is not None:
+        copy.deepcopy(rig.ft.synth).readings(np.zeros((1, mk.STEP_FIELDS)), np.zeros(1, np.int64))
+    copy.deepcopy(rig.skin.stream.clock).stamp(np.zeros(1))
 
 
 def scene_rotation_doc() -> list[list[float]]:

@@ -14,6 +14,7 @@ Nothing needed to go from counts to newtons lives outside it.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -84,7 +85,13 @@ class Estimator:
     def save(self, path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        torch.save(self.to_dict(), path)
+        buf = io.BytesIO()  # serialised here, written by Python: a full disk is an OSError naming the file
+        torch.save(self.to_dict(), buf)
+        try:
+            path.write_bytes(buf.getvalue())
+        except OSError as exc:
+            path.unlink(missing_ok=True)
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
         return path
 
     @classmethod

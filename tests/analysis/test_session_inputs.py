@@ -3,6 +3,7 @@ reason, and carries on; a trial present twice is used once; sessions= may be one
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -150,3 +151,149 @@ def test_an_empty_or_missing_sessions_folder_is_refused_naming_it(tmp_path):
         assert r.returncode == 2, r.stderr[-2000:]
         assert r.stderr.strip().count("\n") == 0 and r.stderr.startswith(f"error: {folder}:"), r.stderr
         assert not list(tmp_path.rglob("report.md")) and not list(tmp_path.rglob("results.json"))
+
+
+def _load_in_a_thread(root, timeout_s: float = 30.0):
+    """load_campaign(root) in a thread; None if it did not return within timeout_s (a hang)."""
+    import threading
+
+    out = {}
+    th = threading.Thread(target=lambda: out.setdefault("camp", load_campaign(root, progress=False, workers=1)),
+                          daemon=True)
+    th.start()
+    th.join(timeout_s)
+    return out.get("camp")
+
+
+def test_a_fifo_named_like_a_session_is_skipped_by_type_without_opening_it(tmp_path):
+    root = tmp_path / "sessions"
+    root.mkdir()
+    _campaign(root, n=1)
+    fifo = root / "pipe.mcap"
+    os.mkfifo(fifo)
+    try:
+        camp = _load_in_a_thread(root)
+    finally:  # a reader blocked on the FIFO (the old behaviour) gets its end of file
+        try:
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:
+            pass
+    assert camp is not None, "load_campaign hung on a FIFO"
+    assert [t.name for t in camp.calibration] == ["cal0.mcap"]
+    (skip,) = camp.skipped_files
+    assert (skip.name, skip.reason, skip.detail) == ("pipe.mcap", "not a regular file",
+                                                     "a FIFO (named pipe); skipped without opening it")
+
+
+def test_an_unreadable_subfolder_is_reported_as_skipped(tmp_path, monkeypatch):
+    # Tests run as root, whom chmod does not stop: the listing of one folder fails as it would
+    # without the permission.
+    root = tmp_path / "sessions"
+    (root / "locked").mkdir(parents=True)
+    _campaign(root, n=1)
+    _campaign(root / "locked", n=1)
+    scandir = os.scandir
+
+    def refusing(path="."):
+        if Path(path).name == "locked":
+            raise PermissionError(13, "Permission denied", str(path))
+        return scandir(path)
+
+    monkeypatch.setattr(os, "scandir", refusing)
+    camp = load_campaign(root, progress=False, workers=1)
+    assert [t.name for t in camp.calibration] == ["cal0.mcap"]
+    assert [(f.name, f.reason, f.detail) for f in camp.skipped_files] == [
+        ("locked/", "folder not read", "Permission denied; its session files are not in the report")]
+
+
+def test_a_file_name_that_is_not_utf8_is_printed_escaped(tmp_path):
+    from analysis.config import AnalysisConfig, ReportConfig
+    from analysis.report_run import ReportRun
+
+    root = tmp_path / "sessions"
+    root.mkdir()
+    (good,) = _campaign(root, n=1)
+    odd = Path(os.fsdecode(bytes(root) + b"/caf\xe9.mcap"))
+    odd.write_bytes(b"not a session")
+    run = ReportRun(ReportConfig(sessions=str(root), out=str(tmp_path / "out"),
+                                 analysis=AnalysisConfig(progress=False)))
+    run.out.mkdir()
+    run.load()
+    run.write()
+    md = (run.out / "report.md").read_text()
+    assert "- `caf\\xe9.mcap`: unreadable file" in md
+    assert json.loads((run.out / "results.json").read_text())["inputs"]["skipped_files"][0]["file"] == "caf\\xe9.mcap"
+
+
+def _report_cli(args, cwd):
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])}
+    return subprocess.run([sys.executable, "-m", "analysis.report", *args, "analysis=demo"], capture_output=True,
+                          text=True, cwd=cwd, env=env, timeout=600)
+
+
+def test_paths_with_spaces_work_quoted_as_hydra_documents(tmp_path):
+    spaced = tmp_path / "my data"
+    _campaign(spaced / "sessions", n=1)
+    out = spaced / "the report"
+    r = _report_cli([f'sessions="{spaced / "sessions"}"', f"out='{out}'"], tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (out / "report.md").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["my data"]  # no tree named after the quoted path
+    data = json.loads((out / "results.json").read_text())
+    assert data["inputs"]["sessions_dir"] == str(spaced / "sessions") and data["data"]["sessions_used"] == 1
+
+
+def test_a_path_with_spaces_left_unquoted_says_how_to_quote_it(tmp_path):
+    spaced = tmp_path / "my data"
+    _campaign(spaced, n=1)
+    # the shell split it: two arguments
+    r = _report_cli([f"sessions={tmp_path}/my", "data", f"out={tmp_path}/o"], tmp_path)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr == (f"configuration error: 'data' is not key=value: the shell split a value at a space; quote it "
+                        f"for the shell and for Hydra: 'sessions=\"{tmp_path}/my data\"'\n")
+    # one argument Hydra cannot read as it stands
+    r = _report_cli([f"sessions={spaced}", f"out={tmp_path}/a b(1)"], tmp_path)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.endswith(f"quote a value with spaces or brackets for Hydra: 'out=\"{tmp_path}/a b(1)\"'\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["my data"]  # nothing made
+
+
+FULL_DISK = r"""
+import errno, logging, sys
+import analysis.report as report
+from analysis.report_run import ReportRun
+
+class Full:  # the job log's file on a full disk
+    def write(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    def flush(self):
+        pass
+    def close(self):
+        pass
+
+def write(self):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+logging.FileHandler._open = lambda self: Full()
+ReportRun.write = write
+sys.argv = ["analysis.report", *sys.argv[1:]]
+report.run_command("report", lambda: report.main, before=[report._check_command_line])
+"""
+
+
+def test_the_report_on_a_full_disk_stops_with_one_line(tmp_path):
+    root = tmp_path / "sessions"
+    _campaign(root, n=1)
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])}
+    r = subprocess.run([sys.executable, "-c", FULL_DISK, f"sessions={root}", f"out={out}", "analysis=demo",
+                        "analysis.progress=false"],
+                       capture_output=True, text=True, cwd=tmp_path, env=env, timeout=600)
+    assert r.returncode == 1, r.stderr[-3000:]
+    assert "Traceback" not in r.stderr and "Logging error" not in r.stderr, r.stderr[-3000:]
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert lines == [
+        f"warning: the job log {out}/.hydra/report.log cannot be written (No space left on device); the run goes "
+        "on without it",
+        f"error: out={out}: the report could not be written (No space left on device); free space there or "
+        "point out= at another disk"], r.stderr[-3000:]

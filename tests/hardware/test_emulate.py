@@ -65,3 +65,27 @@ def test_hande_takes_the_urcap_port():
         with socket.create_connection((host, 63352), timeout=5.0) as s:
             s.sendall(b"GET STA\n")
             assert s.recv(64) == b"STA 0\n"
+
+
+@pytest.mark.parametrize("host, why", [
+    ("evil host", "must be an IP address (127.0.0.1, ::1) or a host name"),
+    ("a;rm -rf", "must be an IP address (127.0.0.1, ::1) or a host name"),
+    ("999.1.1.1", "is not a valid IPv4 address"),
+    ("[::1]", "must be an IPv6 address without brackets"),
+    ("", "must be an IP address or a host name"),
+])
+def test_a_bad_host_is_refused_in_one_line_before_anything_starts(capsys, host, why):
+    from hardware.emulate import main
+
+    with pytest.raises(SystemExit) as stop:
+        main(["netft", "--host", host])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and "Traceback" not in "\n".join(err)
+    assert err[-1].startswith(f"python -m hardware.emulate: error: argument --host: {host!r} {why}")
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "::1", "localhost", "lab-pc.local", "10.0.0.7"])
+def test_an_address_or_host_name_passes(host):
+    from layerskin_exp.config import host_problem
+
+    assert host_problem(host) is None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -191,3 +192,66 @@ def test_layout_of_a_session_file_and_of_a_file_without_one(tmp_path):
     cut.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])  # no layout: written at close
     r = subprocess.run([sys.executable, "-m", "layerskin_exp.log", "layout", str(cut)], capture_output=True, text=True)
     assert r.returncode == 2 and "no stored layout" in r.stderr and r.stderr.count("\n") == 1
+
+
+# ---------------------------------------------------------------------------- special paths
+def test_inspect_and_recover_refuse_a_fifo_without_opening_it(tmp_path):
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    try:
+        for args in (["inspect", str(fifo)], ["recover", str(fifo), str(tmp_path / "out.mcap")]):
+            r = subprocess.run([sys.executable, "-m", "layerskin_exp.log", *args], capture_output=True, text=True,
+                               timeout=60)
+            assert r.returncode == 2 and "Traceback" not in r.stderr
+            assert r.stderr == f"error: {fifo}: a FIFO (named pipe), not a session file; skipped without opening it\n"
+    finally:  # a reader blocked on the FIFO gets its end of file
+        try:
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:
+            pass
+    assert not (tmp_path / "out.mcap").exists()
+
+
+def test_recover_from_a_symlink_loop_names_the_loop(tmp_path, capsys):
+    from layerskin_exp.log.cli import main
+
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    a.symlink_to(b)
+    b.symlink_to(a)
+    assert main(["recover", str(a), str(tmp_path / "out.mcap")]) == 2
+    assert capsys.readouterr().err == (f"error: {a}: a symbolic link loop (the link leads back to itself); "
+                                       "point at the file itself\n")
+    assert main(["inspect", str(a)]) == 2
+    assert "a symbolic link loop" in capsys.readouterr().err
+
+
+def test_recover_into_a_full_disk_leaves_no_output(tmp_path, monkeypatch, capsys):
+    import errno
+
+    from layerskin_exp.log.cli import main
+    from layerskin_exp.log.container import recover as recover_module
+
+    src, _, _ = _session_file(tmp_path)
+    real_open = open
+
+    class Full:
+        def __init__(self, fh):
+            self.fh = fh
+
+        def write(self, data):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+        def __getattr__(self, name):
+            return getattr(self.fh, name)
+
+    monkeypatch.setattr(recover_module, "open", lambda path, mode: Full(real_open(path, mode)), raising=False)
+    out = tmp_path / "out.mcap"
+    assert main(["recover", str(src), str(out)]) == 2
+    assert capsys.readouterr().err == f"error: {out}: cannot be written (No space left on device); nothing was left there\n"
+    assert not out.exists()

@@ -244,3 +244,41 @@ def test_hold_keeps_serving_after_the_run_until_stopped(tmp_path, capsys):
         runner.request_termination("test over")
         th.join(timeout=30)
         runner._termination.clear()  # the request was this test's; later tests run trials again
+
+
+def _status(port: int, path: str = "/", **headers) -> str:
+    """The status line the live view answers a WebSocket upgrade with these headers."""
+    try:
+        client = FoxgloveClient("127.0.0.1", port, timeout=5, path=path, headers=headers)
+    except ConnectionError as e:
+        return str(e).splitlines()[0]
+    client.close()
+    return "101"
+
+
+def test_a_page_on_another_site_is_refused_and_this_machine_accepted(caplog):
+    # A browser page on any site may open a WebSocket to 127.0.0.1; its Origin says where it is
+    # from. A name rebound to 127.0.0.1 (DNS rebinding) shows in the Host header.
+    with caplog.at_level(logging.WARNING, logger="layerskin_exp.log.view.live"), \
+            LiveView("gripper", port=0) as view:
+        own = f"http://127.0.0.1:{view.port}"
+        assert _status(view.port, Origin="http://evil.example") == "handshake refused: HTTP/1.1 403 Forbidden"
+        assert _status(view.port, Host=f"evil.example:{view.port}") == "handshake refused: HTTP/1.1 403 Forbidden"
+        assert _status(view.port, Origin=own) == "101"
+        assert _status(view.port, Origin=f"http://localhost:{view.port}", Host=f"localhost:{view.port}") == "101"
+        assert _status(view.port, Origin="https://app.foxglove.dev") == "101"  # the Foxglove web app
+        assert _status(view.port) == "101"  # no Origin: not a browser page
+    refused = [r.getMessage() for r in caplog.records if "refused the client" in r.getMessage()]
+    assert len(refused) == 2
+    assert "Origin 'http://evil.example' is not an allowed host" in refused[0]
+    assert f"Host 'evil.example:{view.port}' is not an allowed host" in refused[1]
+
+
+def test_a_remote_viewer_gets_in_with_the_token_only():
+    with LiveView("gripper", port=0, token="s3cret-token", allowed_hosts=["127.0.0.1"]) as view:
+        remote = {"Host": f"lab-pc.example:{view.port}", "Origin": "http://lab-pc.example"}
+        assert _status(view.port, **remote).endswith("403 Forbidden")
+        assert _status(view.port, path="/?token=wrong", **remote).endswith("403 Forbidden")
+        assert _status(view.port, path="/?token=s3cret-token", **remote) == "101"
+        assert _status(view.port, Origin="http://localhost:1234").endswith("403 Forbidden")  # not listed here
+        assert _status(view.port) == "101"

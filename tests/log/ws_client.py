@@ -12,10 +12,14 @@ import threading
 
 
 class FoxgloveClient:
-    def __init__(self, host: str, port: int, subprotocol: str = "foxglove.sdk.v1", timeout: float = 10.0):
+    def __init__(self, host: str, port: int, subprotocol: str = "foxglove.sdk.v1", timeout: float = 10.0,
+                 path: str = "/", headers: dict[str, str] | None = None):
+        """headers: extra request headers (Origin, or a Host other than host:port)."""
         self.sock = socket.create_connection((host, port), timeout=timeout)
         key = base64.b64encode(os.urandom(16)).decode()
-        self.sock.sendall((f"GET / HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
+        fields = {"Host": f"{host}:{port}", **(headers or {})}
+        extra = "".join(f"{k}: {v}\r\n" for k, v in fields.items())
+        self.sock.sendall((f"GET {path} HTTP/1.1\r\n{extra}Upgrade: websocket\r\n"
                            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
                            f"Sec-WebSocket-Protocol: {subprotocol}\r\n\r\n").encode())
         head = b""

@@ -249,8 +249,8 @@ def test_a_sample_read_after_a_stop_trips_nothing(tmp_path, monkeypatch, target_
     clear = rig.clear_trip
     late = []
 
-    def clear_then_a_late_sample():
-        reason = clear()
+    def clear_then_a_late_sample(acknowledged=None):
+        reason = clear(acknowledged)
         if reason and reason.startswith(stop):
             late.append(rig.check_guards(Wrench(np.array([0.0, 0.0, late_fz]), np.zeros(3), 0, 0, 0)))
         return reason

@@ -9,7 +9,7 @@ import numpy as np
 from mcap.writer import Writer
 
 import layerskin_exp
-from layerskin_exp.log.container.scan import SessionFileError, scan
+from layerskin_exp.log.container.scan import SessionFileError, link_loop_error, scan
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.session.metacheck import check_records, with_check
 
@@ -20,13 +20,15 @@ def recover(src, dst) -> int:
     The outcome stays absent (the trial did not finish, or its file was damaged); a "recovered"
     metadata record names the source, the number of messages saved, the damage found, the
     lost time ranges, the exact repeats dropped per stream (a chunk present twice) and the
-    metadata fields left out for failing their check (never copied as if valid). `dst` must not exist. Raises SessionFileError for a source with nothing
-    readable or that is not a layerskin session.
+    metadata fields left out for failing their check (never copied as if valid). `dst` must not
+    exist. Raises SessionFileError for a source with nothing readable, that is not a layerskin
+    session, or whose links loop; OSError naming `dst` where it cannot be written (a full disk),
+    after removing what was written of it.
     """
     src, dst = Path(src), Path(dst)
     if dst.exists():
         raise FileExistsError(f"{dst} exists; recover into a new file")
-    if src.resolve() == dst.resolve():
+    if _resolved(src) == _resolved(dst):
         raise ValueError("recover writes a new file; give an output path different from the input")
     sc = scan(src)
     ours = sc.damaged and any(c.metadata.get("stream") for c in sc.channels.values())
@@ -39,6 +41,26 @@ def recover(src, dst) -> int:
     rows = np.concatenate(order) if order else np.zeros((0, 3), np.int64)
     rows = rows[np.argsort(rows[:, 0], kind="stable")]
     payloads = {cid: sc.payloads(m) for cid, m in sc.messages.items() if m.channel is not None}
+    try:
+        _write(dst, sc, rows, payloads, src)
+    except BaseException as exc:
+        dst.unlink(missing_ok=True)  # made here (it did not exist): no empty or cut-off output is left
+        if isinstance(exc, OSError):
+            failed = OSError(f"{dst}: cannot be written ({exc.strerror or exc}); nothing was left there")
+            failed.errno = exc.errno
+            raise failed from None
+        raise
+    return len(rows)
+
+
+def _resolved(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError):  # a link loop: RuntimeError before Python 3.13, OSError after
+        raise link_loop_error(path) from None
+
+
+def _write(dst: Path, sc, rows, payloads, src: Path) -> None:
     with open(dst, "wb") as fh:
         w = Writer(fh)
         w.start(profile="", library=f"layerskin-exp/{layerskin_exp.__version__} recover")
@@ -83,4 +105,3 @@ def recover(src, dst) -> int:
             },
         ))
         w.finish()
-    return len(rows)

@@ -20,8 +20,10 @@ and payload) is kept once; McapScan.repeats counts what was dropped.
 
 from __future__ import annotations
 
+import errno
 import mmap
 import os
+import stat
 import struct
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -132,9 +134,33 @@ class McapScan:
         return [raw[s:e].tobytes() for s, e in zip(starts, ends, strict=True)]
 
 
+_SPECIAL = ((stat.S_ISFIFO, "FIFO (named pipe)"), (stat.S_ISSOCK, "socket"), (stat.S_ISCHR, "character device"),
+            (stat.S_ISBLK, "block device"))
+
+
+def special_file_kind(path) -> str | None:
+    """What a special file at `path` is ("FIFO (named pipe)", "socket", "character device",
+    "block device"), following links; None for a regular file, a folder, or nothing readable there.
+    Told by type, without opening it: opening a FIFO blocks until something writes to it."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    return next((what for test, what in _SPECIAL if test(mode)), None)
+
+
+def link_loop_error(path) -> SessionFileError:
+    """The one line for a path whose symbolic links lead back to themselves."""
+    return SessionFileError(f"{path}: a symbolic link loop (the link leads back to itself); point at the file itself")
+
+
 def scan(path) -> McapScan:
-    """Scan an MCAP file. Raises SessionFileError if it cannot be opened, is empty, or is not
-    MCAP at all; damage inside is read around and reported, never raised."""
+    """Scan an MCAP file. Raises SessionFileError if it cannot be opened, is empty, is a special
+    file (never opened), or is not MCAP at all; damage inside is read around and reported, never
+    raised."""
+    kind = special_file_kind(path)
+    if kind is not None:
+        raise SessionFileError(f"{path}: a {kind}, not a session file; skipped without opening it")
     try:
         with open(path, "rb") as f:
             size = os.fstat(f.fileno()).st_size
@@ -149,6 +175,8 @@ def scan(path) -> McapScan:
     except FileNotFoundError:
         raise SessionFileError(f"{path}: no such session file") from None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise link_loop_error(path) from None
         raise SessionFileError(f"{path}: cannot be read ({exc.strerror or exc})") from None
 
 

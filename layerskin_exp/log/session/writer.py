@@ -192,7 +192,7 @@ class SessionWriter:
         # can truncate anything (see lock.py). A stale file nobody holds is replaced if overwrite.
         self._lock = WriterLock.acquire(self.path, overwrite=overwrite)
         # The file object owns the locked descriptor: closing it (or losing it) drops the lock.
-        self._file = os.fdopen(self._lock.fd, "wb")
+        self._file = _NamedFile(_open_fd(self._lock.fd), self)
         try:
             self._start(metadata or {}, labels or {}, compression, chunk_span_ns, chunk_bytes, epoch_offset_ns,
                         epoch_how)
@@ -702,9 +702,9 @@ class SessionWriter:
                 self.path = self._lock.move(move_to)
         finally:
             self._lock.forget_owner()
-            self._file.close()  # drops the lock
             self._closed = True
             self.outcome = outcome
+            self._file.close()  # drops the lock (and raises, naming the file, if the last bytes did not fit)
 
     def __enter__(self) -> SessionWriter:
         return self
@@ -717,6 +717,43 @@ class SessionWriter:
         else:
             self.close(f"aborted: {exc_type.__name__}: {exc}")
         return False
+
+
+def _open_fd(fd: int):
+    """The buffered file over the writer's locked descriptor."""
+    return os.fdopen(fd, "wb")
+
+
+class _NamedFile:
+    """The writer's file: a failed write, flush or close (a full disk, a lost mount) raises an
+    OSError that names the file being written, whichever record the failure came with."""
+
+    def __init__(self, raw, writer: SessionWriter) -> None:
+        self._raw, self._writer = raw, writer
+
+    def _failed(self, exc: OSError) -> OSError:
+        return OSError(exc.errno, exc.strerror or str(exc), str(self._writer.path))
+
+    def write(self, data) -> int:
+        try:
+            return self._raw.write(data)
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def flush(self) -> None:
+        try:
+            self._raw.flush()
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def close(self) -> None:
+        try:
+            self._raw.close()
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def __getattr__(self, name: str):  # fileno, tell, closed, ...: the file's own
+        return getattr(self._raw, name)
 
 
 def _skin_array(layer, name: str) -> np.ndarray:

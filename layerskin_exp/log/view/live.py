@@ -21,15 +21,27 @@ the current Foxglove app offers. It refuses clients that offer only `foxglove.we
 (older Foxglove Studio releases, ws-protocol clients) with HTTP 400; the SDK does not allow
 accepting them. A refusal is reported once as a warning naming the subprotocol, later ones at
 debug level, instead of the SDK's error line per refused connection.
+
+Who may connect: the SDK's server accepts any client, so it listens on an internal loopback port
+and a gate on host:port reads each connection's HTTP upgrade request first. A client is let
+through when its Host header and its Origin header (a browser's page; absent from non-browser
+clients) name one of `allowed_hosts` (by default this machine, localhost / 127.0.0.1 / [::1],
+and the Foxglove web app, app.foxglove.dev), or when it presents the view's `token` (a remote
+viewer: ws://<host>:<port>/?token=<token>). Any other is answered 403 and logged in one warning
+line naming its address and what was refused: a web page on another site (Origin), or a name
+rebound to this machine (Host), cannot read the run.
 """
 
 from __future__ import annotations
 
+import hmac
 import logging
+import socket
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from urllib.parse import parse_qs, urlsplit
 
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.view.layout import rig_topics
@@ -87,6 +99,141 @@ if not any(isinstance(f, _RefusedClients) for f in _SDK_SERVER_LOG.filters):
     _SDK_SERVER_LOG.addFilter(_RefusedClients())
 
 
+DEFAULT_ALLOWED_HOSTS = ("localhost", "127.0.0.1", "::1", "app.foxglove.dev")
+_MAX_REQUEST = 16384  # bytes of an upgrade request's head (a browser's is ~1 KB)
+_REQUEST_TIMEOUT_S = 5.0
+
+
+def _host_name(value: str) -> str:
+    """The host of a Host header ("127.0.0.1:8765", "[::1]:8765", "localhost"), lower case."""
+    value = value.strip().lower()
+    if value.startswith("["):
+        return value[1:value.find("]")] if "]" in value else value
+    return value.rsplit(":", 1)[0] if value.count(":") == 1 else value
+
+
+class _Gate:
+    """Listens on host:port; forwards each connection whose upgrade request passes `refusal` to
+    the SDK's server on 127.0.0.1:upstream_port, byte for byte, and answers the others 403."""
+
+    def __init__(self, host: str, port: int, upstream_port: int, allowed_hosts: Iterable[str],
+                 token: str | None) -> None:
+        self.upstream_port = upstream_port
+        self.allowed = {_host_name(h) for h in allowed_hosts}
+        self.token = token or None
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self.sock = socket.create_server((host, port), family=family)
+        self.port = self.sock.getsockname()[1]
+        self._open: set[socket.socket] = set()
+        self._lock = threading.Lock()
+        self._closed = False
+        self._acceptor = threading.Thread(target=self._accept, name="live-view-gate", daemon=True)
+        self._acceptor.start()
+
+    def refusal(self, target: str, headers: dict[str, str]) -> str | None:
+        """Why a client with this request target and headers (names lower case) is refused, or None."""
+        if self.token is not None:
+            given = parse_qs(urlsplit(target).query).get("token", [""])[0]
+            if hmac.compare_digest(given.encode(), self.token.encode()):
+                return None
+        host = _host_name(headers.get("host", ""))
+        origin = headers.get("origin")
+        allowed = ", ".join(sorted(self.allowed))
+        hint = ("" if self.token is None else "; a remote viewer adds ?token=<live token> to the URL")
+        if host not in self.allowed:
+            return f"Host {headers.get('host', '(none)')!r} is not an allowed host ({allowed}){hint}"
+        if origin is not None and (urlsplit(origin.strip()).hostname or origin.strip().lower()) not in self.allowed:
+            return f"Origin {origin!r} is not an allowed host ({allowed}){hint}"
+        return None
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn, addr = self.sock.accept()
+            except OSError:
+                return  # closed
+            if self._closed:
+                conn.close()
+                return
+            threading.Thread(target=self._serve, args=(conn, addr), name="live-view-client", daemon=True).start()
+
+    def _serve(self, conn: socket.socket, addr) -> None:
+        peer = f"{addr[0]}:{addr[1]}"
+        try:
+            conn.settimeout(_REQUEST_TIMEOUT_S)
+            head = b""
+            while b"\r\n\r\n" not in head:
+                chunk = conn.recv(4096)
+                if not chunk or len(head) + len(chunk) > _MAX_REQUEST:
+                    conn.close()
+                    return
+                head += chunk
+            lines = head.split(b"\r\n\r\n", 1)[0].decode("latin-1").split("\r\n")
+            parts = lines[0].split(" ")
+            target = parts[1] if len(parts) >= 2 else ""
+            headers = {}
+            for line in lines[1:]:
+                name, sep, value = line.partition(":")
+                if sep:
+                    headers[name.strip().lower()] = value.strip()
+            why = self.refusal(target, headers)
+            if why is not None:
+                log.warning("live view: refused the client at %s: %s", peer, why)
+                conn.sendall(b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+                conn.close()
+                return
+            conn.settimeout(None)
+            up = socket.create_connection(("127.0.0.1", self.upstream_port))
+        except OSError:
+            conn.close()
+            return
+        with self._lock:
+            if self._closed:
+                conn.close()
+                up.close()
+                return
+            self._open.update((conn, up))
+        up.sendall(head)
+        threading.Thread(target=self._pipe, args=(up, conn), daemon=True).start()
+        self._pipe(conn, up)
+
+    def _pipe(self, src: socket.socket, dst: socket.socket) -> None:
+        """Copy src to dst until either ends; then close both."""
+        try:
+            while True:
+                data = src.recv(65536)
+                if not data:
+                    break
+                dst.sendall(data)
+        except OSError:
+            pass
+        for s in (src, dst):
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            s.close()
+        with self._lock:
+            self._open.difference_update((src, dst))
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            open_, self._open = list(self._open), set()
+        try:  # wakes the accept() under way (a plain close leaves the port listening until it returns)
+            self.sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self.sock.close()
+        self._acceptor.join(timeout=5.0)
+        for s in open_:
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            s.close()
+
+
 class _Listener:
     """The SDK's ServerListener: a subscription to a topic gets what was sent on it before."""
 
@@ -107,13 +254,17 @@ class LiveView:
     """A Foxglove WebSocket server on host:port (port 0: any free port, see .port) for a session
     of the rig `setup` ("platform" or "gripper"), whose channels it advertises at start.
 
+    allowed_hosts: the names a client's Host and Origin headers may give; token: lets any client
+    that adds ?token=<token> to the URL in (a remote viewer); see the module docstring.
+
     Open it in Foxglove with "Open connection" -> Foxglove WebSocket -> ws://127.0.0.1:<port>;
     `layout_json(setup)` is the rig's layout in the app's import format. close() stops the
     server; hold(stop) keeps it serving (after a run) until stop() says so or Ctrl-C.
     """
 
     def __init__(self, setup: str, host: str = "127.0.0.1", port: int = 8765, period_ns: int = DISPLAY_PERIOD_NS,
-                 name: str = "layerskin-exp") -> None:
+                 name: str = "layerskin-exp", allowed_hosts: Iterable[str] = DEFAULT_ALLOWED_HOSTS,
+                 token: str | None = None) -> None:
         import foxglove
 
         streamed = rig_topics(setup)  # refuses an unknown setup, naming it
@@ -129,9 +280,14 @@ class LiveView:
         for topic, schema in FIXED_TOPICS.items():
             if topic in streamed:
                 self._channel(topic, schema)
-        self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context,
+        self.server = foxglove.start_server(name=name, host="127.0.0.1", port=0, context=self.context,
                                             server_listener=_Listener(self), message_backlog_size=CLIENT_BACKLOG)
-        self.host, self.port = host, self.server.port
+        try:
+            self.gate = _Gate(host, port, self.server.port, allowed_hosts, token)
+        except BaseException:
+            self.server.stop()
+            raise
+        self.host, self.port = host, self.gate.port
         log.info("live view on ws://%s:%d (subprotocol %s)", host, self.port, " / ".join(SUBPROTOCOLS))
 
     @property
@@ -218,6 +374,7 @@ class LiveView:
             pass
 
     def close(self) -> None:
+        self.gate.close()
         self.server.stop()
 
     def __enter__(self) -> LiveView:
