@@ -183,6 +183,7 @@ def _leaves(node, prefix=""):
 
 def protocol_keys(app: str) -> str:
     from omegaconf import OmegaConf
+    from omegaconf.errors import ValidationError
 
     from layerskin_exp.config import ConfigError, validate
 
@@ -205,7 +206,10 @@ def protocol_keys(app: str) -> str:
         refusals = []
         for probe in _probe_values(value):
             trial = copy.deepcopy(cfg)
-            OmegaConf.update(trial, key, probe, merge=False)
+            try:
+                OmegaConf.update(trial, key, probe, merge=False)
+            except ValidationError:  # the schema's type refuses the probe itself (e.g. None for a list)
+                continue
             try:
                 validate(trial)
             except ConfigError as err:
