@@ -188,3 +188,20 @@ def test_the_stretched_sheets_rim_is_in_hoop_compression_past_the_wrinkling_load
     assert rec["wrinkling_threshold_n_per_mm"] == pytest.approx(2 * math.sqrt(LINEAR.sheet.rigidity_n_mm * k), rel=0.01)
     assert rec["hoop_min_n_per_mm"] < -rec["wrinkling_threshold_n_per_mm"] < 0
     assert rec["over_threshold_from_to_mm"][1] > rec["over_threshold_from_to_mm"][0] > 2.0
+
+
+def test_the_bending_plate_answers_near_a_side_unfolded():
+    """The small-deflection sheet is not folded (its influence length is a fraction of the pad):
+    its kernel maps at a press 2 mm from a side are the numpy reference's, which adds nothing."""
+    from layerskin_exp.config import SkinConfig
+    from layerskin_exp.sim.reference import ReferenceSkin
+    from layerskin_exp.sim.skin import SkinModel
+
+    sim = load_sim(["readout.noise_counts=0", "readout.scan_jitter_ms=0"])
+    model = SkinModel(sim, SkinConfig(), "hemisphere", np.random.default_rng(0))
+    assert model._params["fold_sides"] == 0.0
+    rec = _press(model, (11.0, -6.0))
+    got = model._maps([model.state_of(rec)])[0]
+    want = ReferenceSkin(model).maps(rec[None, :])[0]
+    for layer in range(2):
+        assert np.abs(got[layer] - want[layer]).max() <= 1e-3 * want[layer].max()
