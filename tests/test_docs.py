@@ -52,7 +52,7 @@ def test_every_page_is_in_the_nav():
 EXPECTED_SECTIONS = {
     "protocols.md": {"protocol-keys:force_calibration", "protocol-keys:grip_depth"},
     "simulator.md": {"sim-params", "brackets"},
-    "analysis.md": {"campaign-force:campaign-2026-12-02"},
+    "analysis.md": {"campaign-force:campaign-2026-12-04"},
     **{f"bench/{page}.md": {f"device-options:{dev}", f"device-faults:{dev}"}
        for page, dev in (("skin-board", "skin_board"), ("platform", "platform"), ("netft", "netft"),
                          ("ur5e", "ur5e"), ("hande", "hande"), ("camera", "camera"))},
@@ -76,7 +76,7 @@ def test_generated_tables_hold_what_the_sources_say():
     protocols = (DOCS / "protocols.md").read_text()
     assert "| `safety.max_normal_force_n` | N | `6.0` |" in protocols
     assert "at most 10.0 (a hard ceiling of this rig; no config can raise it)" in protocols
-    results = json.loads((DOCS / "campaign-2026-12-02" / "results.json").read_text())
+    results = json.loads((DOCS / "campaign-2026-12-04" / "results.json").read_text())
     r2 = results["force"]["T-s5"]["Fx"]["r2"]
     assert f"| T-s5 | {r2:.3f} |" in (DOCS / "analysis.md").read_text()
     assert "`hardware.skin_board.port` |  | `/dev/ttyACM0`" in (DOCS / "bench" / "skin-board.md").read_text()
