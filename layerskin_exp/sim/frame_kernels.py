@@ -401,18 +401,17 @@ def frame_fields(st, prm, lk, rows, bounds, dist, quad, lattice, edge, f_sup, f_
     # what the profile puts beyond the pad's sides comes back as the sheet's rigid-body pressure
     # over the pad (`_pad_fold`), for the base about the cap's ground position and for the top
     # about its point in the sheet's frame
-    fold = np.empty(3)
-    folds = prm.fold_sides != 0.0
-    if folds and _pad_fold(lk_deep, t32, cdx, cdy, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32, scale_d32,
-                           fold):
-        _add_fold(base, q, fold)
-        if same:
+    if prm.fold_sides != 0.0:  # the bending plate's frames skip this (and its scratch) entirely
+        fold = np.empty(3)
+        if _pad_fold(lk_deep, t32, cdx, cdy, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32, scale_d32, fold):
+            _add_fold(base, q, fold)
+            if same:
+                _add_fold(top, q, fold)
+            edges = True
+        if not same and _pad_fold(lk_deep, t32, ax, ay, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32,
+                                  scale_d32, fold):
             _add_fold(top, q, fold)
-        edges = True
-    if folds and not same and _pad_fold(lk_deep, t32, ax, ay, mx32, my32, bounds[i, 1], prm.half_pad_mm, origin_d32,
-                                        scale_d32, fold):
-        _add_fold(top, q, fold)
-        edges = True
+            edges = True
     # deep: the lattice's pressure around the contact's deep-frame position
     _window(cdx, cdy, bounds[i, 1], prm, win, 0)
     r0, r1, c0, c1 = win[0] * nq, (win[1] + 1) * nq, win[2] * nq, (win[3] + 1) * nq

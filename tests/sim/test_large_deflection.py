@@ -135,12 +135,13 @@ def wide_model():
 
     model = SkinModel(OFF_CENTRE, SkinConfig(), "hemisphere", np.random.default_rng(0))
     model.reuse_maps = False  # each press is a fresh state, never the last one's hold
+    model.unloaded = model.mech_state()  # before any contact: each press starts from it
     return model
 
 
 def _press(model, xy, fz_n=3.0):
     depth = float(np.interp(fz_n, model.tab.load, model.tab.delta_mm))
-    model.restore_mech_state(model.mech_state() * 0.0)
+    model.restore_mech_state(model.unloaded)
     return model.step_many(np.array([0.0]), np.array([[xy[0], xy[1], -depth]]), np.zeros(1))[0]
 
 
@@ -199,6 +200,7 @@ def test_the_bending_plate_answers_near_a_side_unfolded():
 
     sim = load_sim(["readout.noise_counts=0", "readout.scan_jitter_ms=0"])
     model = SkinModel(sim, SkinConfig(), "hemisphere", np.random.default_rng(0))
+    model.unloaded = model.mech_state()
     assert model._params["fold_sides"] == 0.0
     rec = _press(model, (11.0, -6.0))
     got = model._maps([model.state_of(rec)])[0]
