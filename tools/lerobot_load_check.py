@@ -295,7 +295,11 @@ def compare(dataset: Path, sessions: Path, got: dict) -> tuple[list[str], list[s
     n_values = 0
     for i_str, item in got["items"].items():
         i = int(i_str)
-        row = int(np.nonzero(index == i)[0][0])
+        rows_i = np.nonzero(index == i)[0]
+        if len(rows_i) != 1:
+            check(False, f"frame {i}: one parquet row with index {i}", f"{len(rows_i)} rows")
+            continue
+        row = int(rows_i[0])
         for k in data_keys:
             mine = np.asarray(table.column(k)[row].as_py(), dtype=inf[k][0])
             theirs = np.asarray(item[k], dtype=inf[k][0])
@@ -327,8 +331,10 @@ def compare(dataset: Path, sessions: Path, got: dict) -> tuple[list[str], list[s
                 check(False, f"frame {i} (episode {ep}, frame {k}) {key}: LeRobot = the session's {how}",
                       f"max |difference| {d:.6g}")
             n_values += 1
-    check(not any(f.startswith("frame ") for f in fails),
-          f"{n_values} values at {len(got['items'])} frames: LeRobot = parquet = sessions")
+    for i, err in got.get("item_errors", {}).items():
+        check(False, f"frame {i}: LeRobotDataset[{i}]", err)
+    if not any(f.startswith("frame ") for f in fails):
+        check(True, f"{n_values} values at {len(got['items'])} frames: LeRobot = parquet = sessions")
 
     for path, frames in got["video_frames"].items():
         key = path.split("/")[1]
@@ -362,11 +368,11 @@ def markdown(result: dict) -> str:
     for d in result["datasets"]:
         if d["video_frames"]:
             video = ("decoded by LeRobot" if d["video_decoded_by_lerobot"] else
-                     f"not decoded by LeRobot (no decoder: {d['video_backend']}); "
+                     f"not decoded by LeRobot (its `{d['video_backend']}` backend needs torchvision); "
                      f"{sum(d['video_frames'].values())} frames counted with PyAV")
         else:
             video = "none"
-        status = "all passed" if not d["failures"] else f"{len(d['failures'])} FAILED"
+        status = f"{len(d['failures'])} failed"
         lines.append(f"| `{d['name']}` | {d['episodes']} | {d['frames']} ({' + '.join(map(str, d['episode_lengths']))})"
                      f" | {d['fps']} | {d['checks_passed']} passed, {status} | {d['values_compared']} | {video} |")
     for d in result["datasets"]:

@@ -79,15 +79,21 @@ def main(argv: list[str]) -> int:
     picks = sorted({i for e in episodes for i in (e["dataset_from_index"],
                                                   (e["dataset_from_index"] + e["dataset_to_index"]) // 2,
                                                   e["dataset_to_index"] - 1)})
-    items, video_error = {}, None
+    items, item_errors, video_error = {}, {}, None
     for i in picks:
         try:
-            item = ds[i]
-        except Exception as exc:  # noqa: BLE001 - a video decoder missing here is reported, not fatal
-            if not meta.video_keys:
-                raise
-            video_error = f"{type(exc).__name__}: {exc}"
-            item = ds.hf_dataset[i]  # lerobot's own parquet loading and torch transform, without the videos
+            try:
+                item = ds[i]
+            except (AttributeError, ImportError, RuntimeError) as exc:
+                if not meta.video_keys:
+                    raise
+                # No video decoder here (reported): lerobot's own parquet loading and torch
+                # transform, without the video frames.
+                video_error = f"{type(exc).__name__}: {exc}"
+                item = ds.hf_dataset[i]
+        except Exception as exc:  # noqa: BLE001 - an item LeRobot cannot give is a failed comparison
+            item_errors[str(i)] = f"{type(exc).__name__}: {exc}"
+            continue
         items[str(i)] = {k: (_plain(v) if k not in meta.video_keys else list(v.shape))
                          for k, v in item.items()}
     videos = {}
@@ -112,6 +118,7 @@ def main(argv: list[str]) -> int:
         "tasks": meta.tasks.index.tolist(),
         "episodes": episodes,
         "items": items,
+        "item_errors": item_errors,
         "video_decode_error": video_error,
         "video_frames": videos,
         "network_attempts": NETWORK_ATTEMPTS,
