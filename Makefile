@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test install lint bench clean
+.PHONY: demo test install lint bench check-lerobot clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -27,6 +27,11 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run all
+
+# LeRobot's own loader on exported datasets, in a venv of its own (docs/export.md):
+#   make check-lerobot LEROBOT_CHECK="out/calibration_campaign data/force_calibration"
+check-lerobot: $(STAMP)
+	$(PY) tools/lerobot_load_check.py $(LEROBOT_CHECK)
 
 clean:
 	rm -rf $(VENV) outputs multirun data

@@ -53,6 +53,7 @@ EXPECTED_SECTIONS = {
     "protocols.md": {"protocol-keys:force_calibration", "protocol-keys:grip_depth"},
     "simulator.md": {"sim-params", "brackets"},
     "analysis.md": {"campaign-force:campaign-2026-12-04"},
+    "export.md": {"lerobot-load:lerobot-load-check"},
     **{f"bench/{page}.md": {f"device-options:{dev}", f"device-faults:{dev}"}
        for page, dev in (("skin-board", "skin_board"), ("platform", "platform"), ("netft", "netft"),
                          ("ur5e", "ur5e"), ("hande", "hande"), ("camera", "camera"))},

@@ -18,6 +18,7 @@ Sources:
   sim-params               conf/sim/default.yaml (value and the comment that gives its source)
   brackets                 layerskin_exp/sim/brackets.yaml
   campaign-force:<folder>  docs/<folder>/results.json (a report's force table)
+  lerobot-load:<name>      docs/<name>.json (tools/lerobot_load_check.py --json: its --markdown)
 """
 
 from __future__ import annotations
@@ -356,11 +357,20 @@ def campaign_force(folder: str) -> str:
     return table(["model", "R² Fx", "R² Fy", "R² Fz", "the study's R² (Fx / Fy / Fz)", "training"], rows)
 
 
+def lerobot_load(name: str) -> str:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("lerobot_load_check", ROOT / "tools" / "lerobot_load_check.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.markdown(json.loads((DOCS / f"{name}.json").read_text()))
+
+
 def render(name: str) -> str:
     kind, _, arg = name.partition(":")
     makers = {"protocol-keys": protocol_keys, "device-options": device_options, "device-faults": device_faults,
               "sim-params": lambda _: sim_params(), "brackets": lambda _: brackets(),
-              "campaign-force": campaign_force}
+              "campaign-force": campaign_force, "lerobot-load": lerobot_load}
     if kind not in makers:
         raise SystemExit(f"doc_tables: unknown generated section {name!r}")
     return makers[kind](arg)
