@@ -18,6 +18,7 @@ Python >= 3.11).
 
 from __future__ import annotations
 
+import os
 import re
 import signal
 import sys
@@ -359,12 +360,15 @@ def view(paths, *, web: bool = False, port: int = 9090, grpc_port: int = 9876, b
         folder.mkdir()
         files = save(paths, folder)
         print(f"rerun web viewer: {web_address(port, grpc_port, bind)}  (Ctrl-C to stop)", flush=True)
-        proc = subprocess.Popen(serve_command(files, port=port, grpc_port=grpc_port, bind=bind))
+        # Its own process group: `python -m rerun` runs the viewer binary as a child of its own,
+        # and stopping the view must stop both.
+        proc = subprocess.Popen(serve_command(files, port=port, grpc_port=grpc_port, bind=bind),
+                                start_new_session=True)
         previous = signal.signal(signal.SIGTERM, _interrupt)  # a terminated view stops its server too
         try:
             proc.wait()
         except KeyboardInterrupt:
-            proc.terminate()
+            os.killpg(proc.pid, signal.SIGTERM)
             proc.wait()
         finally:
             signal.signal(signal.SIGTERM, previous)
