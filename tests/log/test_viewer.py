@@ -151,3 +151,25 @@ def test_view_without_rerun_says_how_to_install_it(tmp_path, capsys, monkeypatch
     assert main(["view", str(session)]) == 2
     err = capsys.readouterr().err
     assert "rerun-sdk" in err and "pip install 'layerskin-exp[view]'" in err
+
+
+def test_the_skin_totals_and_cop_plots_come_from_the_stored_summary_channel(tmp_path):
+    """/skin/summary is a view channel the reader skips; the viewer reads it for its two plots."""
+    _rerun()
+    from log_records import frame
+
+    from layerskin_exp.log import SessionWriter
+    from layerskin_exp.log.view import SkinView
+
+    path, view, n = tmp_path / "summary.mcap", SkinView(), 0
+    with SessionWriter(path) as w:
+        for i in range(300):
+            f = frame(i)
+            w.write(f)
+            for topic, schema, payload in view.summary(f):
+                w.write_view(topic, schema, payload, f.host_t_ns)
+                n += topic == S.SKIN_SUMMARY_TOPIC
+    cols = _columns(V.save([path], tmp_path / "summary.rrd")[0])
+    for layer in S.SKIN_TOPICS:
+        assert _rows(cols[f"{S.SKIN_SUMMARY_TOPIC}/{layer}/total_counts"], "Scalars:scalars") == n > 0
+        assert _rows(cols[f"{S.SKIN_SUMMARY_TOPIC}/{layer}/cop_mm"], "Scalars:scalars") == n
