@@ -4,7 +4,7 @@ stores), and files of format_version 1 (JSON channels) read back as the same ses
 
 fixtures/session_format1.mcap was written by layerskin-exp 0.2's SessionWriter from
 `_fixture_records()` below (the same records, the same epoch offset); reading it and a file
-written today from those records must give identical streams.
+the current writer makes from those records must give identical streams.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def _fixture_records() -> list:
     return out
 
 
-def _write_today(path: Path) -> Path:
+def _write_current(path: Path) -> Path:
     with SessionWriter(path, metadata={"protocol": "fixture"}, labels={"trial": 0}, epoch_offset_ns=EPOCH_NS) as w:
         for r in _fixture_records():
             w.write(r)
@@ -48,13 +48,13 @@ def _same(a, b, where: str) -> None:
         assert a == b, where
 
 
-def test_a_format1_file_reads_as_the_same_session_as_one_written_today(tmp_path):
+def test_a_format1_file_reads_as_the_same_session_as_one_written_now(tmp_path):
     with open(FORMAT1, "rb") as fh:
         summary = make_reader(fh).get_summary()
     old_encodings = {c.topic: c.message_encoding for c in summary.channels.values()}
     assert old_encodings[S.WRENCH_TOPIC] == old_encodings[S.EVENTS_TOPIC] == "json"  # really the old form
 
-    old, new = load_session(FORMAT1), load_session(_write_today(tmp_path / "today.mcap"))
+    old, new = load_session(FORMAT1), load_session(_write_current(tmp_path / "current.mcap"))
     assert old.complete and new.complete and old.warnings == new.warnings == []
     assert set(old.streams) == set(new.streams) >= {"skin", "wrench", "stage", "gripper", "markers", "events",
                                                     "estimate_force", "estimate_slip", "tcp"}
@@ -72,7 +72,7 @@ def _fields(msg) -> dict:
 
 
 def test_every_channel_decodes_to_named_fields_in_the_official_mcap_reader(tmp_path):
-    path = _write_today(tmp_path / "s.mcap")
+    path = _write_current(tmp_path / "s.mcap")
     s = load_session(path)
     decoded: dict[str, list] = {}
     with open(path, "rb") as fh:
