@@ -1,16 +1,15 @@
-"""Session-log write speed of the JSON streams: F/T wrench samples (the busiest, 1 kHz).
+"""Session-log write speed of the wrench stream (the busiest, 1 kHz), as protobuf against JSON.
 
 Figure: wrench samples per second through SessionWriter.write (the record's numbers checked,
-encoded as JSON, framed, chunked, compressed, clock pairs kept) for 200,000 samples into a temp
-file. Baseline, same run, same writer: the encoding of 2026-11-25, kept here (`_vec_then` and
-`_dumps_then`: each vector through a numpy round trip and isfinite, json.dumps with arguments,
-which builds a new encoder per message). A force-calibration campaign writes about 2,900 wrench
-samples a trial, so this path was a fifth of a simulated campaign's time (cProfile).
+encoded, framed, chunked, compressed, clock pairs kept) for 200,000 samples into a temp file.
+Baseline, same run, same writer: the JSON encoding of format_version 1 (`_json_then`: the shared
+JSON encoder of 2026-11-25), which the session's own protobuf messages replaced so that generic
+viewers decode the channel. A force-calibration campaign writes about 2,900 wrench samples a
+trial.
 """
 
 from __future__ import annotations
 
-import json
 import tempfile
 import time
 from pathlib import Path
@@ -24,18 +23,8 @@ from layerskin_exp.log.session import writer as W
 from layerskin_exp.types import Wrench
 
 
-def _vec_then(values, n: int, name: str) -> list[float]:
-    v = np.asarray(values, dtype=np.float64).reshape(-1)
-    if v.size != n:
-        raise ValueError(f"{name} has {v.size} values, expected {n}")
-    out = v.tolist()
-    if not np.all(np.isfinite(v)):
-        out = [x if np.isfinite(x) else None for x in out]
-    return out
-
-
-def _dumps_then(obj) -> bytes:
-    return json.dumps(obj, default=S.to_jsonable, allow_nan=False, separators=(",", ":")).encode()
+def _json_then(name: str, body: dict, t_ns: int) -> bytes:
+    return S.dumps(body)
 
 
 def _samples(n: int) -> list[Wrench]:
@@ -58,11 +47,11 @@ def run(n: int = 200_000) -> dict:
     with tempfile.TemporaryDirectory() as d:
         folder = Path(d)
         _rate(samples[:5000], folder, "warm")
-        with mock.patch.object(W, "_vec", _vec_then), mock.patch.object(W.S, "dumps", _dumps_then):
+        with mock.patch.object(W.S, "encode", _json_then):
             then = _rate(samples, folder, "then")
         now = _rate(samples, folder, "now")
     return {"samples": n, "measure": "wrench samples per CPU second",
-            "baseline_2026_11_25_per_s": round(then), "current_per_s": round(now), "ratio": round(now / then, 2)}
+            "baseline_json_per_s": round(then), "current_per_s": round(now), "ratio": round(now / then, 2)}
 
 
 if __name__ == "__main__":

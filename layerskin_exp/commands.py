@@ -6,7 +6,7 @@ from __future__ import annotations
 
 
 def log() -> int:
-    """lsx-log: `python -m layerskin_exp.log` (inspect, recover, layout, export)."""
+    """lsx-log: `python -m layerskin_exp.log` (inspect, recover, layout, export, view)."""
     from layerskin_exp.log.cli import main
 
     return main()

@@ -1,5 +1,5 @@
 """python -m layerskin_exp.log inspect FILE | recover IN OUT | layout platform|gripper|FILE |
-export lerobot SESSIONS OUT [--fps N]"""
+export lerobot SESSIONS OUT [--fps N] | view SESSION... [--web] [--save OUT]"""
 
 import sys
 

@@ -1,5 +1,5 @@
 """Command line: inspect a session file, recover one whose writer died, print a Foxglove layout,
-export a folder of sessions as a LeRobot dataset."""
+export a folder of sessions as a LeRobot dataset, open sessions in the rerun viewer."""
 
 from __future__ import annotations
 
@@ -146,6 +146,24 @@ def _export(args) -> int:
     return 0
 
 
+def _view(args) -> int:
+    """view: the rerun viewer (native, --web, or --save); bad input or rerun missing: one line, exit 2."""
+    from layerskin_exp.log.view.rerun_view import ViewerError, save, view
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # `inspect` lists damage; the viewer shows what was read
+            if args.save:
+                for path in save(args.sessions, args.save):
+                    _emit(f"wrote {path}")
+            else:
+                view(args.sessions, web=args.web, port=args.port, grpc_port=args.grpc_port, bind=args.bind)
+    except (ViewerError, SessionFileError, OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_UNREADABLE
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m layerskin_exp.log", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -172,9 +190,24 @@ def main(argv=None) -> int:
     p_lerobot.add_argument("--fps", type=int, default=None,
                            help="the dataset's frame rate (default: the skin's frame rate / 5, the study's "
                            "downsampling, rounded: 85 for the study's skin)")
+    p_view = sub.add_parser(
+        "view", help="open sessions in the rerun viewer (docs/viewer.md; needs the 'view' extra: "
+        "pip install 'layerskin-exp[view]'), with the panels of the stored Foxglove layout")
+    p_view.add_argument("sessions", nargs="+", help="session files (.mcap) or folders of them")
+    p_view.add_argument("--web", action="store_true", help="serve the web viewer on http://127.0.0.1:PORT "
+                        "instead of opening the native one")
+    p_view.add_argument("--port", type=int, default=9090, help="the web viewer's HTTP port (default 9090)")
+    p_view.add_argument("--grpc-port", type=int, default=9876, help="the port the web viewer reads the "
+                        "recordings from (default 9876)")
+    p_view.add_argument("--bind", default="127.0.0.1", help="with --web: the address to listen on (default "
+                        "127.0.0.1, this machine only; 0.0.0.0 lets any host that reaches this one read the sessions)")
+    p_view.add_argument("--save", metavar="OUT", help="write the recordings to OUT.rrd (a folder for several "
+                        "sessions) instead of opening a viewer")
     args = parser.parse_args(argv)
     if args.command == "export":
         return _export(args)
+    if args.command == "view":
+        return _view(args)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # damage is listed in the report itself

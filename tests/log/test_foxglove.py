@@ -23,8 +23,7 @@ from tests.protocols.conftest import TINY_CALIBRATION, TINY_GRIP, compose_app
 
 FOXGLOVE_SCHEMAS = {"foxglove.RawImage", "foxglove.PoseInFrame", "foxglove.CompressedImage",
                     "foxglove.FrameTransform", "foxglove.Log", "foxglove.ImageAnnotations"}
-JSON_TYPES = {"integer": int, "number": (int, float), "string": str, "boolean": bool, "array": list,
-              "object": dict}
+
 
 
 @pytest.fixture(scope="module")
@@ -60,23 +59,6 @@ def _decoders(summary):
     return out
 
 
-def _check_json(value, schema: dict, where: str) -> None:
-    expected = schema.get("type")
-    if expected is not None:
-        assert isinstance(value, JSON_TYPES[expected]) and not (
-            expected in ("integer", "number") and isinstance(value, bool)), f"{where}: {value!r} is not {expected}"
-    if expected == "object":
-        for key in schema.get("required", []):
-            assert key in value, f"{where}: required {key!r} missing"
-        for key, sub in schema.get("properties", {}).items():
-            if key in value:
-                _check_json(value[key], sub, f"{where}.{key}")
-    if expected == "array" and "items" in schema:
-        for i, item in enumerate(value):
-            if item is not None:  # NaN is stored as null
-                _check_json(item, schema["items"], f"{where}[{i}]")
-
-
 def _ns(ts) -> int:
     return ts.seconds * 1_000_000_000 + ts.nanos
 
@@ -88,24 +70,27 @@ def test_every_message_decodes_against_foxglove_schema_rules(grip_session):
         summary = reader.get_summary()
         decoders = _decoders(summary)
         for _sid, schema in summary.schemas.items():
-            if schema.encoding == "protobuf":
-                assert schema.name in FOXGLOVE_SCHEMAS
-            else:
-                assert schema.encoding == "jsonschema" and json.loads(schema.data)["type"] == "object"
+            # every channel self-describing protobuf: Foxglove's schemas or the session's own
+            assert schema.encoding == "protobuf", schema.name
+            assert schema.name in FOXGLOVE_SCHEMAS or schema.name.startswith("layerskin."), schema.name
         n, log_times = 0, []
         for schema, channel, msg in reader.iter_messages():
             n += 1
             log_times.append(msg.log_time)
             seen_topics.add(channel.topic)
             where = f"{channel.topic} #{n}"
-            if schema.encoding == "jsonschema":
-                assert channel.message_encoding == "json"
-                _check_json(json.loads(msg.data), json.loads(schema.data), where)
-                continue
             assert channel.message_encoding == "protobuf"
             m = decoders[schema.id].FromString(msg.data)
-            # one timeline: every Foxglove timestamp is the message's log (host receive) time
+            # one timeline: every message's timestamp is its log (host receive) time
             assert _ns(m.timestamp) == msg.log_time, where
+            if schema.name.startswith("layerskin."):
+                named = {f.name for f, _ in m.ListFields()}
+                assert "timestamp" in named and len(named) > 1, where
+                if schema.name == "layerskin.ProtocolEvent":
+                    assert m.kind and isinstance(json.loads(m.detail_json), dict), where
+                if schema.name == "layerskin.MarkerDetection":
+                    assert len(m.corners_px) == 4, where
+                continue
             if schema.name == "foxglove.FrameTransform":
                 q = m.rotation
                 assert abs(np.linalg.norm([q.x, q.y, q.z, q.w]) - 1) < 1e-6, where
@@ -338,7 +323,8 @@ def test_cop_is_drawn_only_on_contact(grip_session):
                 topics=[S.SKIN_SUMMARY_TOPIC, S.cop_topic("superficial"), S.cop_topic("deep")]):
             t = msg.log_time
             if channel.topic == S.SKIN_SUMMARY_TOPIC:
-                body = json.loads(msg.data)
+                m = S.PROTO_CLASSES["layerskin.SkinSummary"].FromString(msg.data)
+                body = {layer: {"cop_mm": list(getattr(m, layer).cop_mm)} for layer in S.SKIN_TOPICS}
                 (before if t < contact_ns - 50_000_000 else during if hold <= t < release else []).append(body)
             else:
                 n = len(ImageAnnotations.FromString(msg.data).circles)

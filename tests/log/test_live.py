@@ -4,7 +4,6 @@ what the Foxglove server sends (both layers, CoP summary, frame tree, events), t
 from __future__ import annotations
 
 import base64
-import json
 import logging
 import signal
 import threading
@@ -61,7 +60,8 @@ def test_client_receives_a_running_trial_decimated(tmp_path):
     got: dict[str, list] = {}
     for cid, t, payload in client.messages:
         ch = topics[cid]
-        msg = json.loads(payload) if ch["encoding"] == "json" else _decoder(ch).FromString(payload)
+        assert ch["encoding"] == "protobuf", ch  # every channel decodes from its own schema
+        msg = _decoder(ch).FromString(payload)
         got.setdefault(ch["topic"], []).append((t, msg))
 
     for layer, topic in S.SKIN_TOPICS.items():
@@ -77,7 +77,7 @@ def test_client_receives_a_running_trial_decimated(tmp_path):
         i = int(np.flatnonzero(session.unix_ns(session.streams["skin"]["host_t_ns"]) == images[-1][0])[0])
         np.testing.assert_array_equal(sent, session.streams["skin"][layer][i])
     summary = [m for _, m in got[S.SKIN_SUMMARY_TOPIC]]
-    assert max(m["deep"]["total_counts"] for m in summary) > 500 and any(m["deep"]["cop_mm"] for m in summary)
+    assert max(m.deep.total_counts for m in summary) > 500 and any(m.deep.cop_mm for m in summary)
     # events are never dropped: every one written reaches the Log panel
     logs = [m for _, m in got[S.LOG_TOPIC]]
     assert [m.name for m in logs] == session.streams["events"]["kind"]

@@ -13,6 +13,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from layerskin_exp.log.container.scan import ChannelMessages, Lost, McapScan, scan
 from layerskin_exp.log.errors import SessionFileError
+from layerskin_exp.log.session import messages as M
 from layerskin_exp.log.session import schema as S
 from layerskin_exp.log.session.metacheck import check_records
 from layerskin_exp.sync import ClockMap, estimate_clock_map
@@ -304,9 +305,12 @@ def _decode_stream(sc: McapScan, stream: str, chans: list[ChannelMessages], msgs
         return _decode_camera(sc, chans[0], epoch)
     if stream == "transforms":
         return _decode_transforms(sc, chans[0], epoch)
-    if chans[0].channel.message_encoding == "protobuf":
-        return _decode_poses(sc, chans[0], epoch)
-    return _decode_json(sc, chans[0], stream, epoch)
+    m = chans[0]
+    if m.channel.message_encoding == "json":  # format_version 1
+        return _decode_json(sc, m, stream, epoch)
+    if m.schema is not None and m.schema.name in M.CLASSES:
+        return _decode_messages(sc, m, stream, epoch)
+    return _decode_poses(sc, m, epoch)
 
 
 def _gather_rows(data: np.ndarray, start: np.ndarray, nbytes: int) -> np.ndarray:
@@ -419,6 +423,44 @@ def _decode_json(sc: McapScan, m: ChannelMessages, stream: str, epoch: int) -> d
     return out
 
 
+_TIME_FIELDS = ("timestamp", "host_t_ns", "device_t_ns", "seq")
+
+
+def _decode_messages(sc: McapScan, m: ChannelMessages, stream: str, epoch: int) -> dict:
+    """One of the session's own protobuf streams -> the arrays _decode_json gives for its JSON form."""
+    cls = M.CLASSES[m.schema.name]
+    rows = [cls.FromString(p) for p in sc.payloads(m)]
+    out = _times(m, epoch)
+    if stream == "events":
+        out.pop("seq")
+        out["kind"] = [r.kind for r in rows]
+        out["message"] = [r.message for r in rows]
+        out["detail"] = [json.loads(r.detail_json) if r.detail_json else {} for r in rows]
+        return out
+    for name, kind in M.DEFINITIONS[m.schema.name.removeprefix(M.PACKAGE + ".")]:
+        if name in _TIME_FIELDS:
+            continue
+        values = [getattr(r, name) for r in rows]
+        if kind == "bool":
+            out[name] = np.array(values, dtype=bool)
+        elif kind == "int64":
+            out[name] = np.array(values, dtype=np.int64)
+        elif kind == "repeated double":
+            out[name] = np.array([list(v) for v in values], dtype=np.float64)
+        elif kind == "double":
+            out[name] = np.array(values, dtype=np.float64)
+        # other fields (marker corners) are read by the stream's own decoder
+    return out
+
+
+def _detection_corners(sc: McapScan, m: ChannelMessages) -> list:
+    """Each marker detection's corners, [[x, y] * 4], from its protobuf or (version 1) JSON form."""
+    if m.channel.message_encoding == "json":
+        return [r["corners_px"] for r in _json_rows(sc, m)]
+    cls = M.CLASSES["layerskin.MarkerDetection"]
+    return [[(p.x, p.y) for p in cls.FromString(payload).corners_px] for payload in sc.payloads(m)]
+
+
 def _decode_poses(sc: McapScan, m: ChannelMessages, epoch: int) -> dict:
     from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 
@@ -446,11 +488,11 @@ def _decode_markers(sc: McapScan, chans: list[ChannelMessages], epoch: int) -> d
     for pm in poses:
         mid = pm.channel.metadata.get("marker_id")
         p = _decode_poses(sc, pm, epoch)
-        rows = _json_rows(sc, dets[mid]) if mid in dets else []
-        n = min(len(rows), pm.count)
+        corners = _detection_corners(sc, dets[mid]) if mid in dets else []
+        n = min(len(corners), pm.count)
         p = {k: v[:n] for k, v in p.items()}
         p["marker_id"] = np.full(n, int(mid), np.int64)
-        p["corners_px"] = np.array([r["corners_px"] for r in rows[:n]], np.float64).reshape(n, 4, 2)
+        p["corners_px"] = np.array(corners[:n], np.float64).reshape(n, 4, 2)
         parts.append(p)
     keys = parts[0].keys()
     out = {}

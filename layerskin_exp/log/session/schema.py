@@ -1,7 +1,10 @@
 """What goes on which channel, and how each payload is encoded.
 
 Skin layers and poses use Foxglove's well-known protobuf schemas so a session opens in
-Foxglove Studio as it is; streams with no fitting Foxglove schema are JSON with a JSON schema.
+Foxglove Studio as it is; streams with no fitting Foxglove schema use the session's own protobuf
+messages (messages.py). Every channel is protobuf with its FileDescriptorSet as the schema, so
+generic viewers decode each to named fields. Files of format_version 1 (layerskin-exp 0.2 and
+earlier) hold those streams as JSON with JSON schemas; the reader reads both.
 Every channel carries metadata {"stream": <reader stream name>, ...} so the reader groups
 channels by what they hold, not by topic spelling.
 
@@ -9,8 +12,8 @@ Times (one timeline for Foxglove): MCAP log_time = host receive time on the Unix
 host_t_ns + the session's constant offset (metadata record "log_time", see epoch.py); the
 `timestamp` of every Foxglove message is that same time, so plots by receive time or by message
 time agree across devices. The host's monotonic receive time is log_time - offset; the device's
-own clock stays in the MCAP publish_time (and sequence = device sequence number); JSON payloads
-repeat host_t_ns / device_t_ns / seq. The reader maps device time onto the host timeline with
+own clock stays in the MCAP publish_time (and sequence = device sequence number); the session's
+own messages repeat host_t_ns / device_t_ns / seq. The reader maps device time onto the host timeline with
 the stored clock maps (t_ns).
 
 Frames: every Foxglove message names its frame (skin images "skin", poses the frame they are
@@ -35,10 +38,11 @@ from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap_protobuf.schema import build_file_descriptor_set
 
+from layerskin_exp.log.session import messages as M
 from layerskin_exp.types import SKIN_SHAPE
 
 FORMAT = "layerskin-session"
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"  # 2: the session's own streams are protobuf (1: JSON)
 
 SKIN_TOPICS = {"superficial": "/skin/superficial", "deep": "/skin/deep"}
 WRENCH_TOPIC = "/ft/wrench"
@@ -87,82 +91,29 @@ META_LAYOUT_APP = "layerskin.foxglove_app_layout"  # the same layout in the app'
 # ---------------------------------------------------------------------------- protobuf schemas
 
 PROTO_CLASSES = {
-    cls.DESCRIPTOR.full_name: cls
-    for cls in (RawImage, PoseInFrame, CompressedImage, FrameTransform, Log, ImageAnnotations)
+    **{cls.DESCRIPTOR.full_name: cls
+       for cls in (RawImage, PoseInFrame, CompressedImage, FrameTransform, Log, ImageAnnotations)},
+    **M.CLASSES,
 }
+"""Every schema a session writes, by full name: Foxglove's and the session's own (messages.py)."""
+
+encode = M.encode
+"""encode(name, body, t_ns): the payload of one of the session's own messages (see messages.py)."""
+
+
+def proto_class(schema):
+    """A protobuf class, or the full name of one in PROTO_CLASSES, -> the class."""
+    if isinstance(schema, str):
+        try:
+            return PROTO_CLASSES[schema]
+        except KeyError:
+            raise ValueError(f"no session schema named {schema!r}; known: {sorted(PROTO_CLASSES)}") from None
+    return schema
 
 
 def proto_schema_data(cls) -> bytes:
     """Serialized FileDescriptorSet for a protobuf class (MCAP `protobuf` schema encoding)."""
     return build_file_descriptor_set(cls).SerializeToString()
-
-
-# ---------------------------------------------------------------------------- JSON schemas
-
-_INT = {"type": "integer"}
-_NUM = {"type": "number"}
-_VEC3 = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
-_TIMES = {"host_t_ns": _INT, "device_t_ns": _INT, "seq": _INT}
-
-
-def _object(name: str, props: dict) -> bytes:
-    return json.dumps(
-        {"title": name, "type": "object", "properties": props, "required": sorted(props)}
-    ).encode()
-
-
-JSON_SCHEMAS = {
-    "layerskin.Wrench": _object(
-        "layerskin.Wrench", {**_TIMES, "status": _INT, "force_n": _VEC3, "torque_nm": _VEC3}
-    ),
-    "layerskin.StagePosition": _object("layerskin.StagePosition", {**_TIMES, "position_mm": _VEC3}),
-    "layerskin.ForceEstimate": _object("layerskin.ForceEstimate", {**_TIMES, "force_n": _VEC3}),
-    "layerskin.SlipEstimate": _object(
-        "layerskin.SlipEstimate", {**_TIMES, "score": _NUM, "slip": {"type": "boolean"}}
-    ),
-    "layerskin.GripperState": _object(
-        "layerskin.GripperState",
-        {
-            **_TIMES,
-            "position_mm": _NUM,
-            "requested_mm": _NUM,
-            "speed": _INT,
-            "force": _INT,
-            "object_detected": {"type": "boolean"},
-            "fault": _INT,
-        },
-    ),
-    "layerskin.MarkerDetection": _object(
-        "layerskin.MarkerDetection",
-        {
-            "host_t_ns": _INT,
-            "device_t_ns": _INT,
-            "marker_id": _INT,
-            "frame_seq": _INT,
-            "corners_px": {"type": "array", "items": {"type": "array", "items": _NUM}},
-        },
-    ),
-    "layerskin.SkinSummary": _object(
-        "layerskin.SkinSummary",
-        {
-            layer: {
-                "type": "object",
-                "properties": {"total_counts": _NUM, "cop_mm": {"type": "array", "items": _NUM}},
-            }
-            for layer in SKIN_TOPICS
-        },
-    ),
-    "layerskin.ProtocolEvent": _object(
-        "layerskin.ProtocolEvent",
-        {
-            "host_t_ns": _INT,
-            "device_t_ns": _INT,
-            "kind": {"type": "string"},
-            "message": {"type": "string"},
-            "detail": {"type": "object"},
-        },
-    ),
-}
 
 
 def to_jsonable(value):

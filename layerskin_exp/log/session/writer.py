@@ -296,10 +296,7 @@ class SessionWriter:
     def _schema(self, name: str) -> int:
         sid = self._schemas.get(name)
         if sid is None:
-            if name in S.PROTO_CLASSES:
-                sid = self._mcap.register_schema(name, "protobuf", S.proto_schema_data(S.PROTO_CLASSES[name]))
-            else:
-                sid = self._mcap.register_schema(name, "jsonschema", S.JSON_SCHEMAS[name])
+            sid = self._mcap.register_schema(name, "protobuf", S.proto_schema_data(S.proto_class(name)))
             self._schemas[name] = sid
         return sid
 
@@ -309,9 +306,8 @@ class SessionWriter:
             # Close the open chunk first, so channel records always start a chunk: the reader
             # finds them without walking every message.
             self.flush()
-            name = schema if isinstance(schema, str) else schema.DESCRIPTOR.full_name
-            encoding = "json" if isinstance(schema, str) else "protobuf"
-            cid = self._mcap.register_channel(topic, encoding, self._schema(name), meta)
+            name = S.proto_class(schema).DESCRIPTOR.full_name
+            cid = self._mcap.register_channel(topic, "protobuf", self._schema(name), meta)
             self._channels[topic] = cid
         return cid
 
@@ -429,7 +425,7 @@ class SessionWriter:
         if t - start >= self._chunk_span_ns or self._chunk_fill >= self._chunk_bytes:
             self.flush()
 
-    def _write_json(
+    def _write_message(
         self,
         topic: str,
         schema: str,
@@ -440,8 +436,9 @@ class SessionWriter:
         body: dict,
         meta: dict | None = None,
     ) -> None:
+        """One of the session's own messages (schema: its name in messages.py), body its fields."""
         channel = self._channel(topic, schema, {"stream": stream, **(meta or {})})
-        payload = S.dumps(body)
+        payload = S.encode(schema, body, host + self.epoch_offset_ns)
         self._add(channel, host, dev, seq, payload)
         if self.live is not None:
             self.live.message(topic, schema, payload, host + self.epoch_offset_ns)
@@ -460,7 +457,7 @@ class SessionWriter:
             "force_n": _vec(w.force_n, 3, "force_n"),
             "torque_nm": _vec(w.torque_nm, 3, "torque_nm"),
         }
-        self._write_json(S.WRENCH_TOPIC, "layerskin.Wrench", "wrench", host, dev, seq, body)
+        self._write_message(S.WRENCH_TOPIC, "layerskin.Wrench", "wrench", host, dev, seq, body)
 
     def write_estimate(self, e: SkinEstimate) -> None:
         """A live estimate: the force on /estimate/force (reader stream "estimate_force"), the slip
@@ -469,10 +466,10 @@ class SessionWriter:
         host, dev, seq = int(e.host_t_ns), int(e.device_t_ns), int(e.frame)
         times = {"host_t_ns": host, "device_t_ns": dev, "seq": seq}
         body = {**times, "force_n": _vec(e.force_n, 3, "force_n")}
-        self._write_json(S.ESTIMATE_FORCE_TOPIC, "layerskin.ForceEstimate", "estimate_force", host, dev, seq, body)
+        self._write_message(S.ESTIMATE_FORCE_TOPIC, "layerskin.ForceEstimate", "estimate_force", host, dev, seq, body)
         if e.slip_score is not None:
             body = {**times, "score": float(e.slip_score), "slip": bool(e.slip)}
-            self._write_json(S.ESTIMATE_SLIP_TOPIC, "layerskin.SlipEstimate", "estimate_slip", host, dev, seq, body)
+            self._write_message(S.ESTIMATE_SLIP_TOPIC, "layerskin.SlipEstimate", "estimate_slip", host, dev, seq, body)
 
     def write_stage(self, p: StagePosition) -> None:
         self._check_open()
@@ -483,7 +480,7 @@ class SessionWriter:
             "seq": seq,
             "position_mm": _vec(p.position_mm, 3, "position_mm"),
         }
-        self._write_json(S.STAGE_TOPIC, "layerskin.StagePosition", "stage", host, dev, seq, body)
+        self._write_message(S.STAGE_TOPIC, "layerskin.StagePosition", "stage", host, dev, seq, body)
         # The stage carries the indenter, its position given in the skin (= base) frame.
         self._derived_transform(F.BASE, F.TOOL, np.asarray(body["position_mm"], float) * 1e-3, F.IDENTITY, host)
 
@@ -501,7 +498,7 @@ class SessionWriter:
             "object_detected": bool(g.object_detected),
             "fault": int(g.fault),
         }
-        self._write_json(S.GRIPPER_TOPIC, "layerskin.GripperState", "gripper", host, dev, seq, body)
+        self._write_message(S.GRIPPER_TOPIC, "layerskin.GripperState", "gripper", host, dev, seq, body)
 
     def write_pose(self, pose: Pose, topic: str = S.TCP_TOPIC) -> None:
         """A pose as foxglove.PoseInFrame. Default topic /arm/tcp (reader stream "tcp");
@@ -530,7 +527,7 @@ class SessionWriter:
 
     def write_marker(self, m: MarkerDetection) -> None:
         """Marker pose as PoseInFrame on /markers/<id> (for Foxglove), and the detection itself
-        (image corners, frame sequence) as JSON on /markers/<id>/detection."""
+        (image corners, frame sequence) as layerskin.MarkerDetection on /markers/<id>/detection."""
         self._check_open()
         mid, host, dev, seq = int(m.marker_id), int(m.host_t_ns), int(m.device_t_ns), int(m.frame_seq)
         meta = {"marker_id": str(mid)}
@@ -552,7 +549,7 @@ class SessionWriter:
             "layerskin.MarkerDetection",
             {"stream": "markers", **meta, "part": "detection"},
         )
-        self._add(channel, host, dev, seq, S.dumps(body))
+        self._add(channel, host, dev, seq, S.encode("layerskin.MarkerDetection", body, host + self.epoch_offset_ns))
         self._derived_transform(m.pose.frame_id, F.marker_frame(mid), m.pose.position_m, m.pose.orientation_xyzw,
                                 host)
 
@@ -578,8 +575,8 @@ class SessionWriter:
 
     def write_view(self, topic: str, schema, payload, host_t_ns: int) -> None:
         """A message for Foxglove only, derived from data a stream already holds (image
-        annotations, display-rate skin summaries): schema is a Foxglove protobuf class or a JSON
-        schema name of schema.JSON_SCHEMAS. payload: bytes, or payload(t_ns) -> bytes for a
+        annotations, display-rate skin summaries): schema is a Foxglove protobuf class or the name
+        of one of the session's own messages (schema.PROTO_CLASSES). payload: bytes, or payload(t_ns) -> bytes for a
         message that carries its own Foxglove timestamp (given the message's Unix log time).
         The reader skips these channels."""
         self._check_open()
@@ -596,19 +593,15 @@ class SessionWriter:
         """Protocol events are rare and matter most after a crash: flushed at once."""
         self._check_open()
         host, dev = int(e.host_t_ns), int(e.device_t_ns)
-        body = {
-            "host_t_ns": host,
-            "device_t_ns": dev,
-            "kind": str(e.kind),
-            "message": str(e.message),
-            "detail": dict(e.detail),
-        }
+        kind, message, detail = str(e.kind), str(e.message), dict(e.detail)
+        body = {"host_t_ns": host, "device_t_ns": dev, "kind": kind, "message": message,
+                "detail_json": S.dumps(detail).decode()}
+        t = host + self.epoch_offset_ns
         channel = self._channel(S.EVENTS_TOPIC, "layerskin.ProtocolEvent", {"stream": "events"})
-        self._add(channel, host, dev, self._next_seq(channel), S.dumps(body))
+        self._add(channel, host, dev, self._next_seq(channel), S.encode("layerskin.ProtocolEvent", body, t))
         # The same event for Foxglove's Log panel.
         log_channel = self._channel(S.LOG_TOPIC, Log, {"view": "foxglove"})
-        t = host + self.epoch_offset_ns
-        log_payload = S.log_payload(body["kind"], body["message"], body["detail"], t)
+        log_payload = S.log_payload(kind, message, detail, t)
         self._add(log_channel, host, host, self._next_seq(log_channel), log_payload)
         if self.live is not None:
             self.live.message(S.LOG_TOPIC, Log, log_payload, t, key=None)
@@ -778,6 +771,6 @@ def _vec(values, n: int, name: str) -> list[float]:
     if len(out) != n:
         raise ValueError(f"{name} has {len(out)} values, expected {n}")
     if not all(map(math.isfinite, out)):
-        # JSON has no NaN: store null, which the reader turns back into NaN. Never drop the sample.
+        # None marks NaN (the session's messages store NaN, old JSON files null); the reader gives NaN. Never drop the sample.
         out = [x if math.isfinite(x) else None for x in out]
     return out

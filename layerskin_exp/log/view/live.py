@@ -57,7 +57,7 @@ REPLAY_MAX_PER_TOPIC = 20_000  # messages kept per other topic: ~10 min at the ~
 # a replay): room for every event and the kept messages of 20 topics.
 CLIENT_BACKLOG = REPLAY_MAX_EVENTS + 20 * REPLAY_MAX_PER_TOPIC
 
-# topic -> schema (protobuf class or JSON schema name) of what a session can carry from the start;
+# topic -> schema (protobuf class or the name of one of the session's own messages) of what a session can carry from the start;
 # a live view advertises those its rig's setup streams (rig_topics)
 FIXED_TOPICS = {
     S.SKIN_TOPICS["superficial"]: S.RawImage,
@@ -298,14 +298,9 @@ class LiveView:
         ch = self._channels.get(topic)
         if ch is None:
             fg = self._foxglove
-            if isinstance(schema, str):
-                spec = fg.Schema(name=schema, encoding="jsonschema", data=S.JSON_SCHEMAS[schema])
-                encoding = "json"
-            else:
-                spec = fg.Schema(name=schema.DESCRIPTOR.full_name, encoding="protobuf",
-                                 data=S.proto_schema_data(schema))
-                encoding = "protobuf"
-            ch = self._channels[topic] = fg.Channel(topic, schema=spec, message_encoding=encoding,
+            cls = S.proto_class(schema)
+            spec = fg.Schema(name=cls.DESCRIPTOR.full_name, encoding="protobuf", data=S.proto_schema_data(cls))
+            ch = self._channels[topic] = fg.Channel(topic, schema=spec, message_encoding="protobuf",
                                                     context=self.context)
         return ch
 

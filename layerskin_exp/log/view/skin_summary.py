@@ -41,7 +41,8 @@ def noise_total_threshold(residuals: np.ndarray, z: float = NOISE_Z) -> float:
 
 
 class SkinView:
-    """summary(frame) -> [(topic, schema, payload)] for one frame, or [] between display ticks.
+    """summary(frame) -> [(topic, schema, payload)] for one frame, or [] between display ticks;
+    payload(t_ns) -> bytes, given the message's log time (SessionWriter.write_view).
 
     The first `baseline_frames` frames seen (the skin unloaded at the start of a trial) give
     each layer's baseline (their mean) and its noise; CoP and totals are of the counts above the
@@ -68,7 +69,7 @@ class SkinView:
     def due(self, host_t_ns: int) -> bool:
         return self._last_ns is None or host_t_ns - self._last_ns >= self.period_ns
 
-    def summary(self, frame: TwoLayerFrame) -> list[tuple[str, object, bytes]]:
+    def summary(self, frame: TwoLayerFrame) -> list[tuple[str, object, object]]:
         maps = np.stack([frame.superficial, frame.deep]).astype(np.float64)  # (2, 16, 16)
         if self._baseline is None:
             self._seen.append(maps)
@@ -96,5 +97,5 @@ class SkinView:
             # image rows run along +y like the map's rows; the annotation carries its image's
             # timestamp, which the writer supplies (Unix time)
             out.append((S.cop_topic(layer), S.ImageAnnotations, partial(S.cop_payload, px)))
-        out.append((S.SKIN_SUMMARY_TOPIC, "layerskin.SkinSummary", S.dumps(body)))
+        out.append((S.SKIN_SUMMARY_TOPIC, "layerskin.SkinSummary", partial(S.encode, "layerskin.SkinSummary", body)))
         return out
