@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -178,52 +179,195 @@ def test_the_version_is_one_and_released_in_the_changelog():
     assert re.search(rf"^## \[{re.escape(declared)}\] - \d{{4}}-\d{{2}}-\d{{2}}$", changelog, flags=re.M)
 
 
-def _readme_commands() -> list[str]:
-    """The shell commands of the README's bash blocks, continuation lines joined, comments cut."""
-    text = (ROOT / "README.md").read_text()
-    commands = []
-    for block in re.findall(r"```bash\n(.*?)```", text, re.S):
-        for line in block.replace("\\\n", " ").splitlines():
-            line = line.split(" #", 1)[0].strip()
-            if line:
-                commands.append(line)
-    return commands
+# ---- every command the README and the guide show ---------------------------------------------------
+#
+# Each line of a ```bash block of README.md or docs/**/*.md is a command the suite exercises in a
+# cheap form, without running it:
+#   python -m APP overrides      (a Hydra app: `run_command("NAME"` in its source) its overrides
+#                                compose and validate in-process (a multirun: its first and last
+#                                job), and `python -m APP --help` answers (once per app);
+#   python -m MODULE [args]      (any other entry point, `mkdocs` too) the same line with --help
+#                                answers, exit 0, and its help names every --option the line uses;
+#   make TARGET                  `make -n TARGET` knows it;
+#   pip install                  each extra `.[name]` is in pyproject.toml, a `torch==V` pin is the
+#                                Makefile's.
+# A block whose first line is a comment starting `# not checked:` is shown but not exercised (it
+# says why, where the reader sees it). Anything else fails the test: add a form above or mark it.
+NOT_CHECKED = "# not checked:"
+STAND_INS = {"sensitivity": DOCS / "design-map" / "sensitivity.json"}  # app -> a committed output of it
+FILE_TOOLS = {"touch"}  # coreutils a setup step uses: nothing of the project's to check
 
 
-def test_readme_entry_points_answer_help():
-    """Every `python -m MODULE` the README shows answers --help (run side by side: seconds)."""
-    modules = sorted(set(re.findall(r"python -m ([a-z_][\w.]*)", (ROOT / "README.md").read_text())))
-    assert {"protocols.force_calibration", "protocols.grip_depth", "analysis.report"} <= set(modules)
-    procs = {m: subprocess.Popen([sys.executable, "-m", m, "--help"], cwd=ROOT, stdout=subprocess.PIPE,
-                                 stderr=subprocess.STDOUT, text=True) for m in modules}
-    for module, proc in procs.items():
-        out, _ = proc.communicate(timeout=120)
-        assert proc.returncode == 0 and out.strip(), f"python -m {module} --help: {out[-2000:]}"
-    make = subprocess.run(["make", "-n", "demo", "test"], cwd=ROOT, capture_output=True, text=True)
-    if make.returncode != 127:  # make itself may be missing; the targets must exist where it is not
-        assert make.returncode == 0, make.stderr
+def _shown_pages() -> list[Path]:
+    return [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]
 
 
-def test_readme_protocol_command_lines_compose():
-    """The README's protocol command lines are valid configs: each composes and validates (the first
-    and last job of a multirun), without running anything."""
+def shown_commands(pages: list[Path] | None = None) -> list[tuple[str, list[str]]]:
+    """(page, argv) of every command line of the pages' bash blocks: continuation lines joined,
+    comments, `...` (the overrides above) and a shell redirection cut."""
     import shlex
+
+    out = []
+    for page in pages or _shown_pages():
+        for block in re.findall(r"```bash\n(.*?)```", page.read_text(), re.S):
+            if block.lstrip().startswith(NOT_CHECKED):
+                continue
+            for line in block.replace("\\\n", " ").splitlines():
+                line = re.split(r"(?:^|\s)#", line, maxsplit=1)[0].strip()
+                if not line:
+                    continue
+                argv = [a for a in shlex.split(line) if a != "..."]
+                if ">" in argv:
+                    argv = argv[: argv.index(">")]
+                out.append((str(page.relative_to(ROOT)), argv))
+    return out
+
+
+def _hydra_app(module: str) -> str | None:
+    """The config name a module's command line composes (`run_command("NAME", ...)`), or None."""
+    spec = importlib.util.find_spec(module)
+    if spec is None or spec.origin is None:
+        return None
+    origin = Path(spec.origin)
+    if origin.name == "__init__.py" and (origin.parent / "__main__.py").is_file():
+        origin = origin.parent / "__main__.py"
+    m = re.search(r'run_command\("([\w.]+)"', origin.read_text())
+    return m.group(1) if m else None
+
+
+def _extras() -> set[str]:
+    text = (ROOT / "pyproject.toml").read_text()
+    section = text.split("[project.optional-dependencies]", 1)[1].split("\n[", 1)[0]
+    return set(re.findall(r"^([\w-]+) = ", section, flags=re.M))
+
+
+def _torch_pin() -> str:
+    return re.search(r"torch==([\w.]+)", (ROOT / "Makefile").read_text()).group(1)
+
+
+def plan_checks(commands):
+    """What each shown command's cheap form is: (problems found without running anything,
+    {app: [(page, overrides, multirun)]}, {help argv (tuple): [(page, options the line uses)]},
+    [make targets])."""
+    problems, compose_jobs, helps, make = [], {}, {}, []
+    for page, argv in commands:
+        where = f"{page}: {' '.join(argv)}"
+        prog = Path(argv[0]).name
+        if prog in FILE_TOOLS:
+            continue
+        if prog == "make":
+            make += [a for a in argv[1:] if not a.startswith("-")]
+            continue
+        if prog == "pip" or argv[1:3] == ["-m", "pip"]:
+            for a in argv:
+                for extra in re.findall(r"^\.\[([\w,-]+)\]$", a):
+                    problems += [f"{where}: no extra {e!r} in pyproject.toml"
+                                 for e in extra.split(",") if e not in _extras()]
+                if a.startswith("torch==") and a != f"torch=={_torch_pin()}":
+                    problems.append(f"{where}: the Makefile pins torch=={_torch_pin()}")
+            continue
+        if prog == "mkdocs":
+            argv = ["python", "-m", "mkdocs", *argv[1:]]
+        if not (re.match(r"python3?$", Path(argv[0]).name) and len(argv) > 2 and argv[1] == "-m"):
+            problems.append(f"{where}: no cheap form for this command (see the comment above NOT_CHECKED)")
+            continue
+        module, args = argv[2], argv[3:]
+        if module == "protocols.live" and args and not args[0].startswith("-"):
+            from protocols.live import PROTOCOLS
+
+            helps.setdefault(("protocols.live", args[0]), []).append((where, []))
+            module, args = PROTOCOLS[args[0]], ["live=true", *[a if a != "--hold" else "live_hold=true"
+                                                               for a in args[1:]]]
+        app = _hydra_app(module)
+        if app:
+            helps.setdefault((module,), [])
+            importlib.import_module(module)  # stores the schemas its config names
+            if not any(a.startswith("--") for a in args):
+                overrides = [a for a in args if a != "-m" and not re.match(r"[+~]*hydra[./]", a)]
+                compose_jobs.setdefault(app, []).append((where, overrides, "-m" in args))
+            continue
+        positional = []
+        for a in args:
+            if a.startswith("-"):
+                break
+            positional.append(a)
+        options = [a.split("=", 1)[0] for a in args if a.startswith("--")]
+        helps.setdefault((module, *positional), []).append((where, options))
+    return problems, compose_jobs, helps, make
+
+
+def _answers_help(key: tuple[str, ...]) -> tuple[int, str]:
+    r = subprocess.run([sys.executable, "-m", *key, "--help"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)
+    return r.returncode, r.stdout + r.stderr
+
+
+def check_commands(commands) -> list[str]:
+    """Every problem of the commands' cheap forms, one line each naming the page and command."""
+    from concurrent.futures import ThreadPoolExecutor
 
     import protocols.config  # noqa: F401 - stores the protocol schemas
     from layerskin_exp.cli import expand_sweep
-    from layerskin_exp.config import compose
+    from layerskin_exp.config import ConfigError, compose
 
-    checked = 0
-    for line in _readme_commands():
-        m = re.match(r"python -m protocols\.(force_calibration|grip_depth)\b(.*)", line)
-        if not m:
+    problems, compose_jobs, helps, make = plan_checks(commands)
+    # A file one shown command writes (`out=FILE` of an app in STAND_INS) and another reads: a
+    # committed output of that app stands in for it where it does not exist.
+    written = {o.split("=", 1)[1]: STAND_INS[app] for app, jobs in compose_jobs.items() if app in STAND_INS
+               for _, overrides, _ in jobs for o in overrides if o.startswith("out=")}
+
+    def stood_in(override: str) -> str:
+        key, _, value = override.partition("=")
+        return f"{key}={written[value]}" if value in written and not (ROOT / value).exists() else override
+
+    with ThreadPoolExecutor(max_workers=3) as pool:  # the --help processes, while composing here
+        answers = dict(zip(helps, pool.map(_answers_help, helps), strict=True)) if helps else {}
+        for app, jobs in compose_jobs.items():
+            for where, overrides, multirun in jobs:
+                try:
+                    sweep = expand_sweep(overrides) if multirun else [overrides]
+                    sweep = [[stood_in(o) for o in job] for job in sweep]
+                    for job in {tuple(sweep[0]), tuple(sweep[-1])}:
+                        compose(app, list(job))
+                except ConfigError as err:
+                    problems.append(f"{where}: {err}")
+    for key, uses in helps.items():
+        rc, out = answers[key]
+        if rc != 0 or not out.strip():
+            problems += [f"{where}: `python -m {' '.join(key)} --help` exit {rc}: {out.strip()[-300:]}"
+                         for where, _ in uses[:1]] or [f"python -m {' '.join(key)} --help: exit {rc}"]
             continue
-        args = shlex.split(m.group(2))
-        if any(a.startswith("--") for a in args):
-            continue
-        overrides = [a for a in args if a != "-m" and not a.split("=", 1)[0].lstrip("+~").startswith("hydra")]
-        jobs = expand_sweep(overrides) if "-m" in args else [overrides]
-        for job in {tuple(jobs[0]), tuple(jobs[-1])}:
-            compose(m.group(1), list(job))
-        checked += 1
-    assert checked >= 5
+        for where, options in uses:
+            problems += [f"{where}: {o} is not an option of python -m {' '.join(key)}"
+                         for o in options if o != "--help" and not re.search(rf"{re.escape(o)}\b", out)]
+    if make and shutil.which("make"):  # make itself may be missing; the targets must exist where it is not
+        r = subprocess.run(["make", "-n", *sorted(set(make))], cwd=ROOT, capture_output=True, text=True)
+        if r.returncode != 0:
+            problems.append(f"make -n {' '.join(sorted(set(make)))}: {r.stderr.strip()}")
+    return problems
+
+
+def test_every_shown_command_has_a_cheap_form_that_passes():
+    commands = shown_commands()
+    assert len(commands) >= 40 and any(p == "README.md" for p, _ in commands)
+    assert check_commands(commands) == []
+
+
+def test_the_command_check_fails_on_what_is_wrong():
+    """Each cheap form refuses its kind of mistake: an out-of-range override, an option the entry
+    point does not have, a subcommand it does not have, an extra pyproject.toml lacks, a make
+    target the Makefile lacks, a command with no cheap form."""
+    broken = [("x.md", ["python", "-m", "protocols.grip_depth", "grip_depth=99"]),
+              ("x.md", ["python", "-m", "protocols.grip_depth", "-m", "grip_depth=6,99"]),
+              ("x.md", ["python", "-m", "layerskin_exp.log", "inspect", "FILE", "--no-such-option"]),
+              ("x.md", ["python", "-m", "layerskin_exp.log", "no-such-subcommand"]),
+              ("x.md", ["pip", "install", "-e", ".[no-such-extra]"]),
+              ("x.md", ["frobnicate", "--now"])]
+    if shutil.which("make"):
+        broken.append(("x.md", ["make", "no-such-target"]))
+    problems = check_commands(broken)
+    for fragment in ("grip_depth=99", "grip_depth=6,99", "--no-such-option is not an option",
+                     "layerskin_exp.log no-such-subcommand --help` exit 2", "no extra 'no-such-extra'",
+                     "frobnicate --now: no cheap form", *(["no-such-target"] if shutil.which("make") else [])):
+        assert any(fragment in p for p in problems), (fragment, problems)
+    assert len(problems) == len(broken)
