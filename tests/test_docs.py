@@ -54,6 +54,7 @@ EXPECTED_SECTIONS = {
     "protocols.md": {"protocol-keys:force_calibration", "protocol-keys:grip_depth"},
     "simulator.md": {"sim-params", "brackets"},
     "analysis.md": {"campaign-force:campaign-2026-12-04"},
+    "sessions.md": {"session-channels"},
     **{f"bench/{page}.md": {f"device-options:{dev}", f"device-faults:{dev}"}
        for page, dev in (("skin-board", "skin_board"), ("platform", "platform"), ("netft", "netft"),
                          ("ur5e", "ur5e"), ("hande", "hande"), ("camera", "camera"))},
@@ -159,8 +160,20 @@ def test_the_sessions_page_reads_a_session_as_written(tmp_path, monkeypatch, cap
             w.write(TwoLayerFrame(counts, counts, i, t0 + int(i * 2.36e6), t0 + int(i * 2.36e6)))
         w.write_event(ProtocolEvent("phase", "press", t0 + 5_000_000, t0 + 5_000_000))
     text = (DOCS / "sessions.md").read_text()
+    # the channels table says what the writer writes: each channel of this file, read with the
+    # mcap library, has its row with the same encoding and schema
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "session.mcap", "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    for channel in summary.channels.values():
+        row = re.search(rf"^\| `{re.escape(channel.topic)}` \|.*$", text, re.M)
+        assert row, f"docs/sessions.md has no row for {channel.topic}"
+        cells = [c.strip() for c in row.group(0).split("|")]
+        assert cells[3].split()[0] == channel.message_encoding, (channel.topic, cells[3])
+        assert cells[4] == f"`{summary.schemas[channel.schema_id].name}`", (channel.topic, cells[4])
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
-    assert len(blocks) == 2
+    assert len(blocks) == 2, "a new block of docs/sessions.md needs its run here"
     monkeypatch.chdir(tmp_path)
     for block in blocks:
         exec(compile(block, "docs/sessions.md", "exec"), {})
@@ -371,3 +384,50 @@ def test_the_command_check_fails_on_what_is_wrong():
                      "frobnicate --now: no cheap form", *(["no-such-target"] if shutil.which("make") else [])):
         assert any(fragment in p for p in problems), (fragment, problems)
     assert len(problems) == len(broken)
+
+
+def test_the_export_page_runs_as_written(tmp_path, monkeypatch, capsys):
+    """docs/export.md's Python block, as written, on a small campaign folder of its name."""
+    pytest.importorskip("pyarrow")
+    spec = importlib.util.spec_from_file_location("log_records", ROOT / "tests" / "log" / "log_records.py")
+    log_records = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(log_records)
+    from layerskin_exp.log import SessionWriter
+
+    design = tmp_path / "data" / "force_calibration" / "1844c3702b"
+    design.mkdir(parents=True)
+    labels = {"protocol": "force_calibration", "position_index": 0, "position_mm": [1.5, -2.0], "kind": "press",
+              "repeat": 0, "direction_rad": None, "z_offset_mm": None}
+    for repeat in range(2):
+        with SessionWriter(design / f"pos000_press{repeat}.mcap", metadata={"protocol": "force_calibration"},
+                           labels={**labels, "repeat": repeat}) as w:
+            for record in log_records.records(200, seed=repeat):
+                w.write(record)
+    blocks = re.findall(r"```python\n(.*?)```", (DOCS / "export.md").read_text(), re.S)
+    assert len(blocks) == 1, "a new block of docs/export.md needs its run here"
+    monkeypatch.chdir(tmp_path)
+    exec(compile(blocks[0], "docs/export.md", "exec"), {})
+    assert (tmp_path / "calib_lerobot" / "meta" / "info.json").is_file() and capsys.readouterr().out.strip()
+
+
+# page -> (its Python blocks, the test that runs every one of them as written)
+PYTHON_BLOCKS = {
+    "docs/sessions.md": (2, "tests/test_docs.py::test_the_sessions_page_reads_a_session_as_written"),
+    "docs/export.md": (1, "tests/test_docs.py::test_the_export_page_runs_as_written"),
+    "docs/estimation.md": (2, "tests/estimation/test_readme_bench.py::test_guide_bench_block_runs_as_written"),
+}
+
+
+def test_every_python_block_is_run_by_a_test():
+    found = {}
+    for page in _shown_pages():
+        n = len(re.findall(r"```python\n", page.read_text()))
+        if n:
+            found[str(page.relative_to(ROOT))] = n
+    assert found == {page: n for page, (n, _) in PYTHON_BLOCKS.items()}, "a page's Python blocks need a test"
+    for page, (n, test) in PYTHON_BLOCKS.items():
+        path, name = test.split("::")
+        source = (ROOT / path).read_text()
+        body = source[source.index(f"def {name}("):]
+        body = body[: (re.search(r"\ndef ", body[1:]) or re.search("$", body)).start() + 1]
+        assert Path(page).name in body and f"len(blocks) == {n}" in body, f"{test} no longer runs {page}'s blocks"

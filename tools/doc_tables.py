@@ -18,6 +18,9 @@ Sources:
   sim-params               conf/sim/default.yaml (value and the comment that gives its source)
   brackets                 layerskin_exp/sim/brackets.yaml
   campaign-force:<folder>  docs/<folder>/results.json (a report's force table)
+  session-channels         a session written here by SessionWriter (one message of each kind, and
+                           the views protocols/runner.py adds): each channel's topic, encoding,
+                           schema and fields as the file holds them; rates from the configs
 """
 
 from __future__ import annotations
@@ -337,6 +340,147 @@ def brackets() -> str:
     return table(["parameter", "nominal", "bracket", "screened", "source, and what would settle it"], rows)
 
 
+# ---- the session's channels ----------------------------------------------------------------------
+
+# How often each reader stream (or, for views, each topic) is written: config keys whose values are
+# read below (`skin.*`, `sim.*` from the grip_depth composition; `hardware.<device>.*` from the
+# driver's dataclass), or a sentence for what follows something else.
+RATES = {
+    "skin": ("1000/skin.frame_period_ms", "1000/skin.frame_period_ms"),
+    "wrench": ("sim.rig.ft.rate_hz", "the box's RDT output rate, set on the box"),
+    "stage": ("sim.rig.platform.rate_hz", "hardware.platform.status_rate_hz"),
+    "tcp": ("sim.rig.arm.rate_hz", "hardware.ur5e.rtde_frequency_hz"),
+    "gripper": ("sim.rig.gripper.rate_hz", "hardware.hande.poll_rate_hz"),
+    "markers": ("sim.rig.camera.fps", "hardware.camera.fps"),
+    "camera": ("sim.rig.camera.fps", "hardware.camera.fps"),
+}
+RATES_WHEN = {
+    "estimate_force": "one per downsampled skin frame, with `estimator=...`",
+    "estimate_slip": "one per downsampled skin frame, with `estimator=...` and a slip detector",
+    "events": "as the protocol's events occur",
+    "transforms": "every {tf_ms:g} ms and whenever the jaw moves",
+    "/log": "with each event",
+    "/skin/summary": "every {display_ms:g} ms of skin frames",
+    "cop": "every {display_ms:g} ms of skin frames",
+    "/camera/markers": "with each saved image that has detections",
+}
+
+
+def _rate(spec: str, cfg) -> str:
+    from omegaconf import OmegaConf
+
+    per_ms = spec.startswith("1000/")
+    key = spec.removeprefix("1000/")
+    if not re.fullmatch(r"[a-z_]+(\.[a-z0-9_]+)+", key):
+        return spec
+    if key.startswith("hardware."):
+        import importlib
+
+        _, device, field = key.split(".")
+        module, name = DEVICES[device]
+        value = getattr(getattr(importlib.import_module(module), name)(), field)
+    else:
+        value = OmegaConf.select(cfg, key, throw_on_missing=True)
+    hz = 1000.0 / value if per_ms else value
+    return f"{hz:.4g} Hz (`{key}`{f' = {value:g} ms' if per_ms else ''})"
+
+
+def _written_session(path: Path) -> None:
+    """One message of every kind a session holds, written as the protocols write them: the records
+    through SessionWriter.write, an image with its detections, and the views (skin summary and CoP,
+    frame tree) as protocols/runner.py makes them."""
+    import numpy as np
+
+    from layerskin_exp.log import SessionWriter
+    from layerskin_exp.log.view import FrameTree, SkinView
+    from layerskin_exp.types import (
+        GripperState,
+        MarkerDetection,
+        Pose,
+        ProtocolEvent,
+        SkinEstimate,
+        StagePosition,
+        TwoLayerFrame,
+        Wrench,
+    )
+
+    t0, period = 10**18, 2_360_000
+    with SessionWriter(path, metadata={"config": {}}, labels={"trial": 0}) as w:
+        view, frames = SkinView(), FrameTree(w, "gripper")
+        for i in range(view.baseline_frames + 1):
+            counts = np.full((16, 16), 20, np.uint16)
+            if i == view.baseline_frames:
+                counts[6:9, 6:9] = 2000  # a press, so that the CoP is drawn
+            t = t0 + i * period
+            frame = TwoLayerFrame(counts, counts, i, t, t)
+            w.write(frame)
+            for topic, schema, payload in view.summary(frame):
+                w.write_view(topic, schema, payload, t)
+        t = t0 + 100 * period
+        frames.update(t, opening_mm=20.0)
+        pose = Pose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), "camera", t, t)
+        detection = MarkerDetection(0, pose, np.zeros((4, 2)), 0, t, t)
+        for record in (Wrench(np.zeros(3), np.zeros(3), 0, t, t), StagePosition(np.zeros(3), 0, t, t),
+                       Pose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), "base", t, t),
+                       GripperState(20.0, 20.0, 255, 100, False, 0, t, t), detection,
+                       ProtocolEvent("phase", "press", t, t), SkinEstimate(np.zeros(3), 0.5, False, 0, t, t)):
+            w.write(record)
+        w.write_image(np.zeros((8, 8), np.uint8), t, t, detections=[detection])
+
+
+def _fields(schema) -> list[str]:
+    """The payload's top-level fields, from the schema the file stores (JSON schema or protobuf
+    FileDescriptorSet), less the times every JSON payload repeats."""
+    if schema.encoding == "jsonschema":
+        props = json.loads(schema.data)["properties"]
+        return [k for k in props if k not in ("host_t_ns", "device_t_ns", "seq")]
+    from google.protobuf import descriptor_pb2
+
+    files = descriptor_pb2.FileDescriptorSet.FromString(schema.data).file
+    for f in files:
+        for m in f.message_type:
+            if f"{f.package}.{m.name}".lstrip(".") == schema.name:
+                return [fld.name for fld in m.field]
+    return []
+
+
+def session_channels() -> str:
+    import inspect
+    import tempfile
+
+    from mcap.reader import make_reader
+
+    from layerskin_exp.log.session import schema as S
+    from layerskin_exp.log.view import FrameTree
+    from layerskin_exp.log.view.skin_summary import DISPLAY_PERIOD_NS
+
+    cfg = _compose_dict("grip_depth")
+    when = {"tf_ms": inspect.signature(FrameTree).parameters["period_ns"].default / 1e6,
+            "display_ms": DISPLAY_PERIOD_NS / 1e6}
+    with tempfile.TemporaryDirectory() as d:
+        _written_session(Path(d) / "s.mcap")
+        with open(Path(d) / "s.mcap", "rb") as fh:
+            summary = make_reader(fh).get_summary()
+    rows = []
+    generic = {S.marker_pose_topic(0): "/markers/<id>", S.marker_detection_topic(0): "/markers/<id>/detection"}
+    for channel in sorted(summary.channels.values(), key=lambda c: ("stream" not in c.metadata, c.id)):
+        schema = summary.schemas[channel.schema_id]
+        stream = channel.metadata.get("stream")
+        topic = generic.get(channel.topic, channel.topic)
+        if stream in RATES:
+            sim, bench = RATES[stream]
+            rate = f"sim {_rate(sim, cfg)}; bench {_rate(bench, cfg)}"
+        else:
+            key = stream or ("cop" if channel.topic.endswith("/cop") else channel.topic)
+            rate = RATES_WHEN[key].format(**when)
+        fields = ", ".join(f"`{f}`" for f in _fields(schema))
+        encoding = channel.message_encoding
+        if schema.encoding != encoding:
+            encoding += f" ({schema.encoding})"
+        rows.append([f"`{topic}`", f"`{stream}`" if stream else "(view)", encoding, f"`{schema.name}`", fields, rate])
+    return table(["topic", "reader stream", "encoding", "schema", "fields", "rate"], rows)
+
+
 # ---- committed report outputs ---------------------------------------------------------------------
 
 def campaign_force(folder: str) -> str:
@@ -360,7 +504,7 @@ def render(name: str) -> str:
     kind, _, arg = name.partition(":")
     makers = {"protocol-keys": protocol_keys, "device-options": device_options, "device-faults": device_faults,
               "sim-params": lambda _: sim_params(), "brackets": lambda _: brackets(),
-              "campaign-force": campaign_force}
+              "campaign-force": campaign_force, "session-channels": lambda _: session_channels()}
     if kind not in makers:
         raise SystemExit(f"doc_tables: unknown generated section {name!r}")
     return makers[kind](arg)
