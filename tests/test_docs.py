@@ -53,8 +53,10 @@ def test_every_page_is_in_the_nav():
 EXPECTED_SECTIONS = {
     "protocols.md": {"protocol-keys:force_calibration", "protocol-keys:grip_depth"},
     "simulator.md": {"sim-params", "brackets"},
-    "analysis.md": {"campaign-force:campaign-2026-12-04"},
+    "analysis.md": {"campaign-force:campaign-2026-12-04", "campaign-characterisation:campaign-2026-12-04",
+                    "study:force", "study:characterisation", "study:tracking", "study:slip"},
     "sessions.md": {"session-channels"},
+    "benchmarks.md": {"benchmark-list:cpu-2core", "benchmark-run:cpu-2core"},
     **{f"bench/{page}.md": {f"device-options:{dev}", f"device-faults:{dev}"}
        for page, dev in (("skin-board", "skin_board"), ("platform", "platform"), ("netft", "netft"),
                          ("ur5e", "ur5e"), ("hande", "hande"), ("camera", "camera"))},
@@ -82,6 +84,17 @@ def test_generated_tables_hold_what_the_sources_say():
     r2 = results["force"]["T-s5"]["Fx"]["r2"]
     assert f"| T-s5 | {r2:.3f} |" in (DOCS / "analysis.md").read_text()
     assert "`hardware.skin_board.port` |  | `/dev/ttyACM0`" in (DOCS / "bench" / "skin-board.md").read_text()
+    analysis = (DOCS / "analysis.md").read_text()
+    cop = results["characterization"]["cop_shift"]["median_mm"]
+    assert f"| {cop:.2f} mm (" in analysis
+    from analysis import study
+
+    assert f"| T-s5 | {study.FORCE['T-s5']['Fx']['r2']:.3f} |" in analysis  # the paper's Table II
+    bench = json.loads((DOCS / "benchmarks" / "cpu-2core.json").read_text())
+    page = (DOCS / "benchmarks.md").read_text()
+    assert bench["date"] in page and bench["machine"]["cpu"] in page
+    for name, figures in bench["results"].items():
+        assert f"`{name}` ({figures['benchmark_wall_s']} s)" in page
 
 
 # Each troubleshooting entry: fragments of its quoted message that the code prints literally (the
