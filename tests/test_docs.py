@@ -164,7 +164,7 @@ def test_the_sessions_page_reads_a_session_as_written(tmp_path, monkeypatch, cap
     import numpy as np
 
     from layerskin_exp.log import SessionWriter
-    from layerskin_exp.types import ProtocolEvent, TwoLayerFrame
+    from layerskin_exp.types import MarkerDetection, Pose, ProtocolEvent, TwoLayerFrame, Wrench
 
     t0 = 10**18
     with SessionWriter(tmp_path / "session.mcap", metadata={"config": {"seed": 0}}, labels={"trial": 0}) as w:
@@ -172,6 +172,9 @@ def test_the_sessions_page_reads_a_session_as_written(tmp_path, monkeypatch, cap
             counts = np.full((16, 16), 10 + i, np.uint16)
             w.write(TwoLayerFrame(counts, counts, i, t0 + int(i * 2.36e6), t0 + int(i * 2.36e6)))
         w.write_event(ProtocolEvent("phase", "press", t0 + 5_000_000, t0 + 5_000_000))
+        pose = Pose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), "camera", t0, t0)
+        for record in (Wrench(np.zeros(3), np.zeros(3), 0, t0, t0), MarkerDetection(0, pose, np.zeros((4, 2)), 0, t0, t0)):
+            w.write(record)
     text = (DOCS / "sessions.md").read_text()
     # the channels table says what the writer writes: each channel of this file, read with the
     # mcap library, has its row with the same encoding and schema
@@ -180,7 +183,8 @@ def test_the_sessions_page_reads_a_session_as_written(tmp_path, monkeypatch, cap
     with open(tmp_path / "session.mcap", "rb") as fh:
         summary = make_reader(fh).get_summary()
     for channel in summary.channels.values():
-        row = re.search(rf"^\| `{re.escape(channel.topic)}` \|.*$", text, re.M)
+        topic = re.sub(r"^/markers/\d+", "/markers/<id>", channel.topic)
+        row = re.search(rf"^\| `{re.escape(topic)}` \|.*$", text, re.M)
         assert row, f"docs/sessions.md has no row for {channel.topic}"
         cells = [c.strip() for c in row.group(0).split("|")]
         assert cells[3].split()[0] == channel.message_encoding, (channel.topic, cells[3])
@@ -301,9 +305,10 @@ def plan_checks(commands):
         if module == "protocols.live" and args and not args[0].startswith("-"):
             from protocols.live import PROTOCOLS
 
-            helps.setdefault(("protocols.live", args[0]), []).append((where, []))
-            module, args = PROTOCOLS[args[0]], ["live=true", *[a if a != "--hold" else "live_hold=true"
-                                                               for a in args[1:]]]
+            # its own options against its --help; the rest is the protocol's command line, live=true
+            helps.setdefault(("protocols.live",), []).append((where, [a for a in args[1:] if a.startswith("--")]))
+            module, args = PROTOCOLS[args[0]], ["live=true", *(["live_hold=true"] if "--hold" in args else []),
+                                                *[a for a in args[1:] if not a.startswith("--")]]
         app = _hydra_app(module)
         if app:
             helps.setdefault((module,), [])
