@@ -19,6 +19,15 @@ Sources:
   brackets                 layerskin_exp/sim/brackets.yaml
   campaign-force:<folder>  docs/<folder>/results.json (a report's force table)
   lerobot-load:<name>      docs/<name>.json (tools/lerobot_load_check.py --json: its --markdown)
+  campaign-characterisation:<folder>  the same file's characterisation, beside the study's
+  benchmark-run:<stem>     docs/benchmarks/<stem>.json, a `python -m benchmarks.run --json` output
+  benchmark-list:<stem>    benchmarks/*.py: each one's name, the first line of its docstring, and
+                           whether docs/benchmarks/<stem>.json holds it
+  study:<part>             analysis/study.py, the study's published values the report prints
+                           beside ours (force, characterisation, tracking, slip)
+  session-channels         a session written here by SessionWriter (one message of each kind, and
+                           the views protocols/runner.py adds): each channel's topic, encoding,
+                           schema and fields as the file holds them; rates from the configs
 """
 
 from __future__ import annotations
@@ -338,6 +347,147 @@ def brackets() -> str:
     return table(["parameter", "nominal", "bracket", "screened", "source, and what would settle it"], rows)
 
 
+# ---- the session's channels ----------------------------------------------------------------------
+
+# How often each reader stream (or, for views, each topic) is written: config keys whose values are
+# read below (`skin.*`, `sim.*` from the grip_depth composition; `hardware.<device>.*` from the
+# driver's dataclass), or a sentence for what follows something else.
+RATES = {
+    "skin": ("1000/skin.frame_period_ms", "1000/skin.frame_period_ms"),
+    "wrench": ("sim.rig.ft.rate_hz", "the box's RDT output rate, set on the box"),
+    "stage": ("sim.rig.platform.rate_hz", "hardware.platform.status_rate_hz"),
+    "tcp": ("sim.rig.arm.rate_hz", "hardware.ur5e.rtde_frequency_hz"),
+    "gripper": ("sim.rig.gripper.rate_hz", "hardware.hande.poll_rate_hz"),
+    "markers": ("sim.rig.camera.fps", "hardware.camera.fps"),
+    "camera": ("sim.rig.camera.fps", "hardware.camera.fps"),
+}
+RATES_WHEN = {
+    "estimate_force": "one per downsampled skin frame, with `estimator=...`",
+    "estimate_slip": "one per downsampled skin frame, with `estimator=...` and a slip detector",
+    "events": "as the protocol's events occur",
+    "transforms": "every {tf_ms:g} ms and whenever the jaw moves",
+    "/log": "with each event",
+    "/skin/summary": "every {display_ms:g} ms of skin frames",
+    "cop": "every {display_ms:g} ms of skin frames",
+    "/camera/markers": "with each saved image that has detections",
+}
+
+
+def _rate(spec: str, cfg) -> str:
+    from omegaconf import OmegaConf
+
+    per_ms = spec.startswith("1000/")
+    key = spec.removeprefix("1000/")
+    if not re.fullmatch(r"[a-z_]+(\.[a-z0-9_]+)+", key):
+        return spec
+    if key.startswith("hardware."):
+        import importlib
+
+        _, device, field = key.split(".")
+        module, name = DEVICES[device]
+        value = getattr(getattr(importlib.import_module(module), name)(), field)
+    else:
+        value = OmegaConf.select(cfg, key, throw_on_missing=True)
+    hz = 1000.0 / value if per_ms else value
+    return f"{hz:.4g} Hz (`{key}`{f' = {value:g} ms' if per_ms else ''})"
+
+
+def _written_session(path: Path) -> None:
+    """One message of every kind a session holds, written as the protocols write them: the records
+    through SessionWriter.write, an image with its detections, and the views (skin summary and CoP,
+    frame tree) as protocols/runner.py makes them."""
+    import numpy as np
+
+    from layerskin_exp.log import SessionWriter
+    from layerskin_exp.log.view import FrameTree, SkinView
+    from layerskin_exp.types import (
+        GripperState,
+        MarkerDetection,
+        Pose,
+        ProtocolEvent,
+        SkinEstimate,
+        StagePosition,
+        TwoLayerFrame,
+        Wrench,
+    )
+
+    t0, period = 10**18, 2_360_000
+    with SessionWriter(path, metadata={"config": {}}, labels={"trial": 0}) as w:
+        view, frames = SkinView(), FrameTree(w, "gripper")
+        for i in range(view.baseline_frames + 1):
+            counts = np.full((16, 16), 20, np.uint16)
+            if i == view.baseline_frames:
+                counts[6:9, 6:9] = 2000  # a press, so that the CoP is drawn
+            t = t0 + i * period
+            frame = TwoLayerFrame(counts, counts, i, t, t)
+            w.write(frame)
+            for topic, schema, payload in view.summary(frame):
+                w.write_view(topic, schema, payload, t)
+        t = t0 + 100 * period
+        frames.update(t, opening_mm=20.0)
+        pose = Pose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), "camera", t, t)
+        detection = MarkerDetection(0, pose, np.zeros((4, 2)), 0, t, t)
+        for record in (Wrench(np.zeros(3), np.zeros(3), 0, t, t), StagePosition(np.zeros(3), 0, t, t),
+                       Pose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), "base", t, t),
+                       GripperState(20.0, 20.0, 255, 100, False, 0, t, t), detection,
+                       ProtocolEvent("phase", "press", t, t), SkinEstimate(np.zeros(3), 0.5, False, 0, t, t)):
+            w.write(record)
+        w.write_image(np.zeros((8, 8), np.uint8), t, t, detections=[detection])
+
+
+def _fields(schema) -> list[str]:
+    """The payload's top-level fields, from the schema the file stores (JSON schema or protobuf
+    FileDescriptorSet), less the times every JSON payload repeats."""
+    if schema.encoding == "jsonschema":
+        props = json.loads(schema.data)["properties"]
+        return [k for k in props if k not in ("host_t_ns", "device_t_ns", "seq")]
+    from google.protobuf import descriptor_pb2
+
+    files = descriptor_pb2.FileDescriptorSet.FromString(schema.data).file
+    for f in files:
+        for m in f.message_type:
+            if f"{f.package}.{m.name}".lstrip(".") == schema.name:
+                return [fld.name for fld in m.field]
+    return []
+
+
+def session_channels() -> str:
+    import inspect
+    import tempfile
+
+    from mcap.reader import make_reader
+
+    from layerskin_exp.log.session import schema as S
+    from layerskin_exp.log.view import FrameTree
+    from layerskin_exp.log.view.skin_summary import DISPLAY_PERIOD_NS
+
+    cfg = _compose_dict("grip_depth")
+    when = {"tf_ms": inspect.signature(FrameTree).parameters["period_ns"].default / 1e6,
+            "display_ms": DISPLAY_PERIOD_NS / 1e6}
+    with tempfile.TemporaryDirectory() as d:
+        _written_session(Path(d) / "s.mcap")
+        with open(Path(d) / "s.mcap", "rb") as fh:
+            summary = make_reader(fh).get_summary()
+    rows = []
+    generic = {S.marker_pose_topic(0): "/markers/<id>", S.marker_detection_topic(0): "/markers/<id>/detection"}
+    for channel in sorted(summary.channels.values(), key=lambda c: ("stream" not in c.metadata, c.id)):
+        schema = summary.schemas[channel.schema_id]
+        stream = channel.metadata.get("stream")
+        topic = generic.get(channel.topic, channel.topic)
+        if stream in RATES:
+            sim, bench = RATES[stream]
+            rate = f"sim {_rate(sim, cfg)}; bench {_rate(bench, cfg)}"
+        else:
+            key = stream or ("cop" if channel.topic.endswith("/cop") else channel.topic)
+            rate = RATES_WHEN[key].format(**when)
+        fields = ", ".join(f"`{f}`" for f in _fields(schema))
+        encoding = channel.message_encoding
+        if schema.encoding != encoding:
+            encoding += f" ({schema.encoding})"
+        rows.append([f"`{topic}`", f"`{stream}`" if stream else "(view)", encoding, f"`{schema.name}`", fields, rate])
+    return table(["topic", "reader stream", "encoding", "schema", "fields", "rate"], rows)
+
+
 # ---- committed report outputs ---------------------------------------------------------------------
 
 def campaign_force(folder: str) -> str:
@@ -353,8 +503,128 @@ def campaign_force(folder: str) -> str:
         t = training.get(model)
         conv = "" if not t else (f"{t.get('epochs', '?')} epochs, "
                                  + ("converged" if t.get("converged") else "not converged"))
-        rows.append([model, *r2, " / ".join(ref_r2), conv])
-    return table(["model", "R² Fx", "R² Fy", "R² Fz", "the study's R² (Fx / Fy / Fz)", "training"], rows)
+        own = (t or {}).get("baseline_r2") or {}
+        own_r2 = " / ".join(_f3(own.get(a)) for a in ("Fx", "Fy", "Fz")) if own else "–"
+        rows.append([model, *r2, " / ".join(ref_r2), conv, own_r2])
+    return table(["model", "R² Fx", "R² Fy", "R² Fz", "the study's R² (Fx / Fy / Fz)", "training",
+                  "R² of a linear model of its own inputs (Fx / Fy / Fz)"], rows)
+
+
+def _f3(v, digits: int = 3) -> str:
+    return "–" if v is None else f"{v:.{digits}f}"
+
+
+def _pct(v) -> str:
+    return "–" if v is None else f"{100 * v:.1f} %"
+
+
+def _char_rows(c: dict, h: dict, slides: dict | None) -> dict[str, str]:
+    """outcome -> value, for a report's characterisation (results.json) or the study's
+    (analysis/study.py: the same keys, the height bins as lowest_bin / highest_bin)."""
+    u, r, s = c.get("uniformity", {}), c.get("repeatability", {}), c.get("cop_shift", {})
+    bins = h.get("bins") or [h.get("lowest_bin"), h.get("highest_bin")]
+    lo, hi = (bins[0] or {}), (bins[-1] or {})
+    span = lambda b: f"{b.get('fz_low_n', (b.get('fz_n') or [None])[0])}–{b.get('fz_high_n', (b.get('fz_n') or [None, None])[1])} N"  # noqa: E731
+    out = {
+        "CV across positions at the matched load": f"{_pct(u.get('cv'))} (95 % CI {_pct(u.get('ci_low'))} – "
+                                                  f"{_pct(u.get('ci_high'))}; at {u.get('matched_load_n')} N, {u.get('n_positions')} positions)",
+        "median within-position CV": f"{_pct(r.get('median_cv'))} ({r.get('n_positions')} positions)",
+        "inter-layer CoP shift at 1.9–2.1 N of shear, median (p10 – p90)":
+            f"{_f3(s.get('median_mm'), 2)} mm ({_f3(s.get('p10_mm'), 2)} – {_f3(s.get('p90_mm'), 2)})",
+        "effective height h_x / h_y, all shear frames": f"{_f3(h['overall'].get('h_x_mm'), 2)} / "
+                                                        f"{_f3(h['overall'].get('h_y_mm'), 2)} mm",
+        f"h_x / h_y at the lowest normal-load bin ({span(lo)})": f"{_f3(lo.get('h_x_mm'), 2)} / "
+                                                              f"{_f3(lo.get('h_y_mm'), 2)} mm (R² {_f3(lo.get('r2_x'))} / {_f3(lo.get('r2_y'))})",
+        f"h_x / h_y at the highest normal-load bin ({span(hi)})": f"{_f3(hi.get('h_x_mm'), 2)} / "
+                                                               f"{_f3(hi.get('h_y_mm'), 2)} mm (R² {_f3(hi.get('r2_x'))} / {_f3(hi.get('r2_y'))})",
+    }
+    if slides is not None:
+        out["normal load while the slides' shear first reaches "
+            f"{slides.get('shear_at_n')} N, median"] = f"{_f3(slides.get('fz_at_shear_n'), 2)} N"
+        out["largest shear per slide, median"] = f"{_f3(slides.get('median_max_shear_n'), 2)} N"
+    return out
+
+
+def campaign_characterisation(folder: str) -> str:
+    """A report's characterisation (docs/<folder>/results.json) beside the study's, both as the
+    report stored them. The study gives no slide-load figures: its column says so."""
+    data = json.loads((DOCS / folder / "results.json").read_text())
+    study = data.get("study", {})
+    ours = _char_rows(data["characterization"], data["heights"], data["characterization"].get("slide_loads"))
+    theirs = _char_rows(study.get("characterization", {}), study.get("heights", {}), None)
+    rows = [[k, v, theirs.get(k, "not reported")] for k, v in ours.items()]
+    # the study's bins are its own: shown with their spans in the study's column when they differ
+    for k in theirs:
+        if k not in ours:
+            rows.append([k, "–", theirs[k]])
+    return table(["outcome", "this campaign", "the study"], rows)
+
+
+# ---- committed benchmark runs ---------------------------------------------------------------------
+
+def benchmark_run(stem: str) -> str:
+    """docs/benchmarks/<stem>.json (written by `python -m benchmarks.run ... --json`): where and when
+    it ran, the command that refreshes it, and each benchmark's figures (benchmarks.run.markdown)."""
+    from benchmarks.run import markdown
+
+    path = DOCS / "benchmarks" / f"{stem}.json"
+    record = json.loads(path.read_text())
+    m = record["machine"]
+    names = list(record["results"])
+    head = (f"Measured {record['date']} on {m['cpu']}, {m['cores']} cores (1-minute load {m['load_1min']} before, "
+            f"{m.get('load_1min_after', '?')} after: other jobs shared the machine where it exceeds the cores), "
+            f"{m['os']}, Python {m['python']}, torch {m['torch']}, commit `{record.get('commit')}`. Refresh "
+            f"(then `python tools/doc_tables.py`):\n\n"
+            f"```bash\npython -m benchmarks.run {' '.join(names)} --json {path.relative_to(ROOT)}\n```\n\n")
+    return head + markdown(record)
+
+
+def benchmark_list(stem: str) -> str:
+    """Every benchmark module: its name, the first line of its docstring, and whether the committed
+    run docs/benchmarks/<stem>.json holds it."""
+    from benchmarks.run import HERE, available
+
+    ran = json.loads((DOCS / "benchmarks" / f"{stem}.json").read_text())["results"]
+    rows = []
+    for path in sorted(HERE.glob("*.py")):
+        if path.stem in ("__init__", "run"):
+            continue
+        doc = re.match(r'\s*(?:"""|\'\'\')(.*?)(?:\n\n|"""|\'\'\')', path.read_text(), re.S)
+        first = " ".join(doc.group(1).split()) if doc else ""
+        how = f"`python -m benchmarks.run {path.stem}`" if path.stem in available() else f"`python -m benchmarks.{path.stem}`"
+        rows.append([f"`{path.stem}`", cell(first), how, "yes" if path.stem in ran else "no"])
+    return table(["benchmark", "what it measures", "run", f"in {stem}.json"], rows)
+
+
+# ---- the study's published values (analysis/study.py) ---------------------------------------------
+
+def study_values(part: str) -> str:
+    from analysis import study
+
+    if part == "force":
+        rows = [[m, *(f"{v[a]['r2']:.3f}" for a in ("Fx", "Fy", "Fz")), *(f"{v[a]['mae']:.3f}" for a in ("Fx", "Fy", "Fz"))]
+                for m, v in study.FORCE.items()]
+        return table(["model", "R² Fx", "R² Fy", "R² Fz", "MAE Fx (N)", "MAE Fy (N)", "MAE Fz (N)"], rows)
+    if part == "characterisation":
+        rows = [[k, v] for k, v in _char_rows(study.CHARACTERIZATION, study.HEIGHTS, None).items()]
+        r = study.FORCE_RANGE_N
+        rows.append(["force range of the calibration campaign", cell(f"Fx {r['Fx']['min_n']} – {r['Fx']['max_n']} N, "
+                     f"Fy {r['Fy']['min_n']} – {r['Fy']['max_n']} N, |Fz| up to {r['abs_Fz_max_n']} N")])
+        return table(["outcome", "the study"], rows)
+    if part == "tracking":
+        rows = [[motion, layer, g, f"{v['a']:.2f}", f"{v['r2']:.3f}", f"{v['mae']:.2f}"]
+                for motion, layers in study.TRACKING.items() for layer, depths in layers.items()
+                for g, v in depths.items()]
+        rows += [["preload (T-s5 estimate)", "", g, "", "", f"{n} N"] for g, n in study.PRELOAD_N.items()]
+        return table(["motion", "layer", "grip depth (mm)", "slope a", "R²", "MAE (mm or °)"], rows)
+    if part == "slip":
+        rows = [[motion, cue, *(f"{v[s]:.3f}" for s in ("global", "grip", "oracle"))]
+                for motion, cues in study.SLIP.items() for cue, v in cues.items()]
+        lat = study.SLIP_LATENCY_MS
+        rows.append(["median tactile lead over vision", "", f"{lat['before']} ms before latency compensation",
+                     f"{lat['after']} ms after", ""])
+        return table(["motion", "cue", "F1 global", "F1 per grip depth", "F1 oracle"], rows)
+    raise SystemExit(f"doc_tables: no study values {part!r} (force, characterisation, tracking, slip)")
 
 
 def lerobot_load(name: str) -> str:
@@ -370,7 +640,9 @@ def render(name: str) -> str:
     kind, _, arg = name.partition(":")
     makers = {"protocol-keys": protocol_keys, "device-options": device_options, "device-faults": device_faults,
               "sim-params": lambda _: sim_params(), "brackets": lambda _: brackets(),
-              "campaign-force": campaign_force, "lerobot-load": lerobot_load}
+              "campaign-force": campaign_force, "lerobot-load": lerobot_load, "campaign-characterisation": campaign_characterisation,
+              "study": study_values, "session-channels": lambda _: session_channels(),
+              "benchmark-run": benchmark_run, "benchmark-list": benchmark_list}
     if kind not in makers:
         raise SystemExit(f"doc_tables: unknown generated section {name!r}")
     return makers[kind](arg)

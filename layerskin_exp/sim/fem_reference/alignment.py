@@ -276,7 +276,11 @@ def table_text(res: dict) -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    argparse.ArgumentParser(prog=f"python -m {__spec__.name if __spec__ else __name__}", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     from layerskin_exp.sim.config import load_sim
 
     print(f"F_t / F_z = {SHEAR_RATIO:.3f}; FEM: cap at {ALIGN_X0_MM} mm from a wall x {ALIGN_TAXEL_MM} mm "

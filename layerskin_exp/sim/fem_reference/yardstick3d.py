@@ -320,7 +320,11 @@ def table_text(comparisons: list[Comparison], record: dict) -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    argparse.ArgumentParser(prog=f"python -m {__spec__.name if __spec__ else __name__}", description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     from layerskin_exp.sim.config import load_sim
 
     comparisons, record = rows(load_sim([]))
