@@ -299,6 +299,12 @@ def plan_checks(commands):
             continue
         if prog == "mkdocs":
             argv = ["python", "-m", "mkdocs", *argv[1:]]
+        if re.match(r"python3?$", Path(argv[0]).name) and len(argv) > 1 and argv[1].endswith(".py"):
+            if not (ROOT / argv[1]).is_file():
+                problems.append(f"{where}: no script {argv[1]} in the checkout")
+                continue
+            helps.setdefault((argv[1],), []).append((where, [a.split("=", 1)[0] for a in argv[2:] if a.startswith("--")]))
+            continue
         if not (re.match(r"python3?$", Path(argv[0]).name) and len(argv) > 2 and argv[1] == "-m"):
             problems.append(f"{where}: no cheap form for this command (see the comment above NOT_CHECKED)")
             continue
@@ -329,8 +335,8 @@ def plan_checks(commands):
 
 
 def _answers_help(key: tuple[str, ...]) -> tuple[int, str]:
-    r = subprocess.run([sys.executable, "-m", *key, "--help"], cwd=ROOT, capture_output=True, text=True,
-                       timeout=120)
+    run = [key[0], *key[1:]] if key[0].endswith(".py") else ["-m", *key]  # a script of the checkout, or a module
+    r = subprocess.run([sys.executable, *run, "--help"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     return r.returncode, r.stdout + r.stderr
 
 
@@ -394,13 +400,16 @@ def test_the_command_check_fails_on_what_is_wrong():
               ("x.md", ["python", "-m", "layerskin_exp.log", "inspect", "FILE", "--no-such-option"]),
               ("x.md", ["python", "-m", "layerskin_exp.log", "no-such-subcommand"]),
               ("x.md", ["pip", "install", "-e", ".[no-such-extra]"]),
-              ("x.md", ["frobnicate", "--now"])]
+              ("x.md", ["frobnicate", "--now"]),
+              ("x.md", ["python", "tools/lerobot_load_check.py", "DS", "S", "--no-such-flag"]),
+              ("x.md", ["python", "tools/no_such_tool.py"])]
     if shutil.which("make"):
         broken.append(("x.md", ["make", "no-such-target"]))
     problems = check_commands(broken)
     for fragment in ("grip_depth=99", "grip_depth=6,99", "--no-such-option is not an option",
                      "layerskin_exp.log no-such-subcommand --help` exit 2", "no extra 'no-such-extra'",
-                     "frobnicate --now: no cheap form", *(["no-such-target"] if shutil.which("make") else [])):
+                     "frobnicate --now: no cheap form", "--no-such-flag is not an option",
+                     "no script tools/no_such_tool.py", *(["no-such-target"] if shutil.which("make") else [])):
         assert any(fragment in p for p in problems), (fragment, problems)
     assert len(problems) == len(broken)
 
