@@ -103,7 +103,11 @@ class SheetConfig:
     carrying most of a 3 N press outwards. Off by default: it spreads a press over the whole pad
     and takes most of the inter-layer count shift out of the skin (docs/simulator-validation.md says
     what it does to each row); where a profile reaches past the pad's sides the frame pipeline adds
-    that load back as the sheet's rigid-body pressure (frame_kernels._pad_fold)."""
+    that load back as the sheet's rigid-body pressure (frame_kernels._pad_fold).
+    `wrinkling` (with `large_deflection`): the stretched sheet wrinkles where its membrane would be
+    compressed past 2 sqrt(D k) (a plate on a Winkler foundation, Hetenyi), and carries no more
+    compression than that there (a tension-field membrane, `laminate._tension_field`). Off: the
+    smooth sheet, as the 3D model's, which keeps any hoop compression."""
 
     film_modulus_mpa: float = 2500.0  # polyimide
     film_thickness_mm: float = 0.025
@@ -115,6 +119,7 @@ class SheetConfig:
     interface: str = "friction"  # friction | bonded | unbonded
     interface_friction: float = 0.3  # copper / polyimide on carbon-loaded polyolefin
     large_deflection: bool = False  # the sheet's membrane action (von Karman), hemisphere only
+    wrinkling: bool = False  # with large_deflection: the sheet wrinkles past 2 sqrt(D k) of compression
 
     def __post_init__(self) -> None:
         for key in ("film_modulus_mpa", "film_thickness_mm", "copper_modulus_mpa", "copper_thickness_mm",
@@ -128,6 +133,7 @@ class SheetConfig:
                 self.interface_friction, "must be >= 0")
         require(isinstance(self.large_deflection, bool), "sim.sheet.large_deflection", self.large_deflection,
                 "must be true or false")
+        require(isinstance(self.wrinkling, bool), "sim.sheet.wrinkling", self.wrinkling, "must be true or false")
 
     def _rigidity(self, bonded: bool) -> float:
         from layerskin_exp.sim.laminate import sheet_rigidity_n_mm
