@@ -12,8 +12,8 @@ import scipy.sparse as sp
 from layerskin_exp.sim.config import load_sim
 from layerskin_exp.sim.contact import _solver
 
-SIM = load_sim(["sheet.interface=bonded", "sheet.large_deflection=true"])
-LINEAR = load_sim(["sheet.interface=bonded"])
+SIM = load_sim(["sheet.interface=bonded", "sheet.large_deflection=true", "sheet.wrinkling=false"])  # smooth
+LINEAR = load_sim(["sheet.interface=bonded", "sheet.large_deflection=false"])
 
 
 def _energy(plate, w, u):
@@ -198,7 +198,7 @@ def test_the_bending_plate_answers_near_a_side_unfolded():
     from layerskin_exp.sim.reference import ReferenceSkin
     from layerskin_exp.sim.skin import SkinModel
 
-    sim = load_sim(["readout.noise_counts=0", "readout.scan_jitter_ms=0"])
+    sim = load_sim(["sheet.large_deflection=false", "readout.noise_counts=0", "readout.scan_jitter_ms=0"])
     model = SkinModel(sim, SkinConfig(), "hemisphere", np.random.default_rng(0))
     model.unloaded = model.mech_state()
     assert model._params["fold_sides"] == 0.0
