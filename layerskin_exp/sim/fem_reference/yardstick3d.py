@@ -337,7 +337,7 @@ def record_json(overrides: list[str] | None = None, variants: bool = True) -> di
         designs.update({name: [*designs["default"], *extra] for name, extra in VARIANTS.items()})
     out = {}
     for name, ov in designs.items():
-        comparisons, _ = rows(load_sim([o.removeprefix("sim.") for o in ov]))
+        comparisons, _ = rows(load_sim(ov))
         out[name] = {"overrides": ov, "passed": sum(c.passed for c in comparisons), "total": len(comparisons),
                      "rows": [{"state": c.load, "metric": c.metric, "3d": c.fem, "fast": c.fast, "value": c.value,
                                "lo": c.lo, "hi": c.hi, "kind": c.kind, "passed": bool(c.passed)}
@@ -351,18 +351,17 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog=f"python -m {__spec__.name if __spec__ else __name__}", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("overrides", nargs="*", help="sim.KEY=VALUE overrides of the fast model's design")
     ap.add_argument("--json", metavar="OUT", help="also write the rows of the design and of the variants beside it "
                     "(the smooth sheet, the bending plate) to OUT as JSON, for docs/simulator-validation.md")
     args = ap.parse_args(argv)
     from layerskin_exp.sim.config import load_sim
 
-    comparisons, record = rows(load_sim([o.removeprefix("sim.") for o in args.overrides]))
+    comparisons, record = rows(load_sim([]))  # another design: python -m layerskin_exp.sim.validate sim.KEY=VALUE
     print(table_text(comparisons, record))
     if args.json:
         from pathlib import Path
 
-        Path(args.json).write_text(json.dumps(record_json(args.overrides), indent=1) + "\n")
+        Path(args.json).write_text(json.dumps(record_json(), indent=1) + "\n")
     return 0 if all(c.passed for c in comparisons) else 1
 
 
