@@ -18,7 +18,8 @@ HYDRA_MAIN = {"layerskin_exp/cli.py"}  # hydra_main(name): the decorator every a
 YAML_READERS = {"layerskin_exp/sim/config.py"}  # load_brackets: the brackets file, checked entry by entry
 # The file tools: options, not config (a file to inspect, a device to emulate, an artifact to export).
 ARGPARSE = {"layerskin_exp/log/cli.py", "layerskin_exp/estimation/export.py", "layerskin_exp/demo.py",
-            "layerskin_exp/sim/fem_reference/__main__.py", "protocols/sessions.py", "hardware/emulate.py"}
+            "layerskin_exp/sim/fem_reference/__main__.py", "layerskin_exp/sim/fem_reference/yardstick3d.py",
+            "layerskin_exp/sim/fem_reference/alignment.py", "protocols/sessions.py", "hardware/emulate.py"}
 
 
 def entry_problems(repo: Path) -> list[str]:

@@ -25,6 +25,8 @@ Sources:
                            whether docs/benchmarks/<stem>.json holds it
   study:<part>             analysis/study.py, the study's published values the report prints
                            beside ours (force, characterisation, tracking, slip)
+  yardstick3d:<stem>       docs/validation/<stem>.json (python -m layerskin_exp.sim.fem_reference.yardstick3d
+                           --json): the fast model against the 3D model, the design and its variants
   session-channels         a session written here by SessionWriter (one message of each kind, and
                            the views protocols/runner.py adds): each channel's topic, encoding,
                            schema and fields as the file holds them; rates from the configs
@@ -636,13 +638,51 @@ def lerobot_load(name: str) -> str:
     return module.markdown(json.loads((DOCS / f"{name}.json").read_text()))
 
 
+_YARDSTICK_ROWS = {"deep_cop_counts_mm": "deep count-CoP travel (mm)",
+                   "superficial_cop_counts_mm": "superficial count-CoP travel, own frame (mm)",
+                   "interlayer_shift_counts_mm": "change of the inter-layer count shift (mm)",
+                   "sheet_travel_mm": "sheet travel over the deep sheet (mm)",
+                   "depth_at_load": "cap depth at equal F_z (mm)", "contact_radius": "contact radius (mm)",
+                   "peak_superficial_kpa": "peak superficial pressure (kPa)",
+                   "peak_deep_taxel_kpa": "peak deep taxel pressure (kPa)",
+                   "tangential_stiffness": "tangential stiffness (N/mm)"}
+
+
+def yardstick3d(stem: str) -> str:
+    """Rows x 3D states; each cell 3D / the design / each variant, a failing value marked."""
+    rec = json.loads((DOCS / "validation" / f"{stem}.json").read_text())["designs"]
+    names = list(rec)
+    states = list(dict.fromkeys(r["state"] for r in rec[names[0]]["rows"]))
+    by = {n: {(r["state"], r["metric"]): r for r in rec[n]["rows"]} for n in names}
+
+    def num(v):
+        return "–" if v is None or v != v else f"{v:.3g}"
+
+    rows = []
+    for metric, label in _YARDSTICK_ROWS.items():
+        cells = []
+        for st in states:
+            first = by[names[0]].get((st, metric))
+            if first is None:
+                cells.append("")
+                continue
+            vals = [num(first["3d"])] + [num(by[n][(st, metric)]["fast"]) + ("" if by[n][(st, metric)]["passed"] else " ✗")
+                                          for n in names]
+            cells.append(" / ".join(vals))
+        rows.append([label, *cells])
+    head = ", ".join(f"{n}: {rec[n]['passed']} of {rec[n]['total']} rows agree" for n in names)
+    return (f"Each cell is 3D / {' / '.join(names)}; ✗ marks a row outside its band. {head}.\n\n"
+            + table(["3D state", *states], rows))
+
+
 def render(name: str) -> str:
     kind, _, arg = name.partition(":")
     makers = {"protocol-keys": protocol_keys, "device-options": device_options, "device-faults": device_faults,
               "sim-params": lambda _: sim_params(), "brackets": lambda _: brackets(),
               "campaign-force": campaign_force, "lerobot-load": lerobot_load, "campaign-characterisation": campaign_characterisation,
               "study": study_values, "session-channels": lambda _: session_channels(),
-              "benchmark-run": benchmark_run, "benchmark-list": benchmark_list}
+              "benchmark-run": benchmark_run, "benchmark-list": benchmark_list,
+              "yardstick3d": yardstick3d}
     if kind not in makers:
         raise SystemExit(f"doc_tables: unknown generated section {name!r}")
     return makers[kind](arg)

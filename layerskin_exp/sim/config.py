@@ -100,10 +100,15 @@ class SheetConfig:
     `interface_friction`: the film-Velostat friction coefficient.
     `large_deflection`: the hemisphere's sheet also stretches as it sinks (a von Karman plate with
     the films' membrane stiffness, `laminate`), which the 3D model of the study's geometry shows
-    carrying most of a 3 N press outwards. Off by default: it spreads a press over the whole pad
-    and takes most of the inter-layer count shift out of the skin (docs/simulator-validation.md says
-    what it does to each row); where a profile reaches past the pad's sides the frame pipeline adds
-    that load back as the sheet's rigid-body pressure (frame_kernels._pad_fold)."""
+    carrying most of a 3 N press outwards (docs/simulator-validation.md says what it does to each
+    row); where a profile reaches past the pad's sides the frame pipeline adds that load back as the
+    sheet's rigid-body pressure (frame_kernels._pad_fold). Off: a bending plate only.
+    `wrinkling` (with `large_deflection`): the stretched sheet wrinkles where its membrane would be
+    compressed past 2 sqrt(D k) (a plate on a Winkler foundation, Hetenyi), and carries no more
+    compression than that there (a tension-field membrane, `laminate._tension_field`). Off: the
+    smooth sheet, as the 3D model's, which keeps any hoop compression: its rim, 20 times past that
+    load, spreads a 3 N press over the whole pad and takes most of the inter-layer count shift out of
+    the skin."""
 
     film_modulus_mpa: float = 2500.0  # polyimide
     film_thickness_mm: float = 0.025
@@ -114,7 +119,8 @@ class SheetConfig:
     velostat_thickness_mm: float = 0.1
     interface: str = "friction"  # friction | bonded | unbonded
     interface_friction: float = 0.3  # copper / polyimide on carbon-loaded polyolefin
-    large_deflection: bool = False  # the sheet's membrane action (von Karman), hemisphere only
+    large_deflection: bool = True  # the sheet's membrane action (von Karman), hemisphere only
+    wrinkling: bool = True  # with large_deflection: the sheet wrinkles past 2 sqrt(D k) of compression
 
     def __post_init__(self) -> None:
         for key in ("film_modulus_mpa", "film_thickness_mm", "copper_modulus_mpa", "copper_thickness_mm",
@@ -128,6 +134,7 @@ class SheetConfig:
                 self.interface_friction, "must be >= 0")
         require(isinstance(self.large_deflection, bool), "sim.sheet.large_deflection", self.large_deflection,
                 "must be true or false")
+        require(isinstance(self.wrinkling, bool), "sim.sheet.wrinkling", self.wrinkling, "must be true or false")
 
     def _rigidity(self, bonded: bool) -> float:
         from layerskin_exp.sim.laminate import sheet_rigidity_n_mm

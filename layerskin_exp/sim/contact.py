@@ -151,7 +151,16 @@ def _solver(sim: SimConfig, kind: str, radius_mm: float | None = None) -> PlateO
     return PlateOnFoundation(kind, law, sheet.rigidity_n_mm, g_p, k_c, radius,
                              pad_radius_mm(kind, sim.spacer.width_mm), step_mm=_PLATE_STEP_MM, interface=interface,
                              cover_shear_n_per_mm3=g_c, rim_mm=sim.spacer.rim_width_mm,
-                             membrane_n_per_mm=sheet.membrane_n_per_mm if sheet.large_deflection else 0.0)
+                             membrane_n_per_mm=sheet.membrane_n_per_mm if sheet.large_deflection else 0.0,
+                             wrinkle_n_per_mm=wrinkle_n_per_mm(sim) if sheet.wrinkling else None)
+
+
+def wrinkle_n_per_mm(sim: SimConfig) -> float:
+    """The membrane compression at which the sheet on the open lattice wrinkles, 2 sqrt(D k) (a plate
+    on a Winkler foundation, Hetenyi): D the sheet's rigidity as its films hold (slipping films:
+    their own), k the open lattice's E / h."""
+    law = SpacerLaw(sim.spacer)
+    return 2.0 * math.sqrt(sim.sheet.rigidity_n_mm * law.e_lat_kpa * KPA_MM2_TO_N / law.h_mm)
 
 
 def contact_confinement_mm(kind: str, x_mm: np.ndarray, weight: np.ndarray, contact_kpa: np.ndarray) -> float:

@@ -185,7 +185,7 @@ class PlateOnFoundation:
                  cover_n_per_mm3: float, indenter_radius_mm: float, pad_radius_mm: float,
                  step_mm: float = 0.05, interface: FrictionInterface | None = None,
                  cover_shear_n_per_mm3: float = 0.0, rim_mm: float = 0.0, membrane_n_per_mm: float = 0.0,
-                 poisson: float = SHEET_POISSON):
+                 poisson: float = SHEET_POISSON, wrinkle_n_per_mm: float | None = None):
         if kind not in ("hemisphere", "rod"):
             raise ValueError(f"kind={kind!r}: must be 'hemisphere' or 'rod'")
         self.kind, self.law = kind, law
@@ -223,6 +223,10 @@ class PlateOnFoundation:
         # large deflection: the hemisphere's sheet only (a cylindrical bend with free sides has none)
         self.membrane = membrane_n_per_mm if kind == "hemisphere" else 0.0
         self.poisson = poisson
+        if wrinkle_n_per_mm is not None and wrinkle_n_per_mm < 0.0:
+            raise ValueError(f"wrinkle_n_per_mm={wrinkle_n_per_mm!r}: the compression a sheet carries before it "
+                             "wrinkles must be >= 0 (None: it never wrinkles)")
+        self.wrinkle = wrinkle_n_per_mm
         if self.membrane > 0.0:
             self._seg_rm = rm = (np.arange(len(self.x) - 1) + 0.5) * step_mm  # between neighbouring grid points
             on = rm + 0.5 * step_mm <= pad_radius_mm + 1e-9  # the sheet ends at the pad's edge
@@ -382,9 +386,15 @@ class PlateOnFoundation:
         zero = np.zeros(len(b))
         g_r = np.stack([-one, one, -b / h, b / h], axis=1)  # d e_r / d [u_j, u_j+1, w_j, w_j+1]
         g_t = np.stack([q, q, zero, zero], axis=1)
+        # the membrane's tangent stiffness d[N_r, N_t] / d[e_r, e_t]: plane stress, unless it wrinkles
+        t_rr, t_rt, t_tt = np.full(len(b), c), np.full(len(b), c * nu), np.full(len(b), c)
+        if self.wrinkle is not None:
+            n_r, n_t, t_rr, t_rt, t_tt = _tension_field(e_r, e_t, c, nu, self.wrinkle, on)
         f_loc = area[:, None] * (n_r[:, None] * g_r + n_t[:, None] * g_t)
-        k_loc = (area * c)[:, None, None] * (np.einsum("si,sj->sij", g_r, g_r) + np.einsum("si,sj->sij", g_t, g_t)
-                                             + nu * (np.einsum("si,sj->sij", g_r, g_t) + np.einsum("si,sj->sij", g_t, g_r)))
+        k_loc = area[:, None, None] * (t_rr[:, None, None] * np.einsum("si,sj->sij", g_r, g_r)
+                                       + t_tt[:, None, None] * np.einsum("si,sj->sij", g_t, g_t)
+                                       + t_rt[:, None, None] * (np.einsum("si,sj->sij", g_r, g_t)
+                                                                + np.einsum("si,sj->sij", g_t, g_r)))
         geo = area * n_r / (h * h)  # N_r d2 e_r / dw2: the membrane force's pull on the sheet's slope
         k_loc[:, 2, 2] += geo
         k_loc[:, 3, 3] += geo
@@ -617,6 +627,29 @@ class PlateOnFoundation:
     def load(self, sol: LaminateSolution) -> float:
         """Normal force (hemisphere, N) or line load (rod, N/mm) on the indenter."""
         return float(sol.contact_kpa @ self.area) * KPA
+
+
+def _tension_field(e_r: np.ndarray, e_t: np.ndarray, c: float, nu: float, cap: float, on: np.ndarray):
+    """A membrane that wrinkles (a relaxed, tension-field membrane): in the direction where plane
+    stress would compress it past `cap` (N/mm, the compression it carries before it wrinkles;
+    0: none), the force stays at -cap and the strain there is taken up by the wrinkles; the
+    other direction then stretches as a strip, E t = c (1 - nu^2). Returns N_r, N_t and the
+    tangent d[N_r, N_t] / d[e_r, e_t] (rr, rt, tt). The energy stays continuous and convex, so
+    Newton sees a smooth-enough residual. Wrinkles in both directions: both forces at -cap."""
+    strip = c * (1.0 - nu * nu)
+    n_r, n_t = c * (e_r + nu * e_t), c * (e_t + nu * e_r)
+    t_rr, t_rt, t_tt = np.full(len(e_r), c), np.full(len(e_r), c * nu), np.full(len(e_r), c)
+    hoop_r = strip * e_r - nu * cap  # N_r with the hoop direction wrinkled
+    radial_t = strip * e_t - nu * cap  # N_t with the radial direction wrinkled
+    hoop = (n_t < -cap) & (hoop_r >= -cap)
+    radial = (n_r < -cap) & (radial_t >= -cap) & ~hoop
+    both = ((n_t < -cap) | (n_r < -cap)) & ~hoop & ~radial
+    n_r = np.where(hoop, hoop_r, np.where(radial | both, -cap, n_r))
+    n_t = np.where(radial, radial_t, np.where(hoop | both, -cap, n_t))
+    t_rr = np.where(hoop, strip, np.where(radial | both, 0.0, t_rr))
+    t_tt = np.where(radial, strip, np.where(hoop | both, 0.0, t_tt))
+    t_rt = np.where(hoop | radial | both, 0.0, t_rt)
+    return np.where(on, n_r, 0.0), np.where(on, n_t, 0.0), t_rr, t_rt, t_tt
 
 
 def sheet_rigidity_n_mm(film_modulus_mpa: float, film_mm: float, copper_modulus_mpa: float, copper_mm: float,

@@ -13,7 +13,7 @@ from layerskin_exp.sim.contact import _solver
 
 # the sheet bonded: a uniform bending stiffness across the contact (the friction interface's
 # composite degree follows the state, which the first mode's operator holds fixed)
-SIM = load_sim(["sheet.interface=bonded"])
+SIM = load_sim(["sheet.interface=bonded", "sheet.large_deflection=false"])  # the bending plate
 DEPTHS_MM = (0.3, 0.8, 1.6)
 
 
@@ -37,6 +37,17 @@ def test_the_flank_response_is_the_state_moved_with_the_cap(states):
     are the load's: the patterns move with the cap (which the frame pipeline does by placing them
     about the cap), not a couple of their own."""
     for plate, sol in states:
+        resp, _ = plate.flank(sol)
+        fz = plate.load(sol)
+        assert plate.first_moment(resp.contact_kpa) == pytest.approx(fz, rel=0.15)
+        assert plate.first_moment(resp.foundation_kpa) == pytest.approx(fz, rel=0.15)
+
+
+@pytest.mark.xfail(strict=True, reason="the stretching sheet's flank at 0.3 mm carries 1.17 F_z of first moment "
+                   "(0.98 and 1.02 at 0.8 and 1.6 mm): the first angular mode's operator holds the membrane "
+                   "forces of the state but leaves out the mode's own stretching (laminate._operator_m1)")
+def test_the_stretching_sheets_flank_moves_with_the_cap():
+    for plate, sol in _states(load_sim(["sheet.interface=bonded", "sheet.large_deflection=true"])):
         resp, _ = plate.flank(sol)
         fz = plate.load(sol)
         assert plate.first_moment(resp.contact_kpa) == pytest.approx(fz, rel=0.15)

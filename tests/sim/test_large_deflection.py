@@ -12,8 +12,8 @@ import scipy.sparse as sp
 from layerskin_exp.sim.config import load_sim
 from layerskin_exp.sim.contact import _solver
 
-SIM = load_sim(["sheet.interface=bonded", "sheet.large_deflection=true"])
-LINEAR = load_sim(["sheet.interface=bonded"])
+SIM = load_sim(["sheet.interface=bonded", "sheet.large_deflection=true", "sheet.wrinkling=false"])  # smooth
+LINEAR = load_sim(["sheet.interface=bonded", "sheet.large_deflection=false"])
 
 
 def _energy(plate, w, u):
@@ -198,7 +198,7 @@ def test_the_bending_plate_answers_near_a_side_unfolded():
     from layerskin_exp.sim.reference import ReferenceSkin
     from layerskin_exp.sim.skin import SkinModel
 
-    sim = load_sim(["readout.noise_counts=0", "readout.scan_jitter_ms=0"])
+    sim = load_sim(["sheet.large_deflection=false", "readout.noise_counts=0", "readout.scan_jitter_ms=0"])
     model = SkinModel(sim, SkinConfig(), "hemisphere", np.random.default_rng(0))
     model.unloaded = model.mech_state()
     assert model._params["fold_sides"] == 0.0
@@ -207,3 +207,100 @@ def test_the_bending_plate_answers_near_a_side_unfolded():
     want = ReferenceSkin(model).maps(rec[None, :])[0]
     for layer in range(2):
         assert np.abs(got[layer] - want[layer]).max() <= 1e-3 * want[layer].max()
+
+
+WRINKLING = load_sim(["sheet.interface=bonded", "sheet.large_deflection=true", "sheet.wrinkling=true"])
+
+
+def _relaxed_energy(plate, w, u):
+    """The wrinkling membrane's energy written out afresh (laminate._tension_field): plane stress
+    while neither force is compressed past the cap; past it, that force stays at -cap (the energy
+    grows by -cap times the strain beyond where it reached the cap), the other direction a strip."""
+    h, c, nu, cap = plate.step, plate.membrane, plate.poisson, plate.wrinkle
+    b = np.diff(w) / h
+    rm = (np.arange(len(w) - 1) + 0.5) * h
+    e_r = np.diff(u) / h + 0.5 * b * b
+    e_t = 0.5 * (u[:-1] + u[1:]) / rm
+
+    def taut(er, et):
+        return 0.5 * c * (er**2 + 2 * nu * er * et + et**2)
+
+    n_r, n_t = c * (e_r + nu * e_t), c * (e_t + nu * e_r)
+    strip = c * (1 - nu * nu)
+    corner = -cap / (c * (1 + nu))  # both forces at -cap
+    et_star, er_star = -cap / c - nu * e_r, -cap / c - nu * e_t
+    hoop = (n_t < -cap) & (strip * e_r - nu * cap >= -cap)
+    radial = (n_r < -cap) & (strip * e_t - nu * cap >= -cap) & ~hoop
+    both = ((n_t < -cap) | (n_r < -cap)) & ~hoop & ~radial
+    energy = np.where(hoop, taut(e_r, et_star) - cap * (e_t - et_star),
+                      np.where(radial, taut(er_star, e_t) - cap * (e_r - er_star),
+                               np.where(both, taut(corner, corner) - cap * (e_r - corner + e_t - corner),
+                                        taut(e_r, e_t))))
+    return float((plate._seg_area * energy).sum()), hoop | radial | both
+
+
+@pytest.fixture(scope="module")
+def wrinkled():
+    """The wrinkling sheet at a state of the smooth one pressed 1.5 mm, whose rim is in hoop
+    compression far past the cap."""
+    smooth = _solver(SIM, "hemisphere")
+    sol = smooth.solve(1.5)
+    return _solver(WRINKLING, "hemisphere"), sol.w_mm, sol.u_mm
+
+
+def _relaxed_mismatch(plate, w, u, forces) -> float:
+    n = len(w)
+    f, k = forces(w, u)
+    _, slack = _relaxed_energy(plate, w, u)
+    seg = int(np.flatnonzero(slack).min()) + 5  # inside the wrinkled ring
+    z, eps, worst = np.concatenate([w, u]), 1e-7, 0.0
+    for i in (3, 40, seg, seg + 1, n + 2, n + seg, n + seg + 1):
+        zp, zm = z.copy(), z.copy()
+        zp[i] += eps
+        zm[i] -= eps
+        fd = (_relaxed_energy(plate, zp[:n], zp[n:])[0] - _relaxed_energy(plate, zm[:n], zm[n:])[0]) / (2 * eps)
+        col = (forces(zp[:n], zp[n:])[0] - forces(zm[:n], zm[n:])[0]) / (2 * eps)
+        worst = max(worst, abs(fd - f[i]) / max(abs(f).max(), 1e-12),
+                    float(np.abs(col - k[:, i].toarray().ravel()).max() / abs(k).max()))
+    return worst
+
+
+def test_the_wrinkling_membranes_forces_are_its_relaxed_energys_gradient_and_hessian(wrinkled):
+    plate, w, u = wrinkled
+    _, slack = _relaxed_energy(plate, w, u)
+    assert slack.sum() > 20  # the state reaches well into the wrinkled ring
+
+    def forces(w, u):
+        f, k, _ = plate.membrane_forces(w, u)
+        return f, k
+    assert _relaxed_mismatch(plate, w, u, forces) < 1e-5
+
+
+def test_a_wrinkled_ring_with_the_smooth_sheets_tangent_is_caught(wrinkled):
+    """The check above fails when the wrinkled ring keeps plane stress's stiffness (the forces
+    capped, the tangent not)."""
+    plate, w, u = wrinkled
+    smooth = _solver(SIM, "hemisphere")
+
+    def forces(w, u):
+        return plate.membrane_forces(w, u)[0], smooth.membrane_forces(w, u)[1]
+    assert _relaxed_mismatch(plate, w, u, forces) > 1e-3
+
+
+def test_the_wrinkled_sheet_carries_no_compression_past_its_cap_and_is_the_smooth_one_where_taut(wrinkled):
+    import math
+
+    plate, w, u = wrinkled
+    k = WRINKLING.spacer.lattice_modulus_kpa * 1e-3 / WRINKLING.spacer.thickness_mm
+    assert plate.wrinkle == pytest.approx(2 * math.sqrt(WRINKLING.sheet.rigidity_n_mm * k), rel=1e-9)
+    n_r, n_t = plate.membrane_forces(w, u)[2]
+    s_r, s_t = _solver(SIM, "hemisphere").membrane_forces(w, u)[2]
+    assert n_t.min() >= -plate.wrinkle - 1e-12 and n_r.min() >= -plate.wrinkle - 1e-12
+    assert s_t.min() < -2 * plate.wrinkle  # the smooth sheet, at the same state, does not (-1.05 N/mm)
+    taut = (s_t > -plate.wrinkle) & (s_r > -plate.wrinkle)
+    assert np.allclose(n_r[taut], s_r[taut]) and np.allclose(n_t[taut], s_t[taut])
+    # solved, the wrinkling sheet's press balances as the smooth one's does, and its centre stays taut
+    sol = plate.solve(1.2)
+    assert abs(float(sol.foundation_kpa @ plate.area) * 1e-3 / plate.load(sol) - 1.0) <= 0.01
+    n_r, n_t = sol.membrane_n_per_mm
+    assert n_r[0] > 0.0 and n_t.min() >= -plate.wrinkle - 1e-9

@@ -121,10 +121,6 @@ def test_dropping_the_tangential_loads_moment_fails_the_deep_rows(sides, label):
         or abs(fast["interlayer_shift_counts_mm"] - fem["interlayer_shift_counts_mm"]) > TOL["interlayer_shift_counts_mm"]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "measured: with the pattern at the columns' feet the stiff cover's fast deep count CoP travels 0.39 mm "
-    "against the 3D model's 0.85 (1.00 without the error), 0.46 off in a band of 0.48: at the committed 3D "
-    "states the deep row does not see this error"))
 def test_the_deep_pattern_at_the_columns_feet_fails_the_deep_rows(sides, monkeypatch):
     """Injection: the deep pattern left at the columns' feet (the sheet's travel not added to its
     position, as before), the moment F_z u with nowhere to go: the deep count CoP falls short where

@@ -320,15 +320,48 @@ def table_text(comparisons: list[Comparison], record: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    import argparse
+# Designs printed beside the default in the record (`--json`): what each ingredient of the sheet's
+# mechanics does to the rows; they gate nothing.
+VARIANTS = {"smooth sheet (sim.sheet.wrinkling=false)": ["sim.sheet.wrinkling=false"],
+            "bending plate (sim.sheet.large_deflection=false)": ["sim.sheet.large_deflection=false"]}
 
-    argparse.ArgumentParser(prog=f"python -m {__spec__.name if __spec__ else __name__}", description=__doc__,
-                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
+
+def record_json(overrides: list[str] | None = None, variants: bool = True) -> dict:
+    """The rows of the design `overrides` names (and, with `variants`, those of VARIANTS) as JSON:
+    {"designs": {name: {"overrides", "rows": [{state, metric, 3d, fast, value, lo, hi, kind,
+    passed}], "passed", "total"}}}."""
     from layerskin_exp.sim.config import load_sim
 
-    comparisons, record = rows(load_sim([]))
+    designs = {"default": list(overrides or [])}
+    if variants:
+        designs.update({name: [*designs["default"], *extra] for name, extra in VARIANTS.items()})
+    out = {}
+    for name, ov in designs.items():
+        comparisons, _ = rows(load_sim(ov))
+        out[name] = {"overrides": ov, "passed": sum(c.passed for c in comparisons), "total": len(comparisons),
+                     "rows": [{"state": c.load, "metric": c.metric, "3d": c.fem, "fast": c.fast, "value": c.value,
+                               "lo": c.lo, "hi": c.hi, "kind": c.kind, "passed": bool(c.passed)}
+                              for c in comparisons]}
+    return {"designs": out}
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import json
+
+    ap = argparse.ArgumentParser(prog=f"python -m {__spec__.name if __spec__ else __name__}", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--json", metavar="OUT", help="also write the rows of the design and of the variants beside it "
+                    "(the smooth sheet, the bending plate) to OUT as JSON, for docs/simulator-validation.md")
+    args = ap.parse_args(argv)
+    from layerskin_exp.sim.config import load_sim
+
+    comparisons, record = rows(load_sim([]))  # another design: python -m layerskin_exp.sim.validate sim.KEY=VALUE
     print(table_text(comparisons, record))
+    if args.json:
+        from pathlib import Path
+
+        Path(args.json).write_text(json.dumps(record_json(), indent=1) + "\n")
     return 0 if all(c.passed for c in comparisons) else 1
 
 
