@@ -1,5 +1,6 @@
 import os
 import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -40,3 +41,38 @@ def _priority_as_started():
 def hydra_dirs(tmp_path):
     """Overrides that keep Hydra's run/sweep folders inside tmp_path."""
     return [f"hydra.run.dir={tmp_path}/out", f"hydra.sweep.dir={tmp_path}/multirun"]
+
+
+# Tests that run on the wall clock (a RealtimeWorld, the loopback emulators, a CPU load beside a
+# trial, a protocol process signalled or killed mid-trial) share one xdist group: `--dist loadgroup`
+# (make test) runs them one after another in one worker, so they never starve each other or race
+# for the UR5e emulator's fixed ports (hardware.loopback.free_ur_host probes an address, then
+# another process binds it). A test joins the group by its file (REALTIME_FILES), by the
+# realtime_world fixture, by its module starting a RealtimeWorld or a CpuLoad itself, or by its own
+# @pytest.mark.xdist_group("realtime").
+REALTIME = "realtime"
+REALTIME_FILES = (
+    "hardware/test_loopback.py",  # whole protocols on hardware=loopback
+    "hardware/test_loopback_under_load.py",  # the same beside tests/load.py's CpuLoad
+    "hardware/test_emulate.py",  # standalone emulators on the devices' fixed ports
+    "hardware/test_realtime.py",  # the world's pace against the wall clock
+    "hardware/ur5e/test_ur5e_loopback.py",  # the UR5e emulator's fixed ports on chosen 127.0.0.N hosts
+    "hardware/ur5e/test_ur5e_clients.py",
+)
+
+
+def _is_realtime(item) -> bool:
+    rel = item.path.relative_to(Path(__file__).parent).as_posix()
+    if rel in REALTIME_FILES:
+        return True
+    if "realtime_world" in getattr(item, "fixturenames", ()):
+        return True
+    module = getattr(item, "module", None)
+    return any(hasattr(module, name) for name in ("start_realtime_world", "CpuLoad"))
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own, which names each item's group in its node id
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None and _is_realtime(item):
+            item.add_marker(pytest.mark.xdist_group(REALTIME))
