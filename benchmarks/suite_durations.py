@@ -29,6 +29,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)s\s+(setup|call|teardown)\s+(\S.*?)\s*$")
 SUMMARY = re.compile(r"^=*\s*(\d+ (?:passed|failed).*?) in (\d+(?:\.\d+)?)s")
+XDIST_GROUP = re.compile(r"@[\w.-]+$")  # --dist loadgroup appends "@group" to a grouped test's id
 TOP = 30
 
 
@@ -39,7 +40,7 @@ def parse(text: str) -> tuple[dict[str, dict[str, float]], list[dict]]:
     for line in text.splitlines():
         m = DURATION.match(line)
         if m:
-            seconds, phase, nodeid = float(m.group(1)), m.group(2), m.group(3)
+            seconds, phase, nodeid = float(m.group(1)), m.group(2), XDIST_GROUP.sub("", m.group(3))
             tests[nodeid][phase] = tests[nodeid].get(phase, 0.0) + seconds
             continue
         m = SUMMARY.match(line.strip())
