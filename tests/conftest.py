@@ -76,3 +76,30 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.get_closest_marker("xdist_group") is None and _is_realtime(item):
             item.add_marker(pytest.mark.xdist_group(REALTIME))
+
+
+def pytest_configure(config):
+    """`--dist loadgroup` under pytest 9.2 with pytest-xdist 3.8 or older spreads the real-time group
+    over the workers without a word (pytest-xdist issue 1386): refuse it, saying why."""
+    if getattr(config.option, "dist", "no") != "loadgroup":
+        return
+    from importlib.metadata import version
+
+    xdist = tuple(int(p) for p in version("pytest-xdist").split(".")[:2] if p.isdigit())
+    if pytest.version_tuple[:2] >= (9, 2) and xdist <= (3, 8):
+        raise pytest.UsageError(f"--dist loadgroup does not group with pytest {pytest.__version__} and "
+                                f"pytest-xdist {version('pytest-xdist')} (pytest-xdist issue 1386); "
+                                "install the dev extra's pytest: pip install -e '.[dev]'")
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_finish(session):
+    """A worker of `--dist loadgroup` whose grouped tests kept their plain ids would spread the group
+    over the workers without a word (pytest-xdist issue 1386, pytest 9.2): refuse the run instead."""
+    if not getattr(session.config.option, "loadgroup", False):
+        return
+    lost = [i.nodeid for i in session.items if i.get_closest_marker("xdist_group") and "@" not in
+            i.nodeid.rsplit("]", 1)[-1]]
+    if lost:
+        raise pytest.UsageError(f"--dist loadgroup: {len(lost)} grouped tests have no group in their id "
+                                f"({lost[0]}); this pytest and pytest-xdist do not group (pyproject.toml)")
