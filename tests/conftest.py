@@ -71,11 +71,34 @@ def _is_realtime(item) -> bool:
     return any(hasattr(module, name) for name in ("start_realtime_world", "CpuLoad"))
 
 
+def _module_fixture_file(item) -> str | None:
+    """The test's file if the test uses a module-scoped fixture defined there (a solve, a simulated
+    campaign built once and only read): its tests then share a group, so that the fixture is built
+    once, in one worker, rather than once in each."""
+    info = getattr(item, "_fixtureinfo", None)
+    path = item.nodeid.split("::", 1)[0]
+    for defs in (info.name2fixturedefs.values() if info else ()):
+        if any(d.scope == "module" and d.baseid == path for d in defs):
+            return path
+    return None
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist's own, which names each item's group in its node id
 def pytest_collection_modifyitems(config, items):
+    """Groups for `--dist loadgroup`; the grouped tests first (the real-time group, then each file
+    with its module fixtures), so the long units start early and the single tests fill in behind."""
+    rank = {}
     for item in items:
-        if item.get_closest_marker("xdist_group") is None and _is_realtime(item):
+        marked = item.get_closest_marker("xdist_group")
+        if marked is None and _is_realtime(item):
             item.add_marker(pytest.mark.xdist_group(REALTIME))
+            marked = True
+        elif marked is None and (path := _module_fixture_file(item)):
+            item.add_marker(pytest.mark.xdist_group(path.replace("/", ".")))
+            rank[item] = 1
+            continue
+        rank[item] = 0 if marked else 2
+    items.sort(key=rank.__getitem__)  # stable: each file's tests keep their order
 
 
 def pytest_configure(config):
