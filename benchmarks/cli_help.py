@@ -8,6 +8,8 @@ used, --help took 6.5-7.3 s and imported 1,106 modules (numba, cv2, scipy, mcap,
 schemas reached `layerskin_exp.vision`'s numba kernels through `hardware.camera`'s package file, and
 Hydra's own --help copied the whole config repository for each of ~100 config groups it listed.
 The module count and any heavy module still imported come from one `-X importtime` run.
+Issue 52: the same answers of the report and the design map (3.5-4.2 s while their modules loaded
+torch and scikit-learn at the top).
 
     python -m benchmarks.cli_help                 # 5 runs of each, median and best
     python -m benchmarks.cli_help --repo /tmp/old-checkout   # another checkout's code, same baseline
@@ -36,6 +38,11 @@ COMMANDS = {
     "validate_help": ["-m", "layerskin_exp.sim.validate", "--help"],
     "validate_refused_override": ["-m", "layerskin_exp.sim.validate", "sim.spacer.modulus_kpa=abc"],
     "validate_cfg_job": ["-m", "layerskin_exp.sim.validate", "--cfg", "job"],
+    # the report and the design map: Hydra apps whose runs need torch and scikit-learn
+    "report_help": ["-m", "analysis.report", "--help"],
+    "report_refused_sessions": ["-m", "analysis.report", "sessions=nowhere"],
+    "design_map_help": ["-m", "analysis.design_map", "--help"],
+    "design_map_refused_override": ["-m", "analysis.design_map", "bogus=1"],
 }
 BASELINE = ["-c", "pass"]
 HEAVY = ("numba", "cv2", "scipy", "torch", "mcap", "foxglove", "matplotlib")
