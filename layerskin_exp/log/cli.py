@@ -9,12 +9,14 @@ import os
 import sys
 import warnings
 from datetime import datetime, timezone
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from layerskin_exp.log.container.recover import recover
 from layerskin_exp.log.errors import SessionFileError
-from layerskin_exp.log.session.reader import Session, load_session
+
+if TYPE_CHECKING:
+    from layerskin_exp.log.session.reader import Session
 
 
 def describe(s: Session) -> str:
@@ -175,6 +177,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.command == "export":
         return _export(args)
+    # the reader (scipy, OpenCV, the schemas) loads for a file to read, not for --help
+    from layerskin_exp.log.container.recover import recover
+    from layerskin_exp.log.session.reader import load_session
+
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # damage is listed in the report itself
