@@ -24,9 +24,11 @@ demo: $(STAMP)
 # `make test-all`: the slow ones (the loaded soak, a trial from the installed wheel, the damage
 # harness, the submitit sweep), one at a time, so the soak's load is the only load it has.
 # The two together run every test. Extra pytest arguments: make test PYTEST_ARGS="--durations=0".
+# One OpenBLAS thread a process: two workers each spinning two BLAS threads on two cores made a
+# finite-element test 7x slower (tests/conftest.py does the same for `pytest -n` run directly).
 PYTEST_ARGS ?=
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --dist loadgroup -m "not slow" $(PYTEST_ARGS)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --dist loadgroup -m "not slow" $(PYTEST_ARGS)
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q -m slow $(PYTEST_ARGS)

@@ -6,6 +6,15 @@ import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+# An xdist worker shares the cores with the other: one OpenBLAS thread each (and in the processes
+# its tests start). Measured: a finite-element test took 75 s in each of two processes at once with
+# OpenBLAS's default two threads, 12 s with one.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
+
 # Contact tables on disk (layerskin_exp.sim.table_cache): the protocol runs this suite starts as
 # subprocesses share one folder of this session's own, never the user's cache; the in-process
 # tests, which replace physics functions to show checks failing, use no disk cache at all.
