@@ -56,19 +56,16 @@ from pathlib import Path
 
 import numpy as np
 from omegaconf import DictConfig
-from scipy.stats import linregress
 
-from analysis.characterization import PressTrial, cop_shift_at_shear, uniformity
 from analysis.config import DesignMapConfig
 from analysis.markdown import json_safe
-from analysis.metrics import r2_score
-from analysis.run_info import convergence_caveats, training_state
 from layerskin_exp.cli import hydra_main, refuse, run_command
 from layerskin_exp.config import ConfigError, retired_message, validate
 from layerskin_exp.estimation.config import CnnConfig
-from layerskin_exp.estimation.linear import LinearForceModel, linear_features
-from layerskin_exp.features import two_layer_features
 from layerskin_exp.sim.config import load_brackets
+
+# The measurement's stack (scipy.stats, scikit-learn, torch) is imported where a map is measured,
+# not for --help or a refused command line (benchmarks/cli_help).
 
 STUDY_DESIGN = "study"
 # The headline outcomes a designer ranks by: key in the outcome dict, label, larger is better.
@@ -156,6 +153,8 @@ def _grouped(X: np.ndarray, y: np.ndarray, splits: list, model_factory) -> np.nd
 
 
 def _r2_axes(y: np.ndarray, pred: np.ndarray | None) -> dict:
+    from analysis.metrics import r2_score
+
     r2 = r2_score(y, pred) if pred is not None else [None] * 3
     return {ax: (None if v is None or not np.isfinite(v) else float(v)) for ax, v in zip("xyz", r2, strict=True)}
 
@@ -171,6 +170,7 @@ def ts5_outcomes(X: np.ndarray, y: np.ndarray, trial: np.ndarray, splits: list, 
     report's convergence flag (the caveats of every fold, the R² one on the pooled predictions)."""
     import time
 
+    from analysis.run_info import convergence_caveats, training_state
     from layerskin_exp.estimation.cnn import CnnGruForceModel
 
     if not splits:
@@ -202,6 +202,8 @@ def _ridge():
 
 
 def _slope(x: np.ndarray, y: np.ndarray, min_frames: int) -> float | None:
+    from scipy.stats import linregress
+
     if x.size < min_frames or np.ptp(x) == 0:
         return None
     return float(linregress(x, y).slope)
@@ -229,8 +231,12 @@ def _saturation(shear: np.ndarray, d_par: np.ndarray, k0: float, cfg: DesignMapC
 
 def campaign_outcomes(root: Path, cfg: DesignMapConfig, pitch_mm: float = 1.5) -> dict:
     """Every outcome of one design's campaign folder (see the module docstring)."""
+    from analysis.characterization import PressTrial, cop_shift_at_shear, uniformity
+    from analysis.metrics import r2_score
     from analysis.sessions import load_campaign
     from layerskin_exp.config import SkinConfig
+    from layerskin_exp.estimation.linear import LinearForceModel, linear_features
+    from layerskin_exp.features import two_layer_features
     from layerskin_exp.log import load_session
     from layerskin_exp.sim.config import SpacerConfig
 

@@ -24,25 +24,19 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-import torch
 from omegaconf import DictConfig
-from tqdm.auto import tqdm
 
 from analysis.config import AnalysisConfig, ReportConfig
 from analysis.markdown import counted
 from analysis.report_run import ReportRun
-from analysis.sections import characterisation as characterisation_section
-from analysis.sections import force as force_section
-from analysis.sections import slip as slip_section
-from analysis.sections import streams as streams_section
-from analysis.sections import tracking as tracking_section
 from analysis.sessions import sessions_problem
 from layerskin_exp.cli import EXIT_CONFIG, hydra_main, override_values, refuse, run_command
 from layerskin_exp.config import SkinConfig, validate
-from layerskin_exp.estimation.cnn import default_torch_threads
 from layerskin_exp.provenance import provenance
 
 log = logging.getLogger(__name__)
+# The analysis stack (torch, scikit-learn, the sections) loads when a report runs, not for --help
+# or a refused command line (benchmarks/cli_help).
 
 
 class Analysis(ReportRun):
@@ -51,22 +45,34 @@ class Analysis(ReportRun):
     self.results and leave what later ones need on it (ts5, calib_feats); figures go to self.out."""
 
     def load(self) -> None:
+        from analysis.sections import streams as streams_section
+
         super().load()
         streams_section.stream_health(self)
 
     def force(self) -> None:
+        from analysis.sections import force as force_section
+
         force_section.force(self)
 
     def characterization(self) -> None:
+        from analysis.sections import characterisation as characterisation_section
+
         characterisation_section.characterization(self)
 
     def tracking(self) -> None:
+        from analysis.sections import tracking as tracking_section
+
         tracking_section.tracking(self)
 
     def slip(self) -> None:
+        from analysis.sections import slip as slip_section
+
         slip_section.slip(self)
 
     def run(self) -> dict:
+        from layerskin_exp.estimation.cnn import default_torch_threads
+
         self.out.mkdir(parents=True, exist_ok=True)
         with deterministic_torch(self.a.cnn.torch_threads or default_torch_threads(self.a.cnn.device)):
             return self._run()
@@ -79,6 +85,8 @@ class Analysis(ReportRun):
         stages = [("load sessions", self.load), ("force estimation", self.force),
                   ("characterisation", self.characterization), ("tracking", self.tracking),
                   ("slip detection", self.slip), ("write report", self.write)]
+        from tqdm.auto import tqdm
+
         bar = tqdm(stages, desc="report", disable=not self.a.progress)
         for name, fn in bar:
             bar.set_postfix_str(name)
@@ -100,6 +108,8 @@ def deterministic_torch(threads: int):
     its last bits from run to run, and the cues built on its force (f_xyz, f_z, the preload, the
     live detector) move in the third decimal. Deterministic kernels cost little for this model.
     The intra-op thread count is fixed too: CPU reductions split by thread. Restored on exit."""
+    import torch
+
     os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # deterministic cuBLAS (read at first use)
     saved = (torch.get_num_threads(), torch.are_deterministic_algorithms_enabled(),
              torch.backends.cudnn.deterministic, torch.backends.cudnn.benchmark)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from omegaconf import OmegaConf
@@ -14,9 +15,10 @@ from analysis import study
 from analysis.config import ReportConfig
 from analysis.markdown import json_safe, write_markdown
 from analysis.sessions import Campaign, load_campaign, shown
-from layerskin_exp.estimation.cnn import CnnGruForceModel
-from layerskin_exp.estimation.preprocess import Preprocessor
 from layerskin_exp.features import two_layer_features
+
+if TYPE_CHECKING:
+    from layerskin_exp.estimation.cnn import CnnGruForceModel
 
 log = logging.getLogger("analysis.report")
 
@@ -64,6 +66,8 @@ class ReportRun:
         log.info("sessions: %d used, %d skipped (%s)", self.results["data"]["sessions_used"],
                  len(camp.skipped_files), dict(camp.skipped) or "none")
         # Per-layer scale from the calibration campaign (else the grip sessions), applied to all.
+        from layerskin_exp.estimation.preprocess import Preprocessor  # scikit-learn: when a report runs
+
         self.pre = Preprocessor.from_config(self.a.preprocess)
         src = [t.maps for t in camp.calibration] or [t.maps for t in camp.grip]
         if not src:

@@ -21,9 +21,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from analysis.config import PreprocessConfig
-from analysis.tracking import torsion_reference_deg, translation_reference_mm
-from layerskin_exp.estimation.preprocess import preprocess_counts, smooth_downsample
-from layerskin_exp.log import SessionFileError, SessionWarning, load_session
+from layerskin_exp.log import SessionFileError
 from layerskin_exp.log.container.scan import special_file_kind
 
 
@@ -194,6 +192,11 @@ def _motion_window(events: dict | None, t0: float, t1: float) -> tuple[float, fl
 
 
 def _reference(t_s, positions, quats, motion):
+    from analysis.tracking import (  # scikit-learn: not for a config check
+        torsion_reference_deg,
+        translation_reference_mm,
+    )
+
     return translation_reference_mm(positions) if motion == "translation" else torsion_reference_deg(quats)
 
 
@@ -217,6 +220,8 @@ def _vision(markers: dict | None, window, motion) -> tuple[np.ndarray, np.ndarra
 
 
 def _calibration_trial(s, name, pp: PreprocessConfig) -> CalibrationTrial | str:
+    from layerskin_exp.estimation.preprocess import preprocess_counts, smooth_downsample  # scikit-learn
+
     if "wrench" not in s.streams or not len(s.streams["wrench"]["t_ns"]):
         return "calibration trial without wrench stream"
     skin = s.streams["skin"]
@@ -232,6 +237,8 @@ def _calibration_trial(s, name, pp: PreprocessConfig) -> CalibrationTrial | str:
 
 
 def _grip_trial(s, name, pp: PreprocessConfig) -> GripTrial | str:
+    from layerskin_exp.estimation.preprocess import preprocess_counts, smooth_downsample  # scikit-learn
+
     motion = s.labels.get("motion")
     if motion not in ("translation", "torsion"):
         return f"grip trial with unknown motion {motion!r}"
@@ -266,6 +273,8 @@ STREAMS = ("skin", "wrench", "tcp", "markers", "events")
 def load_trial(path, root, pp: PreprocessConfig) -> CalibrationTrial | GripTrial | Skipped:
     """Read one session file and reduce it to a trial, or say why it is skipped. Never raises on
     a bad file: one bad input must not stop a whole report."""
+    from layerskin_exp.log import SessionWarning, load_session
+
     path = Path(path)
     root = Path(root)
     name = shown(path.relative_to(root if root.is_dir() else root.parent))

@@ -25,8 +25,6 @@ import sys
 import time
 from pathlib import Path
 
-from layerskin_exp.sim.table_cache import simulator_version
-
 
 def _announce(title: str, args: list[str], where: str = "") -> None:
     print(f"\n== {title}{where}\n$ python {shlex.join(args)}", flush=True)
@@ -126,6 +124,8 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(a.out).resolve()
     # one data root per simulator version: a rerun resumes its own sessions, and the report never
     # mixes sessions that another version of the simulator made (those stay where they are)
+    from layerskin_exp.sim.table_cache import simulator_version  # the simulator: not for --help
+
     data = out / "sessions" / f"simulator-{simulator_version()}"
     report = out / "report"
     timings = {}

@@ -20,7 +20,6 @@ from omegaconf import DictConfig, OmegaConf
 import protocols.config  # noqa: F401 - stores the calibration app's schemas for Hydra
 from layerskin_exp.cli import hydra_main, run_command
 from protocols.app import run_app
-from protocols.calibration import PROTOCOL, run_campaign
 from protocols.identity import design_id
 
 OBJECTIVES = ("shift_per_n_mm", "shear_high_n")
@@ -35,6 +34,8 @@ def objectives(folder: Path) -> list[float]:
 
 @hydra_main("force_calibration")
 def main(cfg: DictConfig) -> list[float]:
+    from protocols.calibration import PROTOCOL, run_campaign  # the campaign's stack: not for --help
+
     run_app(cfg, "platform", run_campaign)
     folder = Path(cfg.data_root) / PROTOCOL / design_id(OmegaConf.to_container(cfg, resolve=True))
     values = objectives(folder)

@@ -31,8 +31,6 @@ from pathlib import Path
 
 import yaml
 
-from layerskin_exp.sim.table_cache import simulator_version
-
 # Keys that never shape the data (dotted paths into the resolved config).
 RUN_ONLY_KEYS = ("data_root", "progress", "trial_timeout_s", "hydra", "live", "live_port", "live_hold",
                  # how many lost skin frames a trial may have and still be complete: judges the data
@@ -72,6 +70,8 @@ def shaping_config(config: dict) -> dict:
         # simulated data (sim, and loopback's emulators over the simulated world) is shaped by the
         # simulator's code too: a change to it is a new design, so a rerun simulates it afresh
         # beside the old sessions instead of resuming from data the old code made
+        from layerskin_exp.sim.table_cache import simulator_version  # the simulator: not for --help
+
         cfg["simulator_code"] = simulator_version()
     positions = cfg.get("positions")
     if isinstance(positions, dict) and positions.get("layout") == "random":

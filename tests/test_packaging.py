@@ -65,6 +65,8 @@ def test_wheel_contents(installed):
         assert f"{script} = " in entry
 
 
+# slow: a whole grip trial through the installed lsx-grip, its kernels compiled afresh: ~60 s.
+@pytest.mark.slow
 def test_console_script_runs_a_trial_outside_the_checkout(installed):
     _, venv, env, root = installed
     work = root / "elsewhere"

@@ -14,12 +14,37 @@ Deployment:
     python -m layerskin_exp.estimation.export ARTIFACT --format onnx
 """
 
-from layerskin_exp.estimation.artifact import Estimator
-from layerskin_exp.estimation.cnn import CnnGruForceModel
-from layerskin_exp.estimation.detector import SlipDetector
-from layerskin_exp.estimation.linear import LinearForceModel, linear_features
-from layerskin_exp.estimation.online import Estimate, OnlineEstimator
-from layerskin_exp.estimation.preprocess import DownsampleStream, Preprocessor
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+# name -> the module that defines it; imported on first use, so that the schemas
+# (layerskin_exp.estimation.config) load without torch and scikit-learn (a command's --help and
+# config errors: benchmarks/cli_help)
+_WHERE = {"Estimator": "artifact", "CnnGruForceModel": "cnn", "SlipDetector": "detector",
+          "LinearForceModel": "linear", "linear_features": "linear", "Estimate": "online",
+          "OnlineEstimator": "online", "DownsampleStream": "preprocess", "Preprocessor": "preprocess"}
 
 __all__ = ["CnnGruForceModel", "DownsampleStream", "Estimate", "Estimator", "LinearForceModel", "OnlineEstimator",
            "Preprocessor", "SlipDetector", "linear_features"]
+
+if TYPE_CHECKING:
+    from layerskin_exp.estimation.artifact import Estimator
+    from layerskin_exp.estimation.cnn import CnnGruForceModel
+    from layerskin_exp.estimation.detector import SlipDetector
+    from layerskin_exp.estimation.linear import LinearForceModel, linear_features
+    from layerskin_exp.estimation.online import Estimate, OnlineEstimator
+    from layerskin_exp.estimation.preprocess import DownsampleStream, Preprocessor
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *__all__])

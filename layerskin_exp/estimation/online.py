@@ -125,7 +125,7 @@ class _OnnxBackend:
     def __init__(self, estimator: Estimator, threads: int) -> None:
         import onnxruntime as ort
 
-        from layerskin_exp.estimation.export import EncoderGraph, HeadsGraph, onnx_bytes
+        from layerskin_exp.estimation.onnx_graphs import EncoderGraph, HeadsGraph, onnx_bytes
 
         so = ort.SessionOptions()
         so.intra_op_num_threads, so.inter_op_num_threads = threads, 1

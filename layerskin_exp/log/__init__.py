@@ -28,9 +28,31 @@ true only for a finished, undamaged file whose outcome is "complete". Anything t
 read at all raises SessionFileError naming the file.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
 from layerskin_exp.log.errors import SessionFileError, SessionInUseError
-from layerskin_exp.log.session.reader import LostRange, Session, SessionWarning, load_session
-from layerskin_exp.log.session.writer import SessionClosedError, SessionWriter
+
+# The reader and the writer (numpy, scipy's rotations, OpenCV's image codecs, the MCAP schemas) load
+# on first use: a command's config check that only looks at a path (analysis.sessions.sessions_problem,
+# through layerskin_exp.log.container.scan) does not pay for them (benchmarks/cli_help).
+_WHERE = {"LostRange": "session.reader", "Session": "session.reader", "SessionWarning": "session.reader",
+          "load_session": "session.reader", "SessionClosedError": "session.writer",
+          "SessionWriter": "session.writer"}
+
+if TYPE_CHECKING:
+    from layerskin_exp.log.session.reader import LostRange, Session, SessionWarning, load_session
+    from layerskin_exp.log.session.writer import SessionClosedError, SessionWriter
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
 
 __all__ = [
     "LostRange",
@@ -42,3 +64,7 @@ __all__ = [
     "SessionWriter",
     "load_session",
 ]
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *__all__])

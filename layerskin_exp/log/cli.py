@@ -9,12 +9,14 @@ import os
 import sys
 import warnings
 from datetime import datetime, timezone
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from layerskin_exp.log.container.recover import recover
 from layerskin_exp.log.errors import SessionFileError
-from layerskin_exp.log.session.reader import Session, load_session
+
+if TYPE_CHECKING:
+    from layerskin_exp.log.session.reader import Session
 
 
 def describe(s: Session) -> str:
@@ -208,6 +210,10 @@ def main(argv=None) -> int:
         return _export(args)
     if args.command == "view":
         return _view(args)
+    # the reader (scipy, OpenCV, the schemas) loads for a file to read, not for --help
+    from layerskin_exp.log.container.recover import recover
+    from layerskin_exp.log.session.reader import load_session
+
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # damage is listed in the report itself

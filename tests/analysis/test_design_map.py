@@ -16,6 +16,8 @@ from tests.protocols.conftest import REPO, run_cli
 TINY = ["positions.count=2", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05", "progress=false"]
 
 
+# slow: a design sweep through submitit_local (a job process each, its resume, the map): ~40 s.
+@pytest.mark.slow
 def test_sweep_through_submitit_local_resumes_and_maps(tmp_path, hydra_dirs):
     pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
     data = tmp_path / "data"

@@ -4,8 +4,14 @@ silent is still caught. One loaded run each, on the tiny configs."""
 
 from __future__ import annotations
 
+import pytest
+
 from tests.hardware import test_loopback as unloaded
 from tests.load import CpuLoad
+
+# slow: the loaded soak, four whole loopback trials each beside 2 x cores busy processes (~25 s each
+# on 2 cores, and starving whatever else runs then); make test runs the same trials unloaded.
+pytestmark = pytest.mark.slow
 
 # Measured on a 2-core machine (issue 30; figures in the closing note of the 2026-11-27 seventh
 # session), with GRBL's line on loopback TCP (hardware.emulation.TcpSerialLink): calibration 10 of

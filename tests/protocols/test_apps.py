@@ -88,6 +88,7 @@ def check_calibration_session(s, trial, typed, rate_tol: float = 0.05) -> None:
         assert "safety" in ev["kind"]
 
 
+@pytest.mark.xdist_group("realtime")  # tests/conftest.py: killed mid-campaign at a wall-clock moment
 def test_resume_after_sigkill_runs_each_trial_once(tmp_path, hydra_dirs):
     data = tmp_path / "data"
     args = ["positions.count=4", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05", f"data_root={data}",
@@ -290,6 +291,7 @@ def check_grip_session(s, typed, rate_tol: float = 0.05) -> None:
         typed.approach.threshold_counts
 
 
+@pytest.mark.xdist_group("realtime")  # tests/conftest.py: whole slides into the force guard, one at a time
 def test_slow_zone_keeps_the_normal_force_within_its_stated_overshoot(tmp_path):
     # Slides with large vertical offsets, applied over the first millimetre, drive Fz into the 6 N limit. Near the limit the move goes
     # on at slow_zone_speed_mm_s, so the stage brakes from a crawl when the guard trips: at the
@@ -311,6 +313,7 @@ def test_slow_zone_keeps_the_normal_force_within_its_stated_overshoot(tmp_path):
     assert worst_fz(fast, *no_zone) > 5 * worst_fz(fast)
 
 
+@pytest.mark.xdist_group("realtime")  # tests/conftest.py: signalled inside the first press
 @pytest.mark.parametrize("sig, code, outcome", [
     (signal.SIGTERM, 143, "aborted: terminated (SIGTERM)"),  # what SLURM and process managers send
     (signal.SIGINT, 130, "aborted: interrupted (Ctrl-C)"),
@@ -340,6 +343,7 @@ def test_a_signal_stops_motion_and_closes_the_trial_aborted(tmp_path, hydra_dirs
                                        ".mcap.partial; a rerun runs it again)")
 
 
+@pytest.mark.xdist_group("realtime")  # tests/conftest.py: signalled every 5 ms while the run winds down
 def test_ctrl_c_pressed_again_while_the_run_winds_down_is_ignored(tmp_path, hydra_dirs):
     # Ctrl-C inside the first press closes the trial aborted; Ctrl-C pressed again and again (every
     # 5 ms) from then until the process is gone lands while the devices disconnect and the exit
@@ -372,6 +376,7 @@ def test_ctrl_c_pressed_again_while_the_run_winds_down_is_ignored(tmp_path, hydr
     assert load_session(partial, warn=False).outcome == "aborted: interrupted (Ctrl-C)"
 
 
+@pytest.mark.xdist_group("realtime")  # tests/conftest.py: hardware=loopback, signalled while connecting
 def test_sigterm_while_a_device_is_still_connecting_ends_the_run(tmp_path, hydra_dirs):
     # A stalled platform never sends its banner: connecting waits up to connect_timeout_s (60 s),
     # outside any control tick. SIGTERM ends it without waiting for the timeout (the measured

@@ -56,3 +56,21 @@ def test_answers_that_need_no_run_import_no_heavy_module(args, tmp_path):
                 if ln.startswith("import time:")}
     assert "protocols" in imported  # the probe sees the command's own imports
     assert sorted(imported & set(HEAVY)) == []
+
+
+# The report and the design map: their --help and a refused command line answer before the
+# analysis stack (torch, scikit-learn, scipy.stats) loads; a run imports it where it is used.
+ANALYSIS_ANSWERS = [("analysis.report", ["--help"], 0), ("analysis.report", ["sessions=nowhere"], 2),
+                    ("analysis.design_map", ["--help"], 0), ("analysis.design_map", ["bogus=1"], 2)]
+
+
+@pytest.mark.parametrize(("module", "args", "code"), ANALYSIS_ANSWERS)
+def test_the_analysis_commands_answer_without_their_analysis_stack(module, args, code, tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(REPO), "HYDRA_FULL_ERROR": "0"}
+    r = subprocess.run([sys.executable, "-X", "importtime", "-m", module, *args], cwd=tmp_path, env=env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == code, r.stderr[-2000:]
+    imported = {ln.rsplit("|", 1)[1].strip().split(".")[0] for ln in r.stderr.splitlines()
+                if ln.startswith("import time:")}
+    assert "analysis" in imported
+    assert sorted(imported & {"torch", "sklearn", "scipy", "numba", "cv2", "matplotlib"}) == []

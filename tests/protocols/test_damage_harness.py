@@ -99,6 +99,9 @@ def problems(s, clean) -> list[str]:
     return found
 
 
+# slow: hundreds of damaged copies of each session read back and recovered (~90 s and ~40 s); its
+# cases come from the sessions' own records, so a smaller session would check fewer damages.
+@pytest.mark.slow
 @pytest.mark.parametrize("app", ["force_calibration", "grip_depth"])
 def test_damaged_copies_never_return_duplicates_or_altered_metadata(sim_sessions, tmp_path, app):
     raw = sim_sessions[app]

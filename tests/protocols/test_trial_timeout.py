@@ -3,8 +3,13 @@ aborted file naming the limit; the run exits 1 and a rerun with room resumes it.
 
 from __future__ import annotations
 
+import pytest
+
 from layerskin_exp.log import load_session
 from tests.protocols.conftest import run_cli
+
+# a trial stopped at its timeout: beside the other real-time tests (tests/conftest.py)
+pytestmark = pytest.mark.xdist_group("realtime")
 
 CAL = ["positions.count=1", "press.repeats=1", "slide.repeats=1", "press.hold_s=0.05", "progress=false"]
 
