@@ -54,7 +54,7 @@ EXPECTED_SECTIONS = {
     "protocols.md": {"protocol-keys:force_calibration", "protocol-keys:grip_depth"},
     "simulator.md": {"sim-params", "brackets"},
     "export.md": {"lerobot-load:lerobot-load-check"},
-    "analysis.md": {"campaign-force:campaign-2026-12-04", "campaign-characterisation:campaign-2026-12-04",
+    "analysis.md": {"campaign-force:campaign-2026-12-04b", "campaign-characterisation:campaign-2026-12-04b",
                     "study:force", "study:characterisation", "study:tracking", "study:slip"},
     "sessions.md": {"session-channels"},
     "benchmarks.md": {"benchmark-list:cpu-2core", "benchmark-run:cpu-2core"},
@@ -81,7 +81,7 @@ def test_generated_tables_hold_what_the_sources_say():
     protocols = (DOCS / "protocols.md").read_text()
     assert "| `safety.max_normal_force_n` | N | `6.0` |" in protocols
     assert "at most 10.0 (a hard ceiling of this rig; no config can raise it)" in protocols
-    results = json.loads((DOCS / "campaign-2026-12-04" / "results.json").read_text())
+    results = json.loads((DOCS / "campaign-2026-12-04b" / "results.json").read_text())
     r2 = results["force"]["T-s5"]["Fx"]["r2"]
     assert f"| T-s5 | {r2:.3f} |" in (DOCS / "analysis.md").read_text()
     assert "`hardware.skin_board.port` |  | `/dev/ttyACM0`" in (DOCS / "bench" / "skin-board.md").read_text()
