@@ -192,9 +192,17 @@ def test_slide_friction_bound_and_stick_slip_events():
     _slide_friction_bound_and_stick_slip_events(2.2)
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "measured with the stretching, wrinkling sheet: 1.2 mm is no longer a light press (0.72 N, not 0.3 N); "
+    "the cap slips twice over the 8 mm (onsets at 4.7 and 6.5 mm of travel), not three times"))
 def test_a_light_press_slides_within_the_friction_bound_in_stick_slip():
-    """Pressed light enough (0.3 N: 1.2 mm on the bending plate, 0.58 mm on the stretching sheet)
-    that the cap slips within the 8 mm slide."""
+    """Pressed light enough (1.2 mm, about 0.3 N on the bending plate) that the cap slips within
+    the 8 mm slide."""
+    _slide_friction_bound_and_stick_slip_events(1.2)
+
+
+def test_a_press_of_0_3_n_slides_within_the_friction_bound_in_stick_slip():
+    """The same light press given by its load (0.3 N: 0.58 mm on the stretching sheet)."""
     from layerskin_exp.sim.physics_checks import _depth_for
 
     _slide_friction_bound_and_stick_slip_events(_depth_for(model(), 0.3))
